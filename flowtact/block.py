@@ -1,0 +1,258 @@
+"""The block model: a frozen config, declared ports, state rebuilt by ``reset``, work in ``step``.
+
+A block is a pure streaming transform. It never touches sockets, threads, sleeps or the wall
+clock, and never mutates its inputs, so the same class runs offline on arrays, in-process in a
+graph, or in a worker process, unchanged. The runtime owns the loop and the clock.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+
+from flowtact.chunk import Chunk, StreamSpec
+from flowtact.params import Config
+
+__all__ = [
+    "BadDataError",
+    "Block",
+    "Example",
+    "Port",
+    "Source",
+    "SpecError",
+    "screen_nonfinite",
+]
+
+BadDataPolicy = Literal["raise", "drop", "hold"]
+
+
+@dataclass(frozen=True)
+class Port:
+    """A declared input or output. ``None`` fields accept (inputs) or inherit (outputs) anything.
+
+    ``events`` marks an event stream (spike times + unit index); ``optional`` an input that may be
+    left unconnected; ``delay`` an input that receives data one tick late, which is what lets a
+    feedback loop through it.
+    """
+
+    dtype: str | None = "float64"
+    shape: tuple[int, ...] | None = None
+    units: str | None = None
+    events: bool = False
+    optional: bool = False
+    delay: bool = False
+    doc: str = ""
+
+
+class SpecError(ValueError):
+    """An input stream does not fit what a block expects (``port`` names the input, if any)."""
+
+    def __init__(self, port: str | None, message: str) -> None:
+        self.port = port
+        super().__init__(message)
+
+
+class BadDataError(ValueError):
+    """Non-finite samples reached a block whose policy is ``raise``."""
+
+
+@dataclass(frozen=True)
+class Example:
+    """Small valid inputs for a block: used by its docs and by the conformance suite."""
+
+    params: Mapping[str, Any] = field(default_factory=dict)
+    inputs: Mapping[str, np.ndarray] = field(default_factory=dict)
+    rate_hz: float = 1000.0
+    units: Mapping[str, str] = field(default_factory=dict)
+    duration_s: float = 1.0
+
+
+def _snake(name: str) -> str:
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", name).lower()
+
+
+class Block:
+    """Base class of every block; see the module docstring for the contract.
+
+    Subclasses set ``config_cls`` (a frozen :class:`~flowtact.params.Config` dataclass),
+    ``inputs`` / ``outputs`` (port name -> :class:`Port`), implement ``reset`` and ``step``, and
+    may override ``specs`` (output specs from input specs), ``needs`` (inputs the config makes
+    relevant), ``flush`` (emit what is held back at end of stream) and ``open``/``close``.
+    """
+
+    config_cls: ClassVar[type[Config]] = Config
+    inputs: ClassVar[Mapping[str, Port]] = {}
+    outputs: ClassVar[Mapping[str, Port]] = {}
+    #: Optional heavy modules this block imports in ``open``/``reset`` (never at module import).
+    requires: ClassVar[tuple[str, ...]] = ()
+    #: Registry name; defaults to the snake_case class name.
+    name: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kw: Any) -> None:
+        super().__init_subclass__(**kw)
+        if not cls.__dict__.get("name"):
+            cls.name = _snake(cls.__name__)
+
+    def __init__(self, config: Config | None = None, /, *, node: str | None = None, **params: Any) -> None:
+        self.node = node or self.name
+        owner = f"{self.node} ({self.name})" if node else self.name
+        if config is not None and params:
+            raise TypeError("give either a config object or keyword parameters, not both")
+        self.config: Any = config if config is not None else self.config_cls.build(params, owner=owner)
+        self.seed: int = 0
+        self.demanded: frozenset[str] = frozenset(self.outputs)
+        self.input_specs: dict[str, StreamSpec] = {}
+        self.output_specs: dict[str, StreamSpec] = {}
+        self.counters: dict[str, int] = {}
+        self.rng: np.random.Generator = np.random.default_rng(0)
+        self._bound = False
+
+    # -- compile-time contract ---------------------------------------------------------------
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+        """Output specs for these connected inputs; raise :class:`SpecError` on a mismatch.
+
+        The default gives each output its declared dtype/shape/units, inheriting what the port
+        leaves open (and the rate) from the first connected input.
+        """
+        first = next(iter(inputs.values()), StreamSpec())
+        out = {}
+        for name, port in self.outputs.items():
+            out[name] = StreamSpec(
+                dtype=port.dtype or first.dtype,
+                shape=port.shape if port.shape is not None else first.shape,
+                units=port.units if port.units is not None else first.units,
+                rate_hz=None if port.events else first.rate_hz,
+                events=port.events,
+                n_units=first.n_units if port.events else None,
+                labels=first.labels if port.shape is None else None,
+            )
+        return out
+
+    def needs(self, connected: frozenset[str]) -> frozenset[str]:
+        """The connected inputs this config actually uses (e.g. not those with zero weights)."""
+        return connected
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    def open(self) -> None:
+        """Acquire real resources (a port, a camera, model weights) in the hosting process."""
+
+    def close(self) -> None:
+        """Release what ``open`` acquired."""
+
+    def reset(self) -> None:
+        """Build state from ``self.config``, ``self.input_specs`` and ``self.rng``."""
+
+    def step(self, **chunks: Chunk) -> dict[str, Chunk]:
+        """Turn the input chunks that arrived into output chunks (absent ports: nothing came)."""
+        raise NotImplementedError
+
+    def flush(self) -> dict[str, Chunk]:
+        """At end of stream: emit what the block holds back (e.g. a centred filter's tail)."""
+        return {}
+
+    # -- driving (used by executors and by flowtact.testing) ----------------------------------
+    def bind(
+        self,
+        inputs: Mapping[str, StreamSpec],
+        *,
+        seed: int = 0,
+        demanded: frozenset[str] | None = None,
+    ) -> dict[str, StreamSpec]:
+        """Resolve specs, set the block's own random stream and demanded outputs, then reset."""
+        self.input_specs = dict(inputs)
+        self.output_specs = self.specs(self.input_specs)
+        self.seed = int(seed)
+        if demanded is not None:
+            self.demanded = frozenset(demanded)
+        self.restart()
+        return self.output_specs
+
+    def restart(self) -> None:
+        """Rebuild state from scratch (same config, same seed): a fresh, deterministic start."""
+        self.rng = np.random.default_rng(self.seed)
+        self.counters = {}
+        self.reset()
+        self._bound = True
+
+    def __call__(self, **chunks: Chunk) -> dict[str, Chunk]:
+        """Run one step on read-only views, binding first if the block was never bound."""
+        if not self._bound:
+            raise RuntimeError(f"{self.node}: bind() the block to its input specs before stepping it")
+        return self.step(**{k: c.readonly() for k, c in chunks.items()})
+
+    def count(self, what: str, n: int = 1) -> None:
+        """Add ``n`` to a named counter (reported in the run summary and recording)."""
+        if n:
+            self.counters[what] = self.counters.get(what, 0) + int(n)
+
+    @classmethod
+    def example(cls) -> Example:
+        """Small valid inputs; every registered block provides one."""
+        raise NotImplementedError(f"{cls.__name__} has no example()")
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.node!r} {self.config}>"
+
+
+class Source(Block):
+    """A block with no inputs that the runtime ticks with the graph time ``now``.
+
+    ``step(now)`` emits every sample whose time is before ``now`` that was not emitted yet. A
+    source never sleeps or loops; its sample times come from an integer counter, ``i / rate``.
+    """
+
+    def step(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+        raise NotImplementedError
+
+    def __call__(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+        if not self._bound:
+            raise RuntimeError(f"{self.node}: bind() the source before ticking it")
+        return self.step(now)
+
+    @staticmethod
+    def due(now: float, rate_hz: float) -> int:
+        """Number of samples with ``i / rate_hz < now`` (robust to float rounding of ``now``)."""
+        x = now * rate_hz
+        n = int(np.ceil(x - 1e-9 * max(1.0, abs(x))))
+        return max(n, 0)
+
+
+def screen_nonfinite(block: Block, chunk: Chunk, policy: BadDataPolicy, port: str, last: np.ndarray | None) -> tuple[Chunk, np.ndarray | None]:
+    """Apply a block's bad-data policy to non-finite samples of a float chunk.
+
+    ``raise``: stop with a message naming node and port; ``drop``: remove those samples;
+    ``hold``: repeat the last finite value (zeros before any). Counts ``nonfinite_<policy>``.
+    Returns the cleaned chunk and the updated last good sample.
+    """
+    d = chunk.data
+    if len(chunk) == 0 or d.dtype.kind != "f":
+        return chunk, last
+    flat = d.reshape(len(chunk), -1)
+    bad = ~np.isfinite(flat).all(axis=1)
+    if not bad.any():
+        return chunk, (d[-1].copy() if len(d) else last)
+    n_bad = int(bad.sum())
+    first_bad = float(chunk.t[np.argmax(bad)])
+    if policy == "raise":
+        raise BadDataError(
+            f"{block.node} ({block.name}): {n_bad} non-finite sample(s) on input '{port}', first at "
+            f"t={first_bad:.6f} s (set on_bad_data: drop or hold to tolerate them)"
+        )
+    block.count(f"nonfinite_{policy}", n_bad)
+    if policy == "drop":
+        keep = ~bad
+        cleaned = Chunk(chunk.t[keep], d[keep], chunk.end)
+        return cleaned, (cleaned.data[-1].copy() if len(cleaned) else last)
+    out = d.copy()
+    prev = np.zeros(d.shape[1:], d.dtype) if last is None else last
+    for i in range(len(out)):
+        if bad[i]:
+            row = out[i]
+            mask = ~np.isfinite(row)
+            row[mask] = np.broadcast_to(prev, row.shape)[mask]
+        prev = out[i]
+    return Chunk(chunk.t, out, chunk.end), out[-1].copy()

@@ -1,0 +1,309 @@
+"""Block configuration: frozen dataclasses whose fields carry their rules and a one-line doc.
+
+A config is built once from plain values (YAML, ``--set``, keyword arguments), checked field by
+field against declared rules, then by the class's ``check()`` for cross-field rules. Every failure
+is a :class:`ConfigError` naming the owner, the field and the rule, in one template.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import types
+import typing
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal, Self, get_args, get_origin
+
+__all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param"]
+
+
+class ConfigError(ValueError):
+    """A parameter broke a rule: ``"<owner>: 'field' must be <rule>; got <value>"``."""
+
+    def __init__(self, owner: str, field: str | None, message: str) -> None:
+        self.owner, self.field, self.rule = owner, field, message
+        where = f"'{field}' " if field else ""
+        super().__init__(f"{owner}: {where}{message}")
+
+
+def did_you_mean(name: str, options: typing.Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the closest option, or a list of valid ones."""
+    options = sorted(options)
+    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
+    if close:
+        return f" (did you mean '{close[0]}'?)"
+    return f" (valid: {', '.join(options)})" if options else ""
+
+
+@dataclass(frozen=True)
+class Rules:
+    """Declarative value rules for one field; numeric rules apply element-wise to sequences."""
+
+    ge: float | None = None
+    gt: float | None = None
+    le: float | None = None
+    lt: float | None = None
+    odd: bool = False
+    min_len: int | None = None
+    max_len: int | None = None
+
+    def violation(self, v: Any) -> str | None:
+        """The rule ``v`` breaks, as text, or None."""
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            if self.ge is not None and not v >= self.ge:
+                return f">= {self.ge:g}"
+            if self.gt is not None and not v > self.gt:
+                return f"> {self.gt:g}"
+            if self.le is not None and not v <= self.le:
+                return f"<= {self.le:g}"
+            if self.lt is not None and not v < self.lt:
+                return f"< {self.lt:g}"
+            if self.odd and isinstance(v, int) and v % 2 == 0:
+                return "odd"
+        return None
+
+    def text(self) -> str:
+        """All rules as one phrase, for documentation."""
+        parts = [
+            f"{op} {b:g}"
+            for op, b in ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))
+            if b is not None
+        ]
+        if self.odd:
+            parts.append("odd")
+        if self.min_len is not None:
+            parts.append(f"at least {self.min_len} items")
+        if self.max_len is not None:
+            parts.append(f"at most {self.max_len} items")
+        return ", ".join(parts)
+
+
+def param(
+    default: Any = dataclasses.MISSING,
+    *,
+    doc: str,
+    ge: float | None = None,
+    gt: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+    odd: bool = False,
+    min_len: int | None = None,
+    max_len: int | None = None,
+) -> Any:
+    """Declare a config field with its one-line doc and rules (units belong in the field name)."""
+    if isinstance(default, list):
+        default = _freeze(default)
+    rules = Rules(ge, gt, le, lt, odd, min_len, max_len)
+    return dataclasses.field(default=default, metadata={"doc": doc, "rules": rules})
+
+
+@dataclass(frozen=True)
+class FieldInfo:
+    """One documented config field, as ``flowtact blocks NAME`` prints it."""
+
+    name: str
+    type: str
+    default: Any
+    doc: str
+    rules: str
+
+
+class Config:
+    """Base of every block config. Subclasses are ``@dataclass(frozen=True)`` with ``param`` fields.
+
+    Override ``check()`` for rules across fields and raise ``self.error(field, message)``.
+    """
+
+    owner: ClassVar[str] = "config"
+
+    def check(self) -> None:
+        """Cross-field rules; raise ``self.error(...)`` when one is broken."""
+
+    def error(self, field: str | None, message: str) -> ConfigError:
+        """A ConfigError for this config's owner."""
+        return ConfigError(self.owner, field, message)
+
+    @classmethod
+    def build(cls, params: Mapping[str, Any] | None = None, owner: str | None = None) -> Self:
+        """Validate plain values (YAML or keyword arguments) into a frozen config."""
+        owner = owner or cls.__name__
+        params = dict(params or {})
+        hints = typing.get_type_hints(cls)
+        fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+        for key in params:
+            if key not in fields:
+                raise ConfigError(owner, None, f"unknown parameter '{key}'{did_you_mean(key, fields)}")
+        values = {}
+        for name, f in fields.items():
+            if name in params:
+                rules = f.metadata.get("rules", Rules())
+                values[name] = _coerce(params[name], hints[name], rules, owner, name)
+            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ConfigError(owner, name, "is required but was not given")
+        obj = cls(**values)
+        object.__setattr__(obj, "owner", owner)
+        try:
+            obj.check()
+        except ConfigError as e:
+            raise ConfigError(owner, e.field, e.rule) from None
+        return obj
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain YAML-safe values (tuples become lists) that ``build`` accepts back."""
+        return {f.name: _thaw(getattr(self, f.name)) for f in dataclasses.fields(self)}  # type: ignore[arg-type]
+
+    @classmethod
+    def fields_info(cls) -> list[FieldInfo]:
+        """Name, type, default, doc and rules of each field."""
+        hints = typing.get_type_hints(cls)
+        out = []
+        for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+            default = None if f.default is dataclasses.MISSING else _thaw(f.default)
+            rules = f.metadata.get("rules", Rules())
+            out.append(FieldInfo(f.name, _type_name(hints[f.name]), default, f.metadata.get("doc", ""), rules.text()))
+        return out
+
+    @classmethod
+    def invalid_values(cls) -> Iterator[tuple[str, Any]]:
+        """Values that break each field's declared type or rules (for the conformance suite)."""
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+            hint, rules = hints[f.name], f.metadata.get("rules", Rules())
+            yield f.name, _wrong_type_value(hint)
+            base = _strip_optional(hint)
+            origin = get_origin(base)
+            if origin is Literal:
+                yield f.name, "__not_an_option__"
+            scalar = base
+            if origin is tuple:
+                scalar = get_args(base)[0]
+                if rules.min_len:
+                    yield f.name, []
+            for bad in _rule_breakers(rules, scalar):
+                yield f.name, ([bad] * max(rules.min_len or 1, 1) if origin is tuple else bad)
+
+
+def _rule_breakers(rules: Rules, scalar: Any) -> Iterator[Any]:
+    step = 1 if scalar is int else 1.0
+    if rules.ge is not None:
+        yield type_cast(scalar, rules.ge - step)
+    if rules.gt is not None:
+        yield type_cast(scalar, rules.gt)
+    if rules.le is not None:
+        yield type_cast(scalar, rules.le + step)
+    if rules.lt is not None:
+        yield type_cast(scalar, rules.lt)
+    if rules.odd:
+        low = rules.ge if rules.ge is not None else (rules.gt or 0) + 1
+        yield int(math.ceil(low / 2) * 2) if scalar is int else None
+
+
+def type_cast(scalar: Any, v: float) -> Any:
+    return int(v) if scalar is int else float(v)
+
+
+def _wrong_type_value(hint: Any) -> Any:
+    base = _strip_optional(hint)
+    return {str: 12, bool: "yes"}.get(base, "not-a-number" if base in (int, float) else {"x": 1})
+
+
+def _strip_optional(hint: Any) -> Any:
+    if get_origin(hint) in (typing.Union, types.UnionType):
+        args = [a for a in get_args(hint) if a is not type(None)]
+        if len(args) == 1:
+            return args[0]
+    return hint
+
+
+def _type_name(hint: Any) -> str:
+    origin = get_origin(hint)
+    if origin is Literal:
+        return " | ".join(repr(a) for a in get_args(hint))
+    if origin in (typing.Union, types.UnionType):
+        return " | ".join(_type_name(a) for a in get_args(hint))
+    if origin is tuple:
+        return f"list[{_type_name(get_args(hint)[0])}]"
+    return "null" if hint is type(None) else getattr(hint, "__name__", str(hint))
+
+
+def _describe(v: Any) -> str:
+    text = repr(_thaw(v))
+    return text if len(text) < 60 else text[:57] + "..."
+
+
+def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
+    """Check ``v`` against the type ``hint`` and ``rules``; return the frozen value."""
+
+    def fail(expect: str) -> ConfigError:
+        return ConfigError(owner, name, f"must be {expect}; got {_describe(v)}")
+
+    origin = get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        args = get_args(hint)
+        if v is None and type(None) in args:
+            return None
+        errors = []
+        for a in (a for a in args if a is not type(None)):
+            try:
+                return _coerce(v, a, rules, owner, name)
+            except ConfigError as e:
+                errors.append(e)
+        if len(errors) == 1:
+            raise errors[0]
+        raise fail(_type_name(hint))
+    if origin is Literal:
+        options = get_args(hint)
+        if v not in options or isinstance(v, bool) != any(isinstance(o, bool) for o in options):
+            hint_text = did_you_mean(v, map(str, options)) if isinstance(v, str) else ""
+            raise ConfigError(
+                owner, name, f"must be one of {', '.join(map(repr, options))}; got {_describe(v)}{hint_text}"
+            )
+        return v
+    if origin is tuple:
+        item = get_args(hint)[0]
+        if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
+            raise fail(f"a list of {_type_name(item)}")
+        if rules.min_len is not None and len(v) < rules.min_len:
+            raise fail(f"a list of at least {rules.min_len} items")
+        if rules.max_len is not None and len(v) > rules.max_len:
+            raise fail(f"a list of at most {rules.max_len} items")
+        item_rules = dataclasses.replace(rules, min_len=None, max_len=None)
+        return tuple(_coerce(x, item, item_rules, owner, name) for x in v)
+    if hint is bool:
+        if not isinstance(v, bool):
+            raise fail("true or false")
+        return v
+    if hint is int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise fail("an integer")
+    elif hint is float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise fail("a number")
+        v = float(v)
+        if not math.isfinite(v):
+            raise fail("a finite number")
+    elif hint is str:
+        if not isinstance(v, str):
+            raise fail("a string")
+    elif hint is Any:
+        return _freeze(v)
+    else:
+        raise TypeError(f"{owner}: field '{name}' has an unsupported type {hint!r}")
+    broken = rules.violation(v)
+    if broken:
+        raise fail(broken)
+    return v
+
+
+def _freeze(v: Any) -> Any:
+    if isinstance(v, list):
+        return tuple(_freeze(x) for x in v)
+    return v
+
+
+def _thaw(v: Any) -> Any:
+    if isinstance(v, tuple):
+        return [_thaw(x) for x in v]
+    return v
