@@ -1,0 +1,5 @@
+"""Shared test fixtures."""
+
+import os
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
