@@ -91,6 +91,8 @@ class Block:
     requires: ClassVar[tuple[str, ...]] = ()
     #: Registry name; defaults to the snake_case class name.
     name: ClassVar[str] = ""
+    #: A sink acts on the world (a stimulator, a serial device): it runs even if nothing consumes it.
+    sink: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)
@@ -221,7 +223,9 @@ class Source(Block):
         return max(n, 0)
 
 
-def screen_nonfinite(block: Block, chunk: Chunk, policy: BadDataPolicy, port: str, last: np.ndarray | None) -> tuple[Chunk, np.ndarray | None]:
+def screen_nonfinite(
+    block: Block, chunk: Chunk, policy: BadDataPolicy, port: str, last: np.ndarray | None
+) -> tuple[Chunk, np.ndarray | None]:
     """Apply a block's bad-data policy to non-finite samples of a float chunk.
 
     ``raise``: stop with a message naming node and port; ``drop``: remove those samples;

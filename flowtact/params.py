@@ -162,7 +162,9 @@ class Config:
         for f in dataclasses.fields(cls):  # type: ignore[arg-type]
             default = None if f.default is dataclasses.MISSING else _thaw(f.default)
             rules = f.metadata.get("rules", Rules())
-            out.append(FieldInfo(f.name, _type_name(hints[f.name]), default, f.metadata.get("doc", ""), rules.text()))
+            out.append(
+                FieldInfo(f.name, _type_name(hints[f.name]), default, f.metadata.get("doc", ""), rules.text())
+            )
         return out
 
     @classmethod

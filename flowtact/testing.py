@@ -45,13 +45,18 @@ def infer_specs(
             c = a if isinstance(a, Chunk) else _events_chunk(a)
             n_units = int(c.data.max()) + 1 if len(c) else 1
             specs[name] = StreamSpec(
-                dtype=str(c.data.dtype), shape=c.data.shape[1:], units=units.get(name, "1"),
-                events=True, n_units=n_units,
+                dtype=str(c.data.dtype),
+                shape=c.data.shape[1:],
+                units=units.get(name, "1"),
+                events=True,
+                n_units=n_units,
             )
         else:
             arr = np.asarray(a.data if isinstance(a, Chunk) else a)
             specs[name] = StreamSpec(
-                dtype=str(arr.dtype), shape=arr.shape[1:], units=units.get(name, port.units or "1"),
+                dtype=str(arr.dtype),
+                shape=arr.shape[1:],
+                units=units.get(name, port.units or "1"),
                 rate_hz=rate_hz,
             )
     return specs
@@ -172,8 +177,14 @@ def assert_same(a: Mapping[str, Chunk], b: Mapping[str, Chunk], what: str = "") 
 # -- conformance suite -------------------------------------------------------------------------
 
 
-def run_block_example(cls: type[Block], *, chunk: int | Sequence[int] | None = None, seed: int = 0,
-                      empty_between: bool = False, check_readonly: bool = True) -> dict[str, Chunk]:
+def run_block_example(
+    cls: type[Block],
+    *,
+    chunk: int | Sequence[int] | None = None,
+    seed: int = 0,
+    empty_between: bool = False,
+    check_readonly: bool = True,
+) -> dict[str, Chunk]:
     """Run ``cls.example()`` with the given chunking (sources: ticks of ``chunk`` samples)."""
     ex = cls.example()
     block = cls(**ex.params)
@@ -192,8 +203,15 @@ def run_block_example(cls: type[Block], *, chunk: int | Sequence[int] | None = N
             v = v.view()
             v.flags.writeable = False
         inputs[k] = v
-    return run_offline(block, chunk=chunk, rate_hz=ex.rate_hz, units=ex.units, seed=seed,
-                       empty_between=empty_between, **inputs)
+    return run_offline(
+        block,
+        chunk=chunk,
+        rate_hz=ex.rate_hz,
+        units=ex.units,
+        seed=seed,
+        empty_between=empty_between,
+        **inputs,
+    )
 
 
 def check_config_yaml_roundtrip(cls: type[Block]) -> None:
@@ -213,7 +231,9 @@ def check_invalid_config_rejected(cls: type[Block]) -> None:
         try:
             cls(**params)
         except ConfigError as e:
-            assert e.field == field or field in str(e), f"{cls.name}: error for {field}={bad!r} names another field: {e}"
+            assert e.field == field or field in str(e), (
+                f"{cls.name}: error for {field}={bad!r} names another field: {e}"
+            )
             assert cls.name in str(e), f"{cls.name}: error does not name the block: {e}"
             tried += 1
             continue
@@ -251,8 +271,11 @@ def check_chunking_invariance(cls: type[Block]) -> None:
 
 def check_empty_chunks(cls: type[Block]) -> None:
     """Empty chunks between real ones leave state and output untouched."""
-    assert_same(run_block_example(cls, chunk=13, empty_between=True), run_block_example(cls, chunk=13),
-                f"{cls.name} empty chunks")
+    assert_same(
+        run_block_example(cls, chunk=13, empty_between=True),
+        run_block_example(cls, chunk=13),
+        f"{cls.name} empty chunks",
+    )
 
 
 def check_documented(cls: type[Block]) -> None:

@@ -1,0 +1,276 @@
+"""The ``flowtact`` command: run, validate, draw and document graphs; list blocks; plot recordings.
+
+Graph problems print as ``file:line:col: message`` with a hint and exit with status 2, never a
+traceback; a block failing at run time names its node and exits with status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import textwrap
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from flowtact.graph import GraphErrors
+
+__all__ = ["main"]
+
+EXIT_GRAPH_ERROR = 2
+EXIT_RUN_ERROR = 1
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="flowtact", description=__doc__.splitlines()[0])
+    p.add_argument("--version", action="version", version=f"flowtact {_version()}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def graph_args(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument(
+            "graph", help="graph file (.yaml), a shipped graph name (touch, slip), or a recording (.h5)"
+        )
+        sp.add_argument(
+            "--set",
+            dest="overrides",
+            action="append",
+            default=[],
+            metavar="NODE.PARAM=VALUE",
+            help="override a node parameter (validated like the file); repeatable",
+        )
+        sp.add_argument(
+            "--replay",
+            dest="replays",
+            action="append",
+            default=[],
+            metavar="NODE=FILE",
+            help="swap a source node for a replay of its recorded output; repeatable",
+        )
+
+    run = sub.add_parser("run", help="run a graph")
+    graph_args(run)
+    run.add_argument(
+        "--duration", type=float, metavar="S", help="graph seconds to run (default: the graph's duration_s)"
+    )
+    run.add_argument(
+        "--fast", action="store_true", help="run as fast as possible (virtual clock), not in real time"
+    )
+    run.add_argument("--record", metavar="FILE.h5", help="record the graph's record: streams to HDF5")
+    run.add_argument(
+        "--tick", type=float, metavar="S", help="clock tick (default 1 s with --fast, 5 ms real time)"
+    )
+    run.add_argument(
+        "--inproc", action="store_true", help="run every node in this process (the only mode so far)"
+    )
+    run.add_argument("--json", action="store_true", help="print the final summary as JSON")
+    run.add_argument("--quiet", action="store_true", help="no progress and no summary (errors still print)")
+
+    val = sub.add_parser("validate", help="check a graph without running it")
+    graph_args(val)
+
+    blocks = sub.add_parser("blocks", help="list the block catalogue, or document one block")
+    blocks.add_argument("name", nargs="?", help="block name")
+
+    draw = sub.add_parser("graph", help="draw a graph (pruned parts greyed) as .svg, .png or .dot")
+    graph_args(draw)
+    draw.add_argument("-o", "--output", required=True, help="output file: .svg, .png or .dot")
+
+    plot = sub.add_parser("plot", help="plot a recording: forces, spike rasters and rates")
+    plot.add_argument("recording", help="an .h5 file written by flowtact run --record")
+    plot.add_argument("-o", "--output", required=True, help="image file (.png, .svg, .pdf)")
+    plot.add_argument("--streams", nargs="*", help="streams to plot (default: all)")
+    plot.add_argument("--from", dest="t0", type=float, help="start time (s)")
+    plot.add_argument("--to", dest="t1", type=float, help="end time (s)")
+    return p
+
+
+def _version() -> str:
+    from flowtact import __version__
+
+    return __version__
+
+
+def _replays(items: Sequence[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        node, sep, path = item.partition("=")
+        if not sep or not node or not path:
+            raise SystemExit(f"flowtact: --replay '{item}': expected NODE=FILE")
+        out[node] = path
+    return out
+
+
+def _plan(args: argparse.Namespace) -> Any:
+    from flowtact.run import load_plan
+
+    return load_plan(args.graph, overrides=args.overrides, replays=_replays(args.replays))
+
+
+class _Progress:
+    """A one-line progress bar on stderr when it is a terminal."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled and sys.stderr.isatty()
+        self.last = 0.0
+
+    def __call__(self, now: float, total: float | None) -> None:
+        if not self.enabled or time.monotonic() - self.last < 0.2:
+            return
+        self.last = time.monotonic()
+        if total:
+            done = min(now / total, 1.0)
+            bar = "#" * int(30 * done)
+            sys.stderr.write(f"\r[{bar:<30}] {100 * done:5.1f}%  {now:.1f}/{total:.1f} s")
+        else:
+            sys.stderr.write(f"\r{now:.1f} s (Ctrl-C stops)")
+        sys.stderr.flush()
+
+    def done(self) -> None:
+        if self.enabled and self.last:
+            sys.stderr.write("\r" + " " * 60 + "\r")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from flowtact.run import run_plan
+
+    plan = _plan(args)
+    progress = _Progress(not args.quiet and not args.json)
+
+    def on_term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_term)
+    try:
+        summary = run_plan(
+            plan,
+            duration_s=args.duration,
+            fast=args.fast,
+            record=args.record,
+            tick_s=args.tick,
+            progress=progress,
+            argv=["flowtact", *sys.argv[1:]],
+        )
+    finally:
+        progress.done()
+    if args.json:
+        print(json.dumps(summary.to_dict(), indent=2))
+    elif not args.quiet:
+        print(summary.format())
+        if args.record:
+            print(f"  recorded {', '.join(f'{n}.{p}' for n, p in plan.record)} -> {args.record}")
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    plan = _plan(args)
+    n_streams = sum(len(plan.demanded[n]) for n in plan.order)
+    print(
+        f"{plan.graph.path}: ok — {len(plan.graph.nodes)} nodes, {len(plan.order)} active, "
+        f"{n_streams} computed streams"
+    )
+    for note in plan.notes:
+        print(f"  {note}")
+    return 0
+
+
+def _cmd_blocks(args: argparse.Namespace) -> int:
+    from flowtact.registry import block_names, load_block
+
+    if not args.name:
+        for name in block_names():
+            doc = (load_block(name).__doc__ or "").strip().splitlines()
+            print(f"{name:<16} {doc[0] if doc else ''}")
+        return 0
+    from flowtact.registry import UnknownBlockError
+
+    try:
+        cls = load_block(args.name)
+    except UnknownBlockError as e:
+        print(f"flowtact: {e}", file=sys.stderr)
+        return EXIT_GRAPH_ERROR
+    print(describe_block(cls))
+    return 0
+
+
+def describe_block(cls: Any) -> str:
+    """The block's docstring, ports and parameters, as ``flowtact blocks NAME`` prints them."""
+    lines = [f"{cls.name}  ({cls.__module__}.{cls.__name__})", ""]
+    lines.append(textwrap.dedent(cls.__doc__ or "").strip())
+    lines += ["", "Inputs:"]
+    for name, port in cls.inputs.items() or {}.items():
+        lines.append(f"  {name:<12} {_port_text(port)}  {port.doc}")
+    if not cls.inputs:
+        lines.append("  (none: a source)")
+    lines += ["", "Outputs:"]
+    for name, port in cls.outputs.items():
+        lines.append(f"  {name:<12} {_port_text(port)}  {port.doc}")
+    lines += ["", "Parameters:"]
+    for f in cls.config_cls.fields_info():
+        rules = f"  [{f.rules}]" if f.rules else ""
+        lines.append(f"  {f.name:<16} {f.type:<22} default {f.default!r}{rules}")
+        lines.append(f"      {f.doc}")
+    return "\n".join(lines)
+
+
+def _port_text(port: Any) -> str:
+    if port.events:
+        return "events"
+    shape = "any shape" if port.shape is None else f"shape {tuple(port.shape)}"
+    units = f", {port.units}" if port.units else ""
+    extra = ", optional" if port.optional else ""
+    extra += ", delayed" if port.delay else ""
+    return f"{port.dtype or 'any'} {shape}{units}{extra}"
+
+
+def _cmd_graph(args: argparse.Namespace) -> int:
+    from flowtact.draw import draw_plan
+
+    out = draw_plan(_plan(args), args.output)
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from flowtact.plot import plot_recording
+
+    t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
+    out = plot_recording(args.recording, args.output, streams=args.streams, t_range=t_range)
+    print(f"wrote {out}")
+    return 0
+
+
+COMMANDS = {
+    "run": _cmd_run,
+    "validate": _cmd_validate,
+    "blocks": _cmd_blocks,
+    "graph": _cmd_graph,
+    "plot": _cmd_plot,
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``flowtact`` command."""
+    args = _parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except GraphErrors as e:
+        print(str(e), file=sys.stderr)
+        n = len(e.errors)
+        print(f"flowtact: {n} problem{'s' if n != 1 else ''} in the graph", file=sys.stderr)
+        return EXIT_GRAPH_ERROR
+    except KeyboardInterrupt:
+        print("flowtact: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # a run-time failure: name it, no traceback unless asked
+        from flowtact.runtime.inproc import NodeError
+
+        if isinstance(e, (NodeError, FileNotFoundError, ValueError, ImportError, OSError)):
+            print(f"flowtact: error: {e}", file=sys.stderr)
+            return EXIT_RUN_ERROR
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,259 @@
+"""Graph -> Plan: execution order, resolved stream specs, and what the scene actually needs.
+
+Compilation checks what only the whole graph can tell (port dtype/shape/units/rate agreement,
+unconnected required inputs, cycles that do not pass through a delay port) and propagates demand
+backwards: an output nobody consumes or records is not computed, an input a block's config makes
+irrelevant (zero weights) is not demanded, and a node that ends up feeding nothing is not started
+(so its optional heavy imports are never loaded).
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections import defaultdict
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flowtact.block import Block, Port, SpecError
+from flowtact.chunk import StreamSpec
+from flowtact.graph import Edge, Graph, GraphError, GraphErrors, Loc
+
+__all__ = ["Plan", "compile_graph", "node_seed"]
+
+Stream = tuple[str, str]
+
+
+@dataclass
+class Plan:
+    """A compiled graph: what runs, in which order, on which streams."""
+
+    graph: Graph
+    order: list[str]
+    """Active nodes in execution (topological) order."""
+    specs: dict[Stream, StreamSpec]
+    """Resolved spec of every output stream (active or not)."""
+    demanded: dict[str, frozenset[str]]
+    """Outputs each active node computes."""
+    needed: dict[str, frozenset[str]]
+    """Inputs each active node is fed."""
+    active_edges: list[Edge]
+    pruned: list[str]
+    seeds: dict[str, int]
+    record: list[Stream]
+    notes: list[str] = field(default_factory=list)
+    """Human-readable reasons for what was pruned."""
+
+    @property
+    def requires(self) -> set[str]:
+        """Optional heavy modules the active nodes import."""
+        return {m for n in self.order for m in self.graph.nodes[n].cls.requires}
+
+    def input_specs(self, node: str) -> dict[str, StreamSpec]:
+        """Specs of the streams feeding ``node``'s needed inputs."""
+        return {e.dst_port: self.specs[(e.src, e.src_port)] for e in self.active_edges if e.dst == node}
+
+    def bind(self, node: str, block: Block) -> dict[str, StreamSpec]:
+        """Bind a block instance of ``node`` with its input specs, seed and demanded outputs."""
+        return block.bind(self.input_specs(node), seed=self.seeds[node], demanded=self.demanded[node])
+
+
+def node_seed(graph_seed: int, node: str) -> int:
+    """The seed of a node's own random stream: independent per node, stable across edits."""
+    ss = np.random.SeedSequence(graph_seed, spawn_key=(zlib.crc32(node.encode()),))
+    return int(ss.generate_state(1, np.uint64)[0])
+
+
+def _check_port(port: Port, spec: StreamSpec) -> str | None:
+    """Why a stream cannot feed a declared input port, or None."""
+    if port.events != spec.events:
+        want = "an event stream" if port.events else "a sample stream"
+        return f"expects {want} but gets {spec.describe()}"
+    if port.dtype is not None and port.dtype != spec.dtype:
+        return f"expects dtype {port.dtype} but gets {spec.dtype}"
+    if port.shape is not None and tuple(port.shape) != tuple(spec.shape):
+        return f"expects sample shape {tuple(port.shape)} but gets {tuple(spec.shape)}"
+    if port.units is not None and port.units != spec.units:
+        return f"expects units '{port.units}' but gets '{spec.units}'"
+    return None
+
+
+def _topo_order(graph: Graph, errors: list[GraphError]) -> list[str]:
+    """Kahn's order over non-delay edges; reports a cycle that has no delay port."""
+    deps: dict[str, set[str]] = {n: set() for n in graph.nodes}
+    for e in graph.edges:
+        if not graph.nodes[e.dst].cls.inputs[e.dst_port].delay:
+            deps[e.dst].add(e.src)
+    order: list[str] = []
+    ready = [n for n in graph.nodes if not deps[n]]
+    remaining = {n: set(d) for n, d in deps.items()}
+    while ready:
+        n = ready.pop(0)
+        order.append(n)
+        for m, d in remaining.items():
+            if n in d:
+                d.discard(n)
+                if not d and m not in order and m not in ready:
+                    ready.append(m)
+    stuck = [n for n in graph.nodes if n not in order]
+    if stuck:
+        cycle = _find_cycle(stuck, deps)
+        edge = next(e for e in graph.edges if e.src == cycle[-2] and e.dst == cycle[-1])
+        errors.append(
+            GraphError(
+                edge.loc,
+                f"cycle without a delay: {' -> '.join(cycle)}",
+                "a feedback loop must pass through an input declared with a one-step delay (e.g. a `delay` block)",
+            )
+        )
+    return order
+
+
+def _find_cycle(stuck: list[str], deps: Mapping[str, set[str]]) -> list[str]:
+    start = stuck[0]
+    path, seen = [start], {start}
+    node = start
+    while True:
+        nxt = next(d for d in deps[node] if d in stuck)
+        if nxt in seen:
+            cyc = [*path[path.index(nxt) :], nxt]
+            return list(reversed(cyc))
+        path.append(nxt)
+        seen.add(nxt)
+        node = nxt
+
+
+def compile_graph(graph: Graph) -> Plan:
+    """Check the graph's streams and compute its plan; raise :class:`GraphErrors` on problems."""
+    errors: list[GraphError] = []
+    order = _topo_order(graph, errors)
+    if errors:
+        raise GraphErrors(errors)
+    incoming: dict[str, list[Edge]] = defaultdict(list)
+    for e in graph.edges:
+        incoming[e.dst].append(e)
+
+    blocks = {n: graph.nodes[n].make() for n in order}
+    specs: dict[Stream, StreamSpec] = {}
+    broken: set[str] = set()
+    delayed: list[str] = []
+    for n in order:
+        node = graph.nodes[n]
+        cls = node.cls
+        connected = {e.dst_port for e in incoming[n]}
+        for pname, port in cls.inputs.items():
+            if not port.optional and pname not in connected:
+                errors.append(
+                    GraphError(
+                        node.loc,
+                        f"node '{n}': required input '{pname}' is not connected",
+                        f"add an edge 'some_node.port -> {n}.{pname}'",
+                    )
+                )
+                broken.add(n)
+        inputs: dict[str, StreamSpec] = {}
+        for e in incoming[n]:
+            src = (e.src, e.src_port)
+            if e.src in broken:
+                broken.add(n)
+                continue
+            if src not in specs:  # fed through a delay by a node later in the order
+                delayed.append(n)
+                continue
+            why = _check_port(cls.inputs[e.dst_port], specs[src])
+            if why:
+                errors.append(GraphError(e.loc, f"{e}: input '{e.dst_port}' of '{n}' ({cls.name}) {why}"))
+                broken.add(n)
+            inputs[e.dst_port] = specs[src]
+        if n in broken:
+            continue
+        try:
+            out = blocks[n].specs(inputs)
+        except SpecError as err:
+            loc = next((e.loc for e in incoming[n] if e.dst_port == err.port), node.loc)
+            errors.append(GraphError(loc, f"node '{n}' ({cls.name}): {err}"))
+            broken.add(n)
+            continue
+        for port, spec in out.items():
+            specs[(n, port)] = spec
+    for n in delayed:  # now that the loop's upstream is known, check the delayed inputs too
+        if n in broken:
+            continue
+        inputs = {e.dst_port: specs[(e.src, e.src_port)] for e in incoming[n] if (e.src, e.src_port) in specs}
+        try:
+            again = blocks[n].specs(inputs)
+        except SpecError as err:
+            errors.append(GraphError(graph.nodes[n].loc, f"node '{n}': {err}"))
+            continue
+        if any(again[p] != specs[(n, p)] for p in again):
+            errors.append(
+                GraphError(
+                    graph.nodes[n].loc,
+                    f"node '{n}': its output spec depends on its delayed input",
+                    "declare the fed-back stream's spec in the delay block's parameters",
+                )
+            )
+    if errors:
+        raise GraphErrors(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
+
+    active, demanded, needed, active_edges, notes = _propagate_demand(graph, order, blocks, incoming)
+    seeds = {
+        n: graph.nodes[n].seed if graph.nodes[n].seed is not None else node_seed(graph.seed, n)
+        for n in graph.nodes
+    }
+    return Plan(
+        graph=graph,
+        order=active,
+        specs=specs,
+        demanded=demanded,
+        needed=needed,
+        active_edges=active_edges,
+        pruned=[n for n in order if n not in active],
+        seeds=seeds,
+        record=[(n, p) for n, p, _ in graph.record],
+        notes=notes,
+    )
+
+
+def _propagate_demand(
+    graph: Graph, order: list[str], blocks: Mapping[str, Block], incoming: Mapping[str, list[Edge]]
+) -> tuple[list[str], dict[str, frozenset[str]], dict[str, frozenset[str]], list[Edge], list[str]]:
+    """Walk backwards from recorded streams and sinks.
+
+    Returns the active nodes (in order), the outputs each computes, the inputs each is fed, the
+    edges that carry data, and a note for everything skipped.
+    """
+    demanded: dict[str, set[str]] = defaultdict(set)
+    for n, p, _ in graph.record:
+        demanded[n].add(p)
+    active: set[str] = {n for n in order if graph.nodes[n].cls.sink}
+    needed: dict[str, frozenset[str]] = {}
+    active_edges: list[Edge] = []
+    notes: list[str] = []
+    for n in reversed(order):
+        if demanded[n]:
+            active.add(n)
+        if n not in active:
+            notes.append(f"{n}: not started (nothing consumes or records its outputs)")
+            continue
+        unused = set(graph.nodes[n].cls.outputs) - demanded[n]
+        if unused and any(e.src == n for e in graph.edges):
+            notes.append(f"{n}: outputs {', '.join(sorted(unused))} not computed (not consumed)")
+        connected = frozenset(e.dst_port for e in incoming.get(n, []))
+        need = blocks[n].needs(connected)
+        needed[n] = need
+        for e in incoming.get(n, []):
+            if e.dst_port in need:
+                demanded[e.src].add(e.src_port)
+                active_edges.append(e)
+            else:
+                notes.append(f"{n}.{e.dst_port}: not demanded (its parameters make it irrelevant)")
+    ordered = [n for n in order if n in active]
+    active_edges.sort(key=lambda e: (ordered.index(e.dst), e.dst_port))
+    return ordered, {n: frozenset(demanded[n]) for n in ordered}, needed, active_edges, notes
+
+
+def record_locs(graph: Graph) -> dict[Stream, Loc]:
+    """Where each recorded stream is named in the file."""
+    return {(n, p): loc for n, p, loc in graph.record}

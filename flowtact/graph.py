@@ -1,0 +1,579 @@
+"""YAML graph files -> a validated :class:`Graph`, with ``file:line:col`` for every error.
+
+Loading is strict and collects every problem before giving up: YAML syntax, unknown keys, blocks,
+parameters and ports (each with a did-you-mean hint), wrong parameter values (the block's own
+rules), duplicate nodes, malformed edges and record entries. Stream-level checks (dtype, shape,
+units, rates, cycles, unconnected inputs) happen when the graph is compiled
+(:mod:`flowtact.compile`). Parsing uses ``yaml.SafeLoader``: a graph never executes code.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from flowtact.block import Block
+from flowtact.params import ConfigError, did_you_mean
+from flowtact.registry import UnknownBlockError, load_block
+
+__all__ = [
+    "Edge",
+    "Graph",
+    "GraphError",
+    "GraphErrors",
+    "Loc",
+    "NodeDef",
+    "load_graph",
+    "parse_override",
+    "resolve_graph_path",
+]
+
+TOP_KEYS = ("name", "description", "seed", "duration_s", "nodes", "edges", "record")
+NODE_KEYS = ("block", "params", "process", "seed", "doc")
+EDGE_KEYS = ("from", "to")
+NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+EDGE_RE = re.compile(r"^\s*([^\s.]+)\.([^\s.]+)\s*->\s*([^\s.]+)\.([^\s.]+)\s*$")
+
+
+@dataclass(frozen=True)
+class Loc:
+    """A place in a graph file (1-based line and column)."""
+
+    path: str
+    line: int = 1
+    col: int = 1
+
+    def __str__(self) -> str:
+        return f"{self.path}:{self.line}:{self.col}"
+
+
+@dataclass(frozen=True)
+class GraphError:
+    """One problem with a graph, at a place, with an optional hint on what would be right."""
+
+    loc: Loc
+    message: str
+    hint: str = ""
+
+    def __str__(self) -> str:
+        text = f"{self.loc}: {self.message}"
+        return f"{text}\n    hint: {self.hint}" if self.hint else text
+
+
+class GraphErrors(Exception):
+    """Raised with every :class:`GraphError` found; ``str()`` lists them one per line."""
+
+    def __init__(self, errors: Iterable[GraphError]) -> None:
+        self.errors = list(errors)
+        super().__init__("\n".join(map(str, self.errors)))
+
+
+@dataclass
+class NodeDef:
+    """One node: its block class, validated config, placement and where it was written."""
+
+    name: str
+    block: str
+    cls: type[Block]
+    params: dict[str, Any]
+    config: Any
+    loc: Loc
+    process: str | None = None
+    seed: int | None = None
+    param_locs: dict[str, Loc] = field(default_factory=dict)
+
+    def make(self) -> Block:
+        """A fresh block instance for this node."""
+        return self.cls(self.config, node=self.name)
+
+
+@dataclass(frozen=True)
+class Edge:
+    """``src_node.src_port -> dst_node.dst_port``."""
+
+    src: str
+    src_port: str
+    dst: str
+    dst_port: str
+    loc: Loc
+
+    def __str__(self) -> str:
+        return f"{self.src}.{self.src_port} -> {self.dst}.{self.dst_port}"
+
+
+@dataclass
+class Graph:
+    """A loaded, validated graph file."""
+
+    name: str
+    path: str
+    text: str
+    seed: int
+    nodes: dict[str, NodeDef]
+    edges: list[Edge]
+    record: list[tuple[str, str, Loc]]
+    duration_s: float | None = None
+    description: str = ""
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    def consumers(self, node: str, port: str) -> list[Edge]:
+        """Edges leaving ``node.port``."""
+        return [e for e in self.edges if e.src == node and e.src_port == port]
+
+
+# -- YAML with locations ---------------------------------------------------------------------
+
+
+class _Located:
+    """Plain values plus a location for each YAML node, keyed by the value's path."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.locs: dict[tuple[Any, ...], Loc] = {}
+        self.key_locs: dict[tuple[Any, ...], Loc] = {}
+        self.errors: list[GraphError] = []
+
+    def loc(self, *keys: Any) -> Loc:
+        """Location of the value at ``keys`` (or of its closest parent)."""
+        while keys not in self.locs and keys:
+            keys = keys[:-1]
+        return self.locs.get(keys, Loc(self.path))
+
+    def key_loc(self, *keys: Any) -> Loc:
+        """Location of the mapping key that introduces ``keys``."""
+        return self.key_locs.get(keys, self.loc(*keys))
+
+    def convert(self, node: yaml.Node, keys: tuple[Any, ...] = ()) -> Any:
+        mark = node.start_mark
+        self.locs[keys] = Loc(self.path, mark.line + 1, mark.column + 1)
+        if isinstance(node, yaml.MappingNode):
+            out: dict[Any, Any] = {}
+            for k_node, v_node in node.value:
+                key = yaml.SafeLoader.construct_object(_LOADER, k_node, deep=True)  # type: ignore[arg-type]
+                kmark = k_node.start_mark
+                kloc = Loc(self.path, kmark.line + 1, kmark.column + 1)
+                if key in out:
+                    what = "node" if keys == ("nodes",) else "key"
+                    self.errors.append(
+                        GraphError(
+                            kloc,
+                            f"duplicate {what} '{key}'",
+                            f"first defined at {self.key_locs[(*keys, key)]}",
+                        )
+                    )
+                    continue
+                self.key_locs[(*keys, key)] = kloc
+                out[key] = self.convert(v_node, (*keys, key))
+            return out
+        if isinstance(node, yaml.SequenceNode):
+            return [self.convert(v, (*keys, i)) for i, v in enumerate(node.value)]
+        return yaml.SafeLoader.construct_object(_LOADER, node, deep=True)  # type: ignore[arg-type]
+
+
+_LOADER = yaml.SafeLoader("")
+
+
+def resolve_graph_path(name: str | Path) -> Path:
+    """A graph file path; a bare name such as ``touch`` also finds the graphs shipped with flowtact."""
+    p = Path(name)
+    if p.exists() or p.suffix or "/" in str(name):
+        return p
+    from importlib.resources import files
+
+    packaged = files("flowtact.graphs") / f"{name}.yaml"
+    return Path(str(packaged)) if packaged.is_file() else p
+
+
+def parse_override(text: str) -> tuple[str, str, Any]:
+    """``node.param=value`` -> (node, param, value parsed as a YAML scalar)."""
+    m = re.match(r"^\s*([^.=\s]+)\.([^=\s]+)\s*=(.*)$", text)
+    if not m:
+        raise ValueError(f"--set '{text}': expected node.param=value")
+    try:
+        value = yaml.safe_load(m.group(3)) if m.group(3).strip() else None
+    except yaml.YAMLError as e:
+        raise ValueError(f"--set '{text}': the value is not valid YAML ({e.problem})") from None
+    return m.group(1), m.group(2), value
+
+
+def load_graph(
+    source: str | Path,
+    *,
+    overrides: Iterable[str] = (),
+    replays: Mapping[str, str] | None = None,
+    text: str | None = None,
+) -> Graph:
+    """Load and validate a graph file; raise :class:`GraphErrors` listing every problem.
+
+    ``overrides`` are ``node.param=value`` strings (``--set``), applied before validation, so they
+    go through exactly the same checks. ``replays`` maps a source node to a recording
+    (``--replay sensor=out.h5``): the node is swapped for a ``replay`` block playing back its
+    recorded output (one replay node per consumed port, named ``<node>_<port>`` when there are
+    several). ``text`` gives the YAML directly (``source`` then only names it).
+    """
+    path = str(source)
+    if text is None:
+        try:
+            text = Path(source).read_text()
+        except OSError as e:
+            raise GraphErrors([GraphError(Loc(path), f"cannot read graph file: {e.strerror or e}")]) from None
+    located = _Located(path)
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        loc = Loc(path, mark.line + 1, mark.column + 1) if mark else Loc(path)
+        msg = f"YAML syntax error: {e.problem or e.context}"
+        raise GraphErrors(
+            [GraphError(loc, msg, "check indentation, colons and brackets near here")]
+        ) from None
+    if root is None:
+        raise GraphErrors(
+            [GraphError(Loc(path), "the graph file is empty", "a graph needs at least 'nodes:'")]
+        )
+    try:
+        doc = located.convert(root)
+    except yaml.constructor.ConstructorError as e:
+        mark = e.problem_mark
+        loc = Loc(path, mark.line + 1, mark.column + 1) if mark else Loc(path)
+        raise GraphErrors([GraphError(loc, f"unsupported YAML value: {e.problem}")]) from None
+    return _build(doc, located, path, text, list(overrides), dict(replays or {}))
+
+
+def _apply_replays(doc: dict[str, Any], replays: Mapping[str, str], errors: list[GraphError]) -> None:
+    """Swap each replayed node for replay node(s) of its consumed or recorded outputs, in place."""
+    nodes = doc.get("nodes")
+    for i, (name, rec_path) in enumerate(replays.items()):
+        loc = Loc("--replay", 1, i + 1)
+        if not isinstance(nodes, dict) or name not in nodes:
+            errors.append(
+                GraphError(
+                    loc,
+                    f"--replay {name}={rec_path}: unknown node '{name}'{did_you_mean(name, map(str, nodes or {}))}",
+                )
+            )
+            continue
+        refs = [
+            *(e for e in doc.get("edges") or [] if isinstance(e, str)),
+            *(r for r in doc.get("record") or [] if isinstance(r, str)),
+        ]
+        ports = sorted(
+            {m.group(1) for r in refs for m in re.finditer(rf"(?:^|[\s>]){re.escape(name)}\.(\w+)", r)}
+        )
+        if not ports:
+            errors.append(
+                GraphError(loc, f"--replay {name}={rec_path}: nothing consumes or records node '{name}'")
+            )
+            continue
+        del nodes[name]
+        for port in ports:
+            new = name if len(ports) == 1 else f"{name}_{port}"
+            nodes[new] = {"block": "replay", "params": {"path": str(rec_path), "stream": f"{name}.{port}"}}
+            pattern = re.compile(rf"(^|[\s>]){re.escape(name)}\.{re.escape(port)}\b")
+            for key in ("edges", "record"):
+                items = doc.get(key) or []
+                for j, item in enumerate(items):
+                    if isinstance(item, str):
+                        items[j] = pattern.sub(lambda m, new=new: f"{m.group(1)}{new}.y", item)
+
+
+def _build(
+    doc: Any, y: _Located, path: str, text: str, overrides: list[str], replays: dict[str, str]
+) -> Graph:
+    errors = y.errors
+    if not isinstance(doc, dict):
+        raise GraphErrors([GraphError(y.loc(), "a graph file must be a mapping with 'nodes:' and 'edges:'")])
+    if replays:
+        _apply_replays(doc, replays, errors)
+    for key in doc:
+        if key not in TOP_KEYS:
+            errors.append(
+                GraphError(y.key_loc(key), f"unknown top-level key '{key}'{did_you_mean(str(key), TOP_KEYS)}")
+            )
+    seed = doc.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        errors.append(GraphError(y.loc("seed"), f"'seed' must be a non-negative integer; got {seed!r}"))
+        seed = 0
+    duration = doc.get("duration_s")
+    if duration is not None and (
+        isinstance(duration, bool) or not isinstance(duration, (int, float)) or duration <= 0
+    ):
+        errors.append(
+            GraphError(y.loc("duration_s"), f"'duration_s' must be a positive number; got {duration!r}")
+        )
+        duration = None
+    name = doc.get("name", Path(path).stem)
+    if not isinstance(name, str):
+        errors.append(GraphError(y.loc("name"), f"'name' must be a string; got {name!r}"))
+        name = Path(path).stem
+
+    node_docs = doc.get("nodes")
+    if node_docs is None:
+        errors.append(GraphError(y.loc(), "the graph has no 'nodes:' section"))
+        node_docs = {}
+    elif not isinstance(node_docs, dict):
+        errors.append(
+            GraphError(y.loc("nodes"), "'nodes' must be a mapping of node name -> {block: ..., params: ...}")
+        )
+        node_docs = {}
+
+    set_params, set_errors = _overrides(overrides, node_docs)
+    errors.extend(set_errors)
+
+    nodes: dict[str, NodeDef] = {}
+    for nname, ndoc in node_docs.items():
+        node = _node(str(nname), ndoc, y, set_params.get(str(nname), {}), errors)
+        if node is not None:
+            nodes[node.name] = node
+
+    edges = _edges(doc.get("edges", []), y, node_docs, nodes, errors)
+    record = _record(doc.get("record", []), y, node_docs, nodes, errors)
+    if errors:
+        raise GraphErrors(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
+    return Graph(
+        name=name,
+        path=path,
+        text=text,
+        seed=seed,
+        nodes=nodes,
+        edges=edges,
+        record=record,
+        duration_s=float(duration) if duration is not None else None,
+        description=str(doc.get("description", "")),
+        overrides={o: parse_override(o)[2] for o in overrides},
+    )
+
+
+def _overrides(
+    overrides: list[str], node_docs: Mapping[str, Any]
+) -> tuple[dict[str, dict[str, tuple[Any, Loc]]], list[GraphError]]:
+    out: dict[str, dict[str, tuple[Any, Loc]]] = {}
+    errors = []
+    for i, text in enumerate(overrides):
+        loc = Loc("--set", 1, i + 1)
+        try:
+            node, param, value = parse_override(text)
+        except ValueError as e:
+            errors.append(GraphError(loc, str(e)))
+            continue
+        if node not in node_docs:
+            errors.append(
+                GraphError(
+                    loc, f"--set '{text}': unknown node '{node}'{did_you_mean(node, map(str, node_docs))}"
+                )
+            )
+            continue
+        out.setdefault(node, {})[param] = (value, loc)
+    return out, errors
+
+
+def _node(
+    name: str, ndoc: Any, y: _Located, sets: Mapping[str, tuple[Any, Loc]], errors: list[GraphError]
+) -> NodeDef | None:
+    loc = y.key_loc("nodes", name)
+    if not NAME_RE.match(name):
+        errors.append(
+            GraphError(loc, f"node name '{name}' must be an identifier (letters, digits, _), no dots")
+        )
+        return None
+    if not isinstance(ndoc, dict):
+        errors.append(
+            GraphError(
+                y.loc("nodes", name),
+                f"node '{name}' must be a mapping like {{block: savgol, params: {{...}}}}",
+            )
+        )
+        return None
+    for key in ndoc:
+        if key not in NODE_KEYS:
+            errors.append(
+                GraphError(
+                    y.key_loc("nodes", name, key),
+                    f"node '{name}': unknown key '{key}'{did_you_mean(str(key), NODE_KEYS)}",
+                )
+            )
+    block_name = ndoc.get("block")
+    if not isinstance(block_name, str):
+        errors.append(
+            GraphError(
+                loc,
+                f"node '{name}' has no 'block:' (the block type to run)",
+                "see `flowtact blocks` for the catalogue",
+            )
+        )
+        return None
+    try:
+        cls = load_block(block_name)
+    except UnknownBlockError as e:
+        errors.append(
+            GraphError(
+                y.loc("nodes", name, "block"),
+                f"node '{name}': {e}",
+                "see `flowtact blocks` for the catalogue",
+            )
+        )
+        return None
+    params = ndoc.get("params", {}) or {}
+    if not isinstance(params, dict):
+        errors.append(
+            GraphError(y.loc("nodes", name, "params"), f"node '{name}': 'params' must be a mapping")
+        )
+        return None
+    params = dict(params)
+    param_locs = {k: y.loc("nodes", name, "params", k) for k in params}
+    for k, (value, sloc) in sets.items():
+        params[k] = value
+        param_locs[k] = sloc
+    process = ndoc.get("process")
+    if process is not None and not (isinstance(process, str) and NAME_RE.match(process)):
+        errors.append(
+            GraphError(
+                y.loc("nodes", name, "process"),
+                f"node '{name}': 'process' must be an identifier; got {process!r}",
+            )
+        )
+    seed = ndoc.get("seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        errors.append(
+            GraphError(y.loc("nodes", name, "seed"), f"node '{name}': 'seed' must be a non-negative integer")
+        )
+        seed = None
+    try:
+        config = cls.config_cls.build(params, owner=f"{name} ({cls.name})")
+    except ConfigError as e:
+        if e.field in param_locs:
+            ploc = param_locs[e.field]
+        elif e.field and "unknown parameter" not in e.rule:
+            ploc = y.loc("nodes", name, "params") if "params" in ndoc else loc
+        else:
+            bad = re.search(r"unknown parameter '([^']+)'", e.rule)
+            ploc = param_locs.get(bad.group(1), loc) if bad else loc
+        if ploc.path == "--set":
+            ploc = Loc("--set", ploc.line, ploc.col)
+        errors.append(GraphError(ploc, str(e), f"`flowtact blocks {cls.name}` documents every parameter"))
+        return None
+    return NodeDef(
+        name=name,
+        block=block_name,
+        cls=cls,
+        params=params,
+        config=config,
+        loc=loc,
+        process=process,
+        seed=seed,
+        param_locs=param_locs,
+    )
+
+
+def _endpoint_errors(
+    node: str, port: str, side: str, loc: Loc, node_docs: Mapping[str, Any], nodes: Mapping[str, NodeDef]
+) -> GraphError | None:
+    if node not in node_docs:
+        return GraphError(loc, f"unknown node '{node}'{did_you_mean(node, map(str, node_docs))}")
+    if node not in nodes:
+        return None  # the node itself is broken and already reported
+    cls = nodes[node].cls
+    ports = cls.outputs if side == "output" else cls.inputs
+    if port not in ports:
+        listing = ", ".join(ports) or "none"
+        return GraphError(
+            loc,
+            f"block '{cls.name}' (node '{node}') has no {side} '{port}'{did_you_mean(port, ports)}",
+            f"{side}s of {cls.name}: {listing}",
+        )
+    return None
+
+
+def _edges(
+    raw: Any,
+    y: _Located,
+    node_docs: Mapping[str, Any],
+    nodes: Mapping[str, NodeDef],
+    errors: list[GraphError],
+) -> list[Edge]:
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        errors.append(
+            GraphError(y.loc("edges"), "'edges' must be a list of 'node.port -> node.port' strings")
+        )
+        return []
+    edges = []
+    seen_inputs: dict[tuple[str, str], Edge] = {}
+    for i, item in enumerate(raw):
+        loc = y.loc("edges", i)
+        if isinstance(item, dict):
+            for key in item:
+                if key not in EDGE_KEYS:
+                    errors.append(
+                        GraphError(
+                            y.key_loc("edges", i, key),
+                            f"unknown edge key '{key}'{did_you_mean(str(key), EDGE_KEYS)}",
+                        )
+                    )
+            item = f"{item.get('from')} -> {item.get('to')}"
+        m = EDGE_RE.match(item) if isinstance(item, str) else None
+        if not m:
+            errors.append(
+                GraphError(loc, f"malformed edge {item!r}", "write edges as 'node.port -> node.port'")
+            )
+            continue
+        edge = Edge(m.group(1), m.group(2), m.group(3), m.group(4), loc)
+        bad = [
+            _endpoint_errors(edge.src, edge.src_port, "output", loc, node_docs, nodes),
+            _endpoint_errors(edge.dst, edge.dst_port, "input", loc, node_docs, nodes),
+        ]
+        found = [b for b in bad if b is not None]
+        if found:
+            errors.extend(found)
+            continue
+        if edge.src not in nodes or edge.dst not in nodes:
+            continue
+        key = (edge.dst, edge.dst_port)
+        if key in seen_inputs:
+            errors.append(
+                GraphError(
+                    loc,
+                    f"input '{edge.dst}.{edge.dst_port}' is already fed by "
+                    f"'{seen_inputs[key]}' (at {seen_inputs[key].loc})",
+                    "an input takes one stream; use a block that combines streams",
+                )
+            )
+            continue
+        seen_inputs[key] = edge
+        edges.append(edge)
+    return edges
+
+
+def _record(
+    raw: Any,
+    y: _Located,
+    node_docs: Mapping[str, Any],
+    nodes: Mapping[str, NodeDef],
+    errors: list[GraphError],
+) -> list[tuple[str, str, Loc]]:
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        errors.append(GraphError(y.loc("record"), "'record' must be a list of 'node.port' streams"))
+        return []
+    out = []
+    for i, item in enumerate(raw):
+        loc = y.loc("record", i)
+        m = re.match(r"^\s*([^\s.]+)\.([^\s.]+)\s*$", item) if isinstance(item, str) else None
+        if not m:
+            errors.append(
+                GraphError(loc, f"cannot record {item!r}", "record entries are 'node.port' output streams")
+            )
+            continue
+        err = _endpoint_errors(m.group(1), m.group(2), "output", loc, node_docs, nodes)
+        if err:
+            errors.append(GraphError(err.loc, f"cannot record '{item}': {err.message}", err.hint))
+            continue
+        out.append((m.group(1), m.group(2), loc))
+    return out

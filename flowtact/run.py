@@ -1,0 +1,128 @@
+"""Load, compile and run a graph: the one path shared by the CLI and by ``flowtact.testing``.
+
+Also builds the provenance bundle a recording carries (resolved graph, every parameter, every
+node's seed, versions), from which ``flowtact run out.h5`` re-creates the run exactly.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import json
+import platform
+import sys
+from collections.abc import Callable, Iterable, Mapping
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+import flowtact
+from flowtact.compile import Plan, compile_graph
+from flowtact.graph import load_graph, resolve_graph_path
+from flowtact.runtime.inproc import InprocExecutor, RunSummary
+
+__all__ = ["load_plan", "provenance", "resolved_graph", "run_plan", "versions"]
+
+VERSIONED = ("numpy", "numba", "h5py", "pyzmq", "msgpack", "pyyaml", "scipy", "matplotlib")
+
+
+def load_plan(
+    source: str | Path,
+    *,
+    overrides: Iterable[str] = (),
+    replays: Mapping[str, str] | None = None,
+) -> Plan:
+    """Load and compile a graph file, or the graph stored in a recording (``.h5``)."""
+    path = Path(source)
+    if path.suffix in (".h5", ".hdf5"):
+        from flowtact.record import read_recording
+
+        text = read_recording(path).provenance["graph_yaml"]
+        graph = load_graph(f"{path}#graph", text=text, overrides=overrides, replays=replays)
+    else:
+        graph = load_graph(resolve_graph_path(source), overrides=overrides, replays=replays)
+    return compile_graph(graph)
+
+
+def resolved_graph(plan: Plan) -> dict[str, Any]:
+    """The graph with every parameter (defaults included) and every node's seed written out."""
+    g = plan.graph
+    doc: dict[str, Any] = {"name": g.name, "seed": g.seed}
+    if g.description:
+        doc["description"] = g.description
+    if g.duration_s is not None:
+        doc["duration_s"] = g.duration_s
+    nodes = {}
+    for name, node in g.nodes.items():
+        entry: dict[str, Any] = {
+            "block": node.block,
+            "params": node.config.to_dict(),
+            "seed": plan.seeds[name],
+        }
+        if node.process:
+            entry["process"] = node.process
+        nodes[name] = entry
+    doc["nodes"] = nodes
+    doc["edges"] = [str(e) for e in g.edges]
+    doc["record"] = [f"{n}.{p}" for n, p in plan.record]
+    return doc
+
+
+def versions() -> dict[str, str]:
+    """Python, flowtact and dependency versions."""
+    out = {
+        "python": platform.python_version(),
+        "flowtact": flowtact.__version__,
+        "platform": platform.platform(),
+    }
+    for dist in VERSIONED:
+        with contextlib.suppress(PackageNotFoundError):
+            out[dist] = version(dist)
+    return out
+
+
+def provenance(plan: Plan, argv: list[str] | None = None) -> dict[str, Any]:
+    """Everything needed to re-create a run exactly."""
+    resolved = resolved_graph(plan)
+    return {
+        "flowtact_version": flowtact.__version__,
+        "graph_name": plan.graph.name,
+        "graph_path": plan.graph.path,
+        "graph_yaml": yaml.safe_dump(resolved, sort_keys=False),
+        "graph_source": plan.graph.text,
+        "overrides": json.dumps(plan.graph.overrides),
+        "graph_seed": plan.graph.seed,
+        "params": json.dumps({n: node.config.to_dict() for n, node in plan.graph.nodes.items()}),
+        "seeds": json.dumps(plan.seeds),
+        "pruned": json.dumps(plan.pruned),
+        "versions": json.dumps(versions()),
+        "command": " ".join(argv if argv is not None else sys.argv),
+        "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+    }
+
+
+def run_plan(
+    plan: Plan,
+    *,
+    duration_s: float | None = None,
+    fast: bool = True,
+    record: str | Path | None = None,
+    tick_s: float | None = None,
+    progress: Callable[[float, float | None], None] | None = None,
+    argv: list[str] | None = None,
+) -> RunSummary:
+    """Run a compiled plan in this process, recording its ``record:`` streams to ``record``."""
+    duration = duration_s if duration_s is not None else plan.graph.duration_s
+    if record is None:
+        return InprocExecutor(plan, fast=fast, tick_s=tick_s, progress=progress).run(duration)
+    from flowtact.record import Recorder
+
+    streams = {f"{n}.{p}": plan.specs[(n, p)] for n, p in plan.record}
+    with Recorder(record, streams, provenance(plan, argv)) as recorder:
+        summary = InprocExecutor(plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress).run(
+            duration
+        )
+        recorder.close(summary.to_dict())
+    return summary

@@ -1,0 +1,46 @@
+"""Graph clocks: the runtime, never a block, decides when graph time advances.
+
+Graph time is seconds since the run started, advanced in ticks ``now = k * tick_s`` from an
+integer counter. ``fast`` runs ticks back to back; ``realtime`` waits until the wall clock
+reaches each tick.
+"""
+
+from __future__ import annotations
+
+import time
+
+__all__ = ["Clock", "FastClock", "RealtimeClock"]
+
+
+class Clock:
+    """Paces ticks; ``wait_until(now)`` returns when graph time ``now`` may be processed."""
+
+    def __init__(self) -> None:
+        self._t0 = time.perf_counter()
+
+    def start(self) -> None:
+        """Graph time 0 is now."""
+        self._t0 = time.perf_counter()
+
+    def wait_until(self, now: float) -> None:
+        raise NotImplementedError
+
+    def elapsed(self) -> float:
+        """Wall seconds since start."""
+        return time.perf_counter() - self._t0
+
+
+class FastClock(Clock):
+    """As fast as possible: a tick is processed as soon as the previous one is done."""
+
+    def wait_until(self, now: float) -> None:
+        return None
+
+
+class RealtimeClock(Clock):
+    """Ticks follow the wall clock (a tick that runs late is processed at once, never skipped)."""
+
+    def wait_until(self, now: float) -> None:
+        delay = now - self.elapsed()
+        if delay > 0:
+            time.sleep(delay)

@@ -1,0 +1,255 @@
+"""The in-process executor: every active node of a plan in one loop, deterministic.
+
+Each tick, sources are stepped with the graph time ``now`` and every other node, in topological
+order, receives what its upstream produced during the tick (or, through a delay port, during the
+previous tick). Only demanded outputs travel; recorded streams go to the recorder. At the end
+every node is flushed in order so held-back samples (a centred filter's tail) reach the sinks.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from flowtact.block import Block, Source
+from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.compile import Plan
+from flowtact.runtime.clock import Clock, FastClock, RealtimeClock
+
+__all__ = ["InprocExecutor", "NodeError", "RunSummary"]
+
+DEFAULT_TICK_FAST_S = 1.0
+DEFAULT_TICK_REALTIME_S = 0.005
+
+
+class Sink(Protocol):
+    """What the executor writes recorded streams to (a :class:`flowtact.record.Recorder`)."""
+
+    def write(self, stream: str, chunk: Chunk) -> None: ...
+
+
+class NodeError(RuntimeError):
+    """A block raised while stepping: names the node, its block and the graph time."""
+
+    def __init__(self, node: str, block: str, now: float, cause: BaseException) -> None:
+        self.node, self.block, self.now, self.cause = node, block, now, cause
+        super().__init__(f"node '{node}' ({block}) failed at t={now:.3f} s: {type(cause).__name__}: {cause}")
+
+
+@dataclass
+class RunSummary:
+    """What a run did: samples, spikes per population, wall time, real-time factor, counters."""
+
+    graph: str
+    duration_s: float
+    wall_s: float
+    stopped_by: str
+    samples: dict[str, int] = field(default_factory=dict)
+    events: dict[str, int] = field(default_factory=dict)
+    event_units: dict[str, int] = field(default_factory=dict)
+    counters: dict[str, dict[str, int]] = field(default_factory=dict)
+    pruned: list[str] = field(default_factory=list)
+    ticks: int = 0
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall second."""
+        return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "graph": self.graph,
+            "duration_s": self.duration_s,
+            "wall_s": self.wall_s,
+            "realtime_factor": self.realtime_factor,
+            "stopped_by": self.stopped_by,
+            "ticks": self.ticks,
+            "samples": self.samples,
+            "events": self.events,
+            "event_rate_hz_per_unit": {k: self.rate(k) for k in self.events},
+            "counters": self.counters,
+            "pruned": self.pruned,
+        }
+
+    def rate(self, stream: str) -> float:
+        """Mean events per second per unit on an event stream."""
+        units = max(self.event_units.get(stream, 1), 1)
+        return self.events[stream] / units / self.duration_s if self.duration_s > 0 else 0.0
+
+    def format(self) -> str:
+        """A short human summary."""
+        lines = [
+            f"{self.graph}: {self.duration_s:.3f} s of graph time in {self.wall_s:.3f} s wall "
+            f"({self.realtime_factor:,.0f}x real time, {self.stopped_by})"
+        ]
+        for k, n in self.samples.items():
+            lines.append(f"  {k:<28} {n:>10,} samples")
+        for k, n in self.events.items():
+            lines.append(
+                f"  {k:<28} {n:>10,} spikes  ({self.rate(k):.1f}/s per unit, {self.event_units.get(k, 1)} units)"
+            )
+        for node, cs in self.counters.items():
+            if cs:
+                lines.append(f"  {node}: " + ", ".join(f"{k}={v}" for k, v in sorted(cs.items())))
+        if self.pruned:
+            lines.append(f"  not started: {', '.join(self.pruned)}")
+        return "\n".join(lines)
+
+
+class InprocExecutor:
+    """Runs a :class:`~flowtact.compile.Plan` in this process."""
+
+    def __init__(
+        self,
+        plan: Plan,
+        *,
+        fast: bool = True,
+        tick_s: float | None = None,
+        recorder: Sink | None = None,
+        progress: Callable[[float, float | None], None] | None = None,
+    ) -> None:
+        self.plan = plan
+        self.fast = fast
+        self.tick_s = tick_s or (DEFAULT_TICK_FAST_S if fast else DEFAULT_TICK_REALTIME_S)
+        if not self.tick_s > 0:
+            raise ValueError("tick_s must be > 0")
+        self.recorder = recorder
+        self.progress = progress
+        self.blocks: dict[str, Block] = {n: plan.graph.nodes[n].make() for n in plan.order}
+        for n, block in self.blocks.items():
+            plan.bind(n, block)
+        # routes[(node, port)] -> [(dst node, dst port, delayed)]
+        self.routes: dict[tuple[str, str], list[tuple[str, str, bool]]] = defaultdict(list)
+        for e in plan.active_edges:
+            delayed = plan.graph.nodes[e.dst].cls.inputs[e.dst_port].delay
+            self.routes[(e.src, e.src_port)].append((e.dst, e.dst_port, delayed))
+        self.recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in self.blocks}
+        self.inputs = {n: sorted(plan.needed[n]) for n in plan.order}
+        self.samples: dict[str, int] = defaultdict(int)
+        self.events: dict[str, int] = defaultdict(int)
+
+    def _deliver(
+        self,
+        node: str,
+        out: dict[str, Chunk],
+        now: float,
+        pending: dict[tuple[str, str], list[Chunk]],
+        later: dict[tuple[str, str], list[Chunk]],
+    ) -> None:
+        demanded = self.plan.demanded[node]
+        for port, chunk in out.items():
+            if port not in demanded:
+                continue
+            spec = self.plan.specs[(node, port)]
+            _check_chunk(node, port, chunk, spec, now)
+            key = (node, port)
+            for dst, dport, delayed in self.routes.get(key, ()):
+                (later if delayed else pending)[(dst, dport)].append(chunk)
+            name = self.recorded.get(key)
+            if name is not None:
+                (self.events if spec.events else self.samples)[name] += len(chunk)
+                if self.recorder is not None:
+                    self.recorder.write(name, chunk)
+            elif spec.events:
+                self.events[f"{node}.{port}"] += len(chunk)
+
+    def _step(
+        self,
+        node: str,
+        now: float,
+        pending: dict[tuple[str, str], list[Chunk]],
+        later: dict[tuple[str, str], list[Chunk]],
+    ) -> None:
+        block = self.blocks[node]
+        try:
+            if isinstance(block, Source):
+                out = block(now)
+            else:
+                ins = {p: concat(pending.pop((node, p), []), block.input_specs[p]) for p in self.inputs[node]}
+                if all(len(c) == 0 and c.end is None for c in ins.values()):
+                    return
+                out = block(**ins)
+        except Exception as e:
+            raise NodeError(node, block.name, now, e) from e
+        self._deliver(node, out, now, pending, later)
+
+    def run(self, duration_s: float | None) -> RunSummary:
+        """Run until ``duration_s`` of graph time (None: until interrupted; realtime only)."""
+        if duration_s is None and self.fast:
+            raise ValueError("a --fast run needs a duration (--duration or the graph's duration_s)")
+        clock: Clock = FastClock() if self.fast else RealtimeClock()
+        pending: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
+        opened: list[Block] = []
+        stopped_by = "duration"
+        now, k = 0.0, 0
+        try:
+            for block in self.blocks.values():
+                block.open()
+                opened.append(block)
+            clock.start()
+            n_ticks = math.ceil(duration_s / self.tick_s - 1e-9) if duration_s is not None else None
+            try:
+                while n_ticks is None or k < n_ticks:
+                    k += 1
+                    now = k * self.tick_s if n_ticks is None or k < n_ticks else float(duration_s)  # type: ignore[arg-type]
+                    clock.wait_until(now)
+                    later: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
+                    for node in self.plan.order:
+                        self._step(node, now, pending, later)
+                    for key, chunks in later.items():
+                        pending[key].extend(chunks)
+                    if self.progress is not None:
+                        self.progress(now, duration_s)
+            except KeyboardInterrupt:
+                stopped_by = "interrupted"
+            self._flush_all(now, pending)
+        finally:
+            for block in reversed(opened):
+                block.close()
+        return RunSummary(
+            graph=self.plan.graph.name,
+            duration_s=now,
+            wall_s=clock.elapsed(),
+            stopped_by=stopped_by,
+            samples=dict(self.samples),
+            events=dict(self.events),
+            event_units={
+                f"{n}.{p}": self.plan.specs[(n, p)].n_units or 1
+                for n in self.plan.order
+                for p in self.plan.demanded[n]
+                if self.plan.specs[(n, p)].events
+            },
+            counters={n: dict(b.counters) for n, b in self.blocks.items() if b.counters},
+            pruned=list(self.plan.pruned),
+            ticks=k,
+        )
+
+    def _flush_all(self, now: float, pending: dict[tuple[str, str], list[Chunk]]) -> None:
+        """End of stream: feed what is pending, then flush each node in order."""
+        for node in self.plan.order:
+            block = self.blocks[node]
+            if not isinstance(block, Source):
+                self._step(node, now, pending, pending)
+            try:
+                out = block.flush()
+            except Exception as e:
+                raise NodeError(node, block.name, now, e) from e
+            self._deliver(node, out, now, pending, pending)
+
+
+def _check_chunk(node: str, port: str, chunk: Chunk, spec: StreamSpec, now: float) -> None:
+    """Guard the stream contract: a block's output must match its declared spec."""
+    n = len(chunk)
+    if (
+        chunk.data.shape[:1] != (n,)
+        or chunk.data.shape[1:] != tuple(spec.shape)
+        or str(chunk.data.dtype) != spec.dtype
+    ):
+        raise RuntimeError(
+            f"node '{node}' produced {chunk.data.dtype}{list(chunk.data.shape)} with {n} timestamps on "
+            f"'{port}' at t={now:.3f} s, but the stream is {spec.describe()} (a bug in the block)"
+        )

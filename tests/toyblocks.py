@@ -1,0 +1,114 @@
+"""Tiny generic blocks for framework tests (graphs name them as ``toyblocks:Class``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from flowtact import Block, Chunk, Config, Example, Port, Source, StreamSpec, param
+from flowtact.block import SpecError
+
+
+@dataclass(frozen=True)
+class RampConfig(Config):
+    rate_hz: float = param(1000.0, doc="sample rate", gt=0)
+    channels: int = param(1, doc="channels", ge=1)
+    units: str = param("N", doc="units of the output")
+    noise: float = param(0.0, doc="white noise sd", ge=0)
+
+
+class Ramp(Source):
+    """A ramp t·(1 + channel index) plus seeded noise."""
+
+    config_cls = RampConfig
+    outputs = {"y": Port(doc="the ramp"), "z": Port(doc="the ramp negated")}
+
+    def specs(self, inputs):
+        c = self.config
+        spec = StreamSpec(shape=(c.channels,), units=c.units, rate_hz=c.rate_hz)
+        return {"y": spec, "z": spec}
+
+    def reset(self):
+        self.i = 0
+
+    def step(self, now):
+        n = self.due(now, self.config.rate_hz) - self.i
+        t = (self.i + np.arange(n)) / self.config.rate_hz
+        self.i += n
+        y = t[:, None] * (1.0 + np.arange(self.config.channels))
+        y = y + self.config.noise * self.rng.standard_normal(y.shape)
+        out = {}
+        if "y" in self.demanded:
+            out["y"] = Chunk(t, y)
+        if "z" in self.demanded:
+            self.count("z_chunks")
+            out["z"] = Chunk(t, -y)
+        return out
+
+    @classmethod
+    def example(cls):
+        return Example(params={"noise": 0.1})
+
+
+@dataclass(frozen=True)
+class ScaleConfig(Config):
+    gain: float = param(2.0, doc="multiplier")
+    rate_hz: float | None = param(None, doc="expected input rate", gt=0)
+    mode: Literal["mul", "neg"] = param("mul", doc="what to do")
+
+
+class Scale(Block):
+    """y = gain · x."""
+
+    config_cls = ScaleConfig
+    inputs = {"x": Port(doc="in")}
+    outputs = {"y": Port(doc="out")}
+
+    def specs(self, inputs):
+        x = inputs["x"]
+        if self.config.rate_hz is not None and x.rate_hz != self.config.rate_hz:
+            raise SpecError(
+                "x", f"expects {self.config.rate_hz:g} Hz (rate_hz) but the stream is {x.rate_hz:g} Hz"
+            )
+        return {"y": x}
+
+    def step(self, x):
+        return {"y": Chunk(x.t, x.data * self.config.gain)}
+
+    @classmethod
+    def example(cls):
+        return Example(inputs={"x": np.ones((10, 2))})
+
+
+@dataclass(frozen=True)
+class AddConfig(Config):
+    wb: float = param(1.0, doc="weight of b (0: b is not needed)")
+
+
+class Add(Block):
+    """y = a + wb·b, for sample-aligned inputs."""
+
+    config_cls = AddConfig
+    inputs = {
+        "a": Port(units="N", doc="first"),
+        "b": Port(optional=True, doc="second (optional)"),
+        "fb": Port(optional=True, delay=True, doc="fed back one tick late"),
+    }
+    outputs = {"y": Port(doc="sum")}
+
+    def needs(self, connected):
+        return connected - ({"b"} if self.config.wb == 0 else set())
+
+    def reset(self):
+        self.held = {p: [] for p in self.inputs}
+
+    def step(self, a, b=None, fb=None):
+        if b is None:
+            return {"y": a}
+        return {"y": Chunk(a.t, a.data + self.config.wb * b.data)}
+
+    @classmethod
+    def example(cls):
+        return Example(inputs={"a": np.ones((10, 1))})
