@@ -326,13 +326,14 @@ def _build(
     errors.extend(set_errors)
 
     nodes: dict[str, NodeDef] = {}
+    classes: dict[str, type[Block]] = {}
     for nname, ndoc in node_docs.items():
-        node = _node(str(nname), ndoc, y, set_params.get(str(nname), {}), errors)
+        node = _node(str(nname), ndoc, y, set_params.get(str(nname), {}), errors, classes)
         if node is not None:
             nodes[node.name] = node
 
-    edges = _edges(doc.get("edges", []), y, node_docs, nodes, errors)
-    record = _record(doc.get("record", []), y, node_docs, nodes, errors)
+    edges = _edges(doc.get("edges", []), y, node_docs, classes, errors)
+    record = _record(doc.get("record", []), y, node_docs, classes, errors)
     if errors:
         raise GraphErrors(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
     return Graph(
@@ -373,7 +374,12 @@ def _overrides(
 
 
 def _node(
-    name: str, ndoc: Any, y: _Located, sets: Mapping[str, tuple[Any, Loc]], errors: list[GraphError]
+    name: str,
+    ndoc: Any,
+    y: _Located,
+    sets: Mapping[str, tuple[Any, Loc]],
+    errors: list[GraphError],
+    classes: dict[str, type[Block]],
 ) -> NodeDef | None:
     loc = y.key_loc("nodes", name)
     if not NAME_RE.match(name):
@@ -418,6 +424,7 @@ def _node(
             )
         )
         return None
+    classes[name] = cls
     params = ndoc.get("params", {}) or {}
     if not isinstance(params, dict):
         errors.append(
@@ -452,7 +459,12 @@ def _node(
             ploc = y.loc("nodes", name, "params") if "params" in ndoc else loc
         else:
             bad = re.search(r"unknown parameter '([^']+)'", e.rule)
-            ploc = param_locs.get(bad.group(1), loc) if bad else loc
+            key = bad.group(1) if bad else None
+            ploc = (
+                y.key_loc("nodes", name, "params", key)
+                if key in (ndoc.get("params") or {})
+                else param_locs.get(key, loc)
+            )
         if ploc.path == "--set":
             ploc = Loc("--set", ploc.line, ploc.col)
         errors.append(GraphError(ploc, str(e), f"`flowtact blocks {cls.name}` documents every parameter"))
@@ -471,21 +483,23 @@ def _node(
 
 
 def _endpoint_errors(
-    node: str, port: str, side: str, loc: Loc, node_docs: Mapping[str, Any], nodes: Mapping[str, NodeDef]
+    node: str,
+    port: str,
+    side: str,
+    loc: Loc,
+    node_docs: Mapping[str, Any],
+    classes: Mapping[str, type[Block]],
 ) -> GraphError | None:
     if node not in node_docs:
         return GraphError(loc, f"unknown node '{node}'{did_you_mean(node, map(str, node_docs))}")
-    if node not in nodes:
-        return None  # the node itself is broken and already reported
-    cls = nodes[node].cls
+    if node not in classes:
+        return None  # the node's block is unknown: already reported
+    cls = classes[node]
     ports = cls.outputs if side == "output" else cls.inputs
     if port not in ports:
-        listing = ", ".join(ports) or "none"
-        return GraphError(
-            loc,
-            f"block '{cls.name}' (node '{node}') has no {side} '{port}'{did_you_mean(port, ports)}",
-            f"{side}s of {cls.name}: {listing}",
-        )
+        suggestion = did_you_mean(port, ports)
+        hint = f"{side}s of {cls.name}: {', '.join(ports) or 'none'}" if "(valid" not in suggestion else ""
+        return GraphError(loc, f"block '{cls.name}' (node '{node}') has no {side} '{port}'{suggestion}", hint)
     return None
 
 
@@ -493,7 +507,7 @@ def _edges(
     raw: Any,
     y: _Located,
     node_docs: Mapping[str, Any],
-    nodes: Mapping[str, NodeDef],
+    classes: Mapping[str, type[Block]],
     errors: list[GraphError],
 ) -> list[Edge]:
     if raw is None:
@@ -525,14 +539,14 @@ def _edges(
             continue
         edge = Edge(m.group(1), m.group(2), m.group(3), m.group(4), loc)
         bad = [
-            _endpoint_errors(edge.src, edge.src_port, "output", loc, node_docs, nodes),
-            _endpoint_errors(edge.dst, edge.dst_port, "input", loc, node_docs, nodes),
+            _endpoint_errors(edge.src, edge.src_port, "output", loc, node_docs, classes),
+            _endpoint_errors(edge.dst, edge.dst_port, "input", loc, node_docs, classes),
         ]
         found = [b for b in bad if b is not None]
         if found:
             errors.extend(found)
             continue
-        if edge.src not in nodes or edge.dst not in nodes:
+        if edge.src not in classes or edge.dst not in classes:
             continue
         key = (edge.dst, edge.dst_port)
         if key in seen_inputs:
@@ -554,7 +568,7 @@ def _record(
     raw: Any,
     y: _Located,
     node_docs: Mapping[str, Any],
-    nodes: Mapping[str, NodeDef],
+    classes: Mapping[str, type[Block]],
     errors: list[GraphError],
 ) -> list[tuple[str, str, Loc]]:
     if raw is None:
@@ -571,7 +585,7 @@ def _record(
                 GraphError(loc, f"cannot record {item!r}", "record entries are 'node.port' output streams")
             )
             continue
-        err = _endpoint_errors(m.group(1), m.group(2), "output", loc, node_docs, nodes)
+        err = _endpoint_errors(m.group(1), m.group(2), "output", loc, node_docs, classes)
         if err:
             errors.append(GraphError(err.loc, f"cannot record '{item}': {err.message}", err.hint))
             continue

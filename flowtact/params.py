@@ -238,8 +238,10 @@ def _describe(v: Any) -> str:
 def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
     """Check ``v`` against the type ``hint`` and ``rules``; return the frozen value."""
 
+    given = v
+
     def fail(expect: str) -> ConfigError:
-        return ConfigError(owner, name, f"must be {expect}; got {_describe(v)}")
+        return ConfigError(owner, name, f"must be {expect}; got {_describe(given)}")
 
     origin = get_origin(hint)
     if origin in (typing.Union, types.UnionType):

@@ -112,3 +112,42 @@ class Add(Block):
     @classmethod
     def example(cls):
         return Example(inputs={"a": np.ones((10, 1))})
+
+
+class Heavy(Block):
+    """Imports a (pretend) heavy optional dependency only when opened."""
+
+    config_cls = ScaleConfig
+    requires = ("toyheavy",)
+    inputs = {"x": Port(doc="in")}
+    outputs = {"y": Port(doc="out")}
+
+    def open(self):
+        import toyheavy  # noqa: F401  (the import itself is what the test watches)
+
+    def step(self, x):
+        return {"y": x}
+
+    @classmethod
+    def example(cls):
+        return Example(inputs={"x": np.ones((10, 1))})
+
+
+class Loop(Block):
+    """y = x + (what came back through the delayed input fb, shifted one tick)."""
+
+    config_cls = AddConfig
+    inputs = {"x": Port(doc="in"), "fb": Port(delay=True, optional=True, doc="feedback, one tick late")}
+    outputs = {"y": Port(doc="out")}
+
+    def reset(self):
+        self.got_feedback = 0
+
+    def step(self, x, fb=None):
+        if fb is not None:
+            self.got_feedback += len(fb)
+        return {"y": x}
+
+    @classmethod
+    def example(cls):
+        return Example(inputs={"x": np.ones((10, 1))})

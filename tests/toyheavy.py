@@ -1,0 +1,1 @@
+"""Stands in for a heavy optional dependency (torch, OpenCV) in the lazy-import test."""
