@@ -1,0 +1,1 @@
+"""Graph files shipped with flowtact (found by name: `flowtact run touch`)."""

@@ -1,0 +1,111 @@
+"""The flowtact command end to end: run, record, re-run from a recording, replay, blocks, graph, plot."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from flowtact.cli import main
+from flowtact.record import read_recording
+
+ROOT = Path(__file__).parent.parent
+TOUCH = str(ROOT / "graphs" / "touch.yaml")
+SLIP = str(ROOT / "graphs" / "slip.yaml")
+
+
+def flowtact(*args):
+    return subprocess.run([sys.executable, "-m", "flowtact.cli", *args], capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def touch_h5(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec") / "touch.h5"
+    proc = flowtact("run", TOUCH, "--fast", "--duration", "3", "--record", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "sa1.spikes" in proc.stdout and "real time" in proc.stdout
+    return out
+
+
+@pytest.mark.parametrize("graph", [TOUCH, SLIP])
+def test_graphs_validate(graph, capsys):
+    assert main(["validate", graph]) == 0
+    out = capsys.readouterr().out
+    assert "ddforce: not started" in out
+
+
+def test_recording_layout_and_provenance(touch_h5):
+    with h5py.File(touch_h5, "r") as f:
+        for name in ("force.f", "sa1.spikes", "fa1.spikes", "sensor.force"):
+            assert f"streams/{name}/t" in f and f"streams/{name}/data" in f
+        assert f["streams/force.f/data"].shape == (3000, 3)
+        assert f["streams/force.f"].attrs["units"] == "N"
+    rec = read_recording(touch_h5)
+    assert rec.provenance["graph_seed"] == 7
+    seeds = json.loads(rec.provenance["seeds"])
+    assert set(seeds) >= {"sensor", "sa1", "fa1"}
+    params = json.loads(rec.provenance["params"])
+    assert params["dforce"]["window"] == 5 and params["dforce"]["order"] == 4
+    assert "numpy" in json.loads(rec.provenance["versions"])
+    t = rec.streams["sa1.spikes"].t
+    assert len(t) > 0 and np.all(np.diff(t) >= 0)
+
+
+def test_rerun_from_a_recording_is_identical(touch_h5, tmp_path):
+    again = tmp_path / "again.h5"
+    proc = flowtact("run", str(touch_h5), "--fast", "--duration", "3", "--record", str(again))
+    assert proc.returncode == 0, proc.stderr
+    a, b = read_recording(touch_h5), read_recording(again)
+    for name in a.streams:
+        assert np.array_equal(a.streams[name].t, b.streams[name].t)
+        assert np.array_equal(a.streams[name].data, b.streams[name].data)
+
+
+def test_replaying_the_sensor_reproduces_every_downstream_stream(touch_h5, tmp_path):
+    out = tmp_path / "replayed.h5"
+    proc = flowtact("run", TOUCH, "--fast", "--duration", "3", "--replay", f"sensor={touch_h5}", "--record", str(out))
+    assert proc.returncode == 0, proc.stderr
+    a, b = read_recording(touch_h5), read_recording(out)
+    for name in ("force.f", "dforce.y", "sa1.spikes", "fa1.spikes"):
+        assert np.array_equal(a.streams[name].t, b.streams[name].t), name
+        assert np.array_equal(a.streams[name].data, b.streams[name].data), name
+    assert np.array_equal(a.streams["sensor.r"].data, b.streams["sensor_r.y"].data)
+
+
+def test_run_json_summary():
+    proc = flowtact("run", SLIP, "--fast", "--duration", "1", "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["duration_s"] == 1.0
+    assert "ddforce" in summary["pruned"]
+    assert summary["events"]["sa1.spikes"] > 0
+
+
+def test_blocks_catalogue_and_one_block(capsys):
+    assert main(["blocks"]) == 0
+    out = capsys.readouterr().out
+    for name in ("aunp_sensor", "gauge_force", "savgol", "weighted_sum", "nlif", "rate", "pulses", "replay"):
+        assert name in out
+    assert main(["blocks", "savgol"]) == 0
+    out = capsys.readouterr().out
+    assert "window" in out and "Parameters:" in out and "Inputs:" in out
+    assert main(["blocks", "savgl"]) == 2
+    assert "did you mean 'savgol'" in capsys.readouterr().err
+
+
+def test_graph_drawing(tmp_path, capsys):
+    for suffix in (".dot", ".svg", ".png"):
+        out = tmp_path / f"touch{suffix}"
+        assert main(["graph", TOUCH, "-o", str(out)]) == 0
+        assert out.stat().st_size > 0
+    dot = (tmp_path / "touch.dot").read_text()
+    assert '"ddforce" [label="ddforce\\n(savgol)", style="rounded,dashed"' in dot
+
+
+def test_plot(touch_h5, tmp_path, capsys):
+    out = tmp_path / "fig.png"
+    assert main(["plot", str(touch_h5), "-o", str(out)]) == 0
+    assert out.stat().st_size > 10_000
