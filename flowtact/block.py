@@ -254,7 +254,9 @@ def screen_nonfinite(
     out = d.copy()
     prev = np.zeros(d.shape[1:], d.dtype) if last is None else last
     for i in range(len(out)):
-        if bad[i]:
+        if bad[i] and out.ndim == 1:  # scalar samples: a row is a numpy scalar, not a view
+            out[i] = prev
+        elif bad[i]:
             row = out[i]
             mask = ~np.isfinite(row)
             row[mask] = np.broadcast_to(prev, row.shape)[mask]

@@ -13,6 +13,7 @@ import sys
 import textwrap
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from flowtact.graph import GraphErrors
@@ -83,6 +84,11 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("--streams", nargs="*", help="streams to plot (default: all)")
     plot.add_argument("--from", dest="t0", type=float, help="start time (s)")
     plot.add_argument("--to", dest="t1", type=float, help="end time (s)")
+    bench = sub.add_parser("bench", help="run a benchmark of bench/ (in a source checkout)")
+    bench.add_argument("name", nargs="?", help="benchmark name (bench/NAME.py); none lists them")
+    bench.add_argument(
+        "args", nargs=argparse.REMAINDER, help="arguments for the benchmark (e.g. --quick --json out.json)"
+    )
     return p
 
 
@@ -241,12 +247,43 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_dir() -> Path | None:
+    for base in (Path.cwd(), Path(__file__).resolve().parent.parent):
+        if (base / "bench").is_dir() and any((base / "bench").glob("*.py")):
+            return base / "bench"
+    return None
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    import runpy
+
+    folder = _bench_dir()
+    if folder is None:
+        print("flowtact: no bench/ folder here: benchmarks run from a source checkout", file=sys.stderr)
+        return EXIT_RUN_ERROR
+    scripts = {p.stem: p for p in sorted(folder.glob("*.py")) if not p.stem.startswith("_")}
+    if not args.name:
+        for name, path in scripts.items():
+            doc = (path.read_text().split('"""')[1].strip().splitlines() or [""])[0]
+            print(f"{name:<12} {doc}")
+        return 0
+    if args.name not in scripts:
+        from flowtact.params import did_you_mean
+
+        print(f"flowtact: unknown benchmark '{args.name}'{did_you_mean(args.name, scripts)}", file=sys.stderr)
+        return EXIT_GRAPH_ERROR
+    sys.argv = [str(scripts[args.name]), *args.args]
+    runpy.run_path(str(scripts[args.name]), run_name="__main__")
+    return 0
+
+
 COMMANDS = {
     "run": _cmd_run,
     "validate": _cmd_validate,
     "blocks": _cmd_blocks,
     "graph": _cmd_graph,
     "plot": _cmd_plot,
+    "bench": _cmd_bench,
 }
 
 
