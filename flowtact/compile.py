@@ -65,6 +65,11 @@ def node_seed(graph_seed: int, node: str) -> int:
     return int(ss.generate_state(1, np.uint64)[0])
 
 
+def _essential(spec: StreamSpec) -> tuple[object, ...]:
+    """What a delayed stream must agree on: dtype, shape, units, rate, kind."""
+    return (spec.dtype, tuple(spec.shape), spec.units, spec.rate_hz, spec.events)
+
+
 def _check_port(port: Port, spec: StreamSpec) -> str | None:
     """Why a stream cannot feed a declared input port, or None."""
     if port.events != spec.events:
@@ -186,12 +191,12 @@ def compile_graph(graph: Graph) -> Plan:
         except SpecError as err:
             errors.append(GraphError(graph.nodes[n].loc, f"node '{n}': {err}"))
             continue
-        if any(again[p] != specs[(n, p)] for p in again):
+        if any(_essential(again[p]) != _essential(specs[(n, p)]) for p in again):
             errors.append(
                 GraphError(
                     graph.nodes[n].loc,
                     f"node '{n}': its output spec depends on its delayed input",
-                    "declare the fed-back stream's spec in the delay block's parameters",
+                    "declare the fed-back stream (dtype, shape, units, rate_hz) in the delay block's parameters",
                 )
             )
     if errors:

@@ -222,3 +222,25 @@ def test_errors_are_all_collected_with_locations():
     assert "g.yaml:6:44: s (scale): unknown parameter 'gian' (did you mean 'gain'?)" in text_all
     assert "g.yaml:8:5: block 'ramp' (node 'src') has no output 'w' (valid: y, z)" in text_all
     assert "g.yaml:9:10: cannot record 's.q': block 'scale' (node 's') has no output 'q'" in text_all
+
+
+DELAY_LOOP = """
+nodes:
+  src: {block: "toyblocks:Ramp"}
+  a:   {block: "toyblocks:Loop"}
+  d:   {block: delay, params: {shape: [1], units: N, rate_hz: 1000}}
+edges:
+  - src.y -> a.x
+  - a.y -> d.x
+  - d.y -> a.fb
+record: [a.y]
+"""
+
+
+def test_a_delay_block_closes_a_loop_when_it_declares_the_fed_back_stream():
+    plan = compile_graph(load(DELAY_LOOP))
+    ex = InprocExecutor(plan, fast=True, tick_s=0.5)
+    ex.run(2.0)
+    assert ex.blocks["a"].got_feedback == 2000
+    with pytest.raises(GraphErrors, match="declare the fed-back stream"):
+        compile_graph(load(DELAY_LOOP.replace("units: N,", "units: mN,")))
