@@ -198,6 +198,10 @@ class SavGolConfig(Config):
     preset: Literal["none", "rager"] = param(
         "none", doc="rager: assert the paper's filter (window 5, order 4; mode stays free); none: free"
     )
+    padding: Literal["zeros", "hold"] = param(
+        "zeros",
+        doc="signal assumed outside the stream: zeros (the paper's zero padding) or hold (its first/last sample: no edge transients)",
+    )
     on_bad_data: Literal["raise", "drop", "hold"] = param(
         "raise", doc="non-finite samples: raise, drop them, or hold the last good value"
     )
@@ -240,7 +244,10 @@ class SavGol(Block):
     Coefficients: least squares on the Vandermonde of the window, solved exactly (rationals),
     scaled by ``rate_hz^deriv`` (delta = 1/rate_hz), so derivatives are per **second** — the
     convention Table I's weights are read in (blocks/afferents.py). History before the first
-    sample is zero (the paper's zero padding).
+    sample is zero (the paper's zero padding). A force sensor that starts under load (Rager's
+    120 mN baseline) then sees a step at t = 0 and a huge spurious derivative there; ``padding:
+    hold`` assumes the signal held its first value before the stream (and its last value after it,
+    for the centred flush), so derivatives start at 0 — what the graphs use.
 
     *causal*: ``y[n]`` is the estimate at the newest sample, ``c · x[n−N+1..n]``, stamped ``t[n]``;
     latency 0 samples (as stamped; order-2 F'' is nevertheless the centre estimate in disguise and
@@ -303,6 +310,7 @@ class SavGol(Block):
         self._h = self.latency_samples
         self._t_hist = np.empty(0)  # stamps of the last <= h samples (centred)
         self._last: np.ndarray | None = None
+        self._started = False  # has a sample arrived (padding: hold primes the history with it)
 
     def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
         if x is None or len(x) == 0:
@@ -316,6 +324,10 @@ class SavGol(Block):
         elif self.config.on_bad_data == "hold":
             self._last = d[-1].copy()
         n = len(x)
+        if not self._started:
+            self._started = True
+            if self.config.padding == "hold":
+                self._tail[:] = d.reshape(n, self._nc)[0]
         y = savgol_apply(self._coef, self._tail, d.reshape(n, self._nc))
         if self._h == 0:
             return {"y": Chunk(x.t, y.reshape(n, *self._shape))}
@@ -331,6 +343,8 @@ class SavGol(Block):
         if k == 0:
             return {}
         pad = np.zeros((self._h, self._nc))
+        if self.config.padding == "hold" and self._started:
+            pad[:] = self._tail[-1]
         y = savgol_apply(self._coef, self._tail, pad)
         t = self._t_hist
         self._t_hist = np.empty(0)

@@ -457,3 +457,14 @@ def test_docstring_examples_run():
     result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted >= 3
     assert result.failed == 0
+
+
+@pytest.mark.parametrize("mode", ["causal", "centred"])
+def test_hold_padding_has_no_edge_transient_on_a_loaded_sensor(mode):
+    """A force sitting at 0.12 N from t = 0: zero padding sees a step, hold padding does not."""
+    x = np.full((50, 3), 0.12) + np.linspace(0, 0.01, 50)[:, None]  # 0.2 N/s ramp
+    held = run_offline(SavGol(deriv=1, mode=mode, padding="hold"), x=x, units={"x": "N"})["y"].data
+    zero = run_offline(SavGol(deriv=1, mode=mode), x=x, units={"x": "N"})["y"].data
+    assert np.abs(zero[:2]).max() > 10  # the step at t = 0 is a spurious 1e1..1e2 N/s
+    assert np.abs(held).max() < 1.0  # no transient: the kink where the ramp starts overshoots to 0.43 at most
+    np.testing.assert_allclose(held[5:-5], zero[5:-5], rtol=1e-9)  # the interior is unchanged
