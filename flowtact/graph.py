@@ -246,40 +246,53 @@ def load_graph(
 
 
 def _apply_replays(doc: dict[str, Any], replays: Mapping[str, str], errors: list[GraphError]) -> None:
-    """Swap each replayed node for replay node(s) of its consumed or recorded outputs, in place."""
+    """Swap each replayed node for replay node(s) of its consumed or recorded outputs, in place.
+
+    The node's inputs are dropped (a replay has none); each consumed or recorded output ``port``
+    becomes a replay node named ``<node>`` (one output) or ``<node>_<port>`` (several).
+    """
     nodes = doc.get("nodes")
     for i, (name, rec_path) in enumerate(replays.items()):
         loc = Loc("--replay", 1, i + 1)
         if not isinstance(nodes, dict) or name not in nodes:
+            known = map(str, nodes or {})
             errors.append(
                 GraphError(
-                    loc,
-                    f"--replay {name}={rec_path}: unknown node '{name}'{did_you_mean(name, map(str, nodes or {}))}",
+                    loc, f"--replay {name}={rec_path}: unknown node '{name}'{did_you_mean(name, known)}"
                 )
             )
             continue
-        refs = [
-            *(e for e in doc.get("edges") or [] if isinstance(e, str)),
-            *(r for r in doc.get("record") or [] if isinstance(r, str)),
-        ]
-        ports = sorted(
-            {m.group(1) for r in refs for m in re.finditer(rf"(?:^|[\s>]){re.escape(name)}\.(\w+)", r)}
-        )
+        edges = [e for e in doc.get("edges") or [] if isinstance(e, str)]
+        parsed = [(e, EDGE_RE.match(e)) for e in edges]
+        record = doc.get("record") or []
+        ports = {m.group(2) for _, m in parsed if m and m.group(1) == name}
+        ports |= {
+            r.partition(".")[2] for r in record if isinstance(r, str) and r.partition(".")[0].strip() == name
+        }
         if not ports:
             errors.append(
                 GraphError(loc, f"--replay {name}={rec_path}: nothing consumes or records node '{name}'")
             )
             continue
         del nodes[name]
-        for port in ports:
-            new = name if len(ports) == 1 else f"{name}_{port}"
+        renamed = {p: (name if len(ports) == 1 else f"{name}_{p}") for p in sorted(ports)}
+        for port, new in renamed.items():
             nodes[new] = {"block": "replay", "params": {"path": str(rec_path), "stream": f"{name}.{port}"}}
-            pattern = re.compile(rf"(^|[\s>]){re.escape(name)}\.{re.escape(port)}\b")
-            for key in ("edges", "record"):
-                items = doc.get(key) or []
-                for j, item in enumerate(items):
-                    if isinstance(item, str):
-                        items[j] = pattern.sub(lambda m, new=new: f"{m.group(1)}{new}.y", item)
+        kept = []
+        for e, m in parsed:
+            if m and m.group(3) == name:
+                continue  # an input of the replayed node: the replay has none
+            if m and m.group(1) == name:
+                e = f"{renamed[m.group(2)]}.y -> {m.group(3)}.{m.group(4)}"
+            kept.append(e)
+        if "edges" in doc:
+            doc["edges"] = kept
+        doc["record"] = [
+            f"{renamed[r.partition('.')[2].strip()]}.y"
+            if isinstance(r, str) and r.partition(".")[0].strip() == name
+            else r
+            for r in record
+        ]
 
 
 def _build(

@@ -169,6 +169,9 @@ class _Memory:
     def write(self, stream: str, chunk: Chunk) -> None:
         self.chunks.setdefault(stream, []).append(chunk)
 
+    def maybe_flush(self) -> None:
+        """Nothing to make durable in memory."""
+
 
 def run_graph(
     graph: str | Path,

@@ -109,3 +109,12 @@ def test_plot(touch_h5, tmp_path, capsys):
     out = tmp_path / "fig.png"
     assert main(["plot", str(touch_h5), "-o", str(out)]) == 0
     assert out.stat().st_size > 10_000
+
+
+def test_replaying_a_node_that_has_inputs_drops_them(touch_h5, tmp_path):
+    out = tmp_path / "replayed_dforce.h5"
+    proc = flowtact("run", TOUCH, "--fast", "--duration", "3", "--replay", f"dforce={touch_h5}", "--record", str(out))
+    assert proc.returncode == 0, proc.stderr
+    a, b = read_recording(touch_h5), read_recording(out)
+    assert np.array_equal(a.streams["sa1.spikes"].data, b.streams["sa1.spikes"].data)
+    assert np.array_equal(a.streams["dforce.y"].data, b.streams["dforce.y"].data)

@@ -30,6 +30,8 @@ class Sink(Protocol):
 
     def write(self, stream: str, chunk: Chunk) -> None: ...
 
+    def maybe_flush(self) -> None: ...
+
 
 class NodeError(RuntimeError):
     """A block raised while stepping: names the node, its block and the graph time."""
@@ -202,6 +204,8 @@ class InprocExecutor:
                         self._step(node, now, pending, later)
                     for key, chunks in later.items():
                         pending[key].extend(chunks)
+                    if self.recorder is not None:
+                        self.recorder.maybe_flush()  # a quiet spell must not hold data back
                     if self.progress is not None:
                         self.progress(now, duration_s)
             except KeyboardInterrupt:
