@@ -22,8 +22,9 @@ __all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param
 class ConfigError(ValueError):
     """A parameter broke a rule: ``"<owner>: 'field' must be <rule>; got <value>"``."""
 
-    def __init__(self, owner: str, field: str | None, message: str) -> None:
+    def __init__(self, owner: str, field: str | None, message: str, *, type_error: bool = False) -> None:
         self.owner, self.field, self.rule = owner, field, message
+        self.type_error = type_error  # the value had the wrong type (vs. broke a rule)
         where = f"'{field}' " if field else ""
         super().__init__(f"{owner}: {where}{message}")
 
@@ -240,8 +241,8 @@ def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
 
     given = v
 
-    def fail(expect: str) -> ConfigError:
-        return ConfigError(owner, name, f"must be {expect}; got {_describe(given)}")
+    def fail(expect: str, type_error: bool = True) -> ConfigError:
+        return ConfigError(owner, name, f"must be {expect}; got {_describe(given)}", type_error=type_error)
 
     origin = get_origin(hint)
     if origin in (typing.Union, types.UnionType):
@@ -254,15 +255,19 @@ def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
                 return _coerce(v, a, rules, owner, name)
             except ConfigError as e:
                 errors.append(e)
-        if len(errors) == 1:
-            raise errors[0]
+        rule_errors = [e for e in errors if not e.type_error]
+        if len(errors) == 1 or rule_errors:
+            raise (rule_errors or errors)[0]  # the branch whose type matched explains best
         raise fail(_type_name(hint))
     if origin is Literal:
         options = get_args(hint)
         if v not in options or isinstance(v, bool) != any(isinstance(o, bool) for o in options):
             hint_text = did_you_mean(v, map(str, options)) if isinstance(v, str) else ""
             raise ConfigError(
-                owner, name, f"must be one of {', '.join(map(repr, options))}; got {_describe(v)}{hint_text}"
+                owner,
+                name,
+                f"must be one of {', '.join(map(repr, options))}; got {_describe(v)}{hint_text}",
+                type_error=not isinstance(v, type(options[0])),
             )
         return v
     if origin is tuple:
@@ -270,9 +275,9 @@ def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
         if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
             raise fail(f"a list of {_type_name(item)}")
         if rules.min_len is not None and len(v) < rules.min_len:
-            raise fail(f"a list of at least {rules.min_len} items")
+            raise fail(f"a list of at least {rules.min_len} items", type_error=False)
         if rules.max_len is not None and len(v) > rules.max_len:
-            raise fail(f"a list of at most {rules.max_len} items")
+            raise fail(f"a list of at most {rules.max_len} items", type_error=False)
         item_rules = dataclasses.replace(rules, min_len=None, max_len=None)
         return tuple(_coerce(x, item, item_rules, owner, name) for x in v)
     if hint is bool:
@@ -287,7 +292,7 @@ def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
             raise fail("a number")
         v = float(v)
         if not math.isfinite(v):
-            raise fail("a finite number")
+            raise fail("a finite number", type_error=False)
     elif hint is str:
         if not isinstance(v, str):
             raise fail("a string")
@@ -297,7 +302,7 @@ def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
         raise TypeError(f"{owner}: field '{name}' has an unsupported type {hint!r}")
     broken = rules.violation(v)
     if broken:
-        raise fail(broken)
+        raise fail(broken, type_error=False)
     return v
 
 
