@@ -126,11 +126,14 @@ def bench_overhead(chunk: int, n_nodes: int, n_ticks: int, repeats: int) -> dict
 
 
 class Ones(Src):
-    """Ones at rate_hz: a constant drive for the NLIF population."""
+    """Ones at rate_hz, one value per sample: a constant drive for the NLIF population."""
+
+    def specs(self, inputs):
+        return {"y": StreamSpec(shape=(), rate_hz=self.config.rate_hz)}
 
     def step(self, now):
         out = super().step(now)["y"]
-        return {"y": Chunk(out.t, np.ones((len(out), 1)))}
+        return {"y": Chunk(out.t, np.ones(len(out)))}
 
 
 def bench_nlif(n: int, sigma: float, seconds: float, repeats: int) -> dict:

@@ -111,8 +111,9 @@ class FieldInfo:
     rules: str
 
 
+@dataclass(frozen=True)
 class Config:
-    """Base of every block config. Subclasses are ``@dataclass(frozen=True)`` with ``param`` fields.
+    """Base of every block config (itself the config of a block without parameters). Subclasses are ``@dataclass(frozen=True)`` with ``param`` fields.
 
     Override ``check()`` for rules across fields and raise ``self.error(field, message)``.
     """
