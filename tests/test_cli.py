@@ -18,7 +18,9 @@ SLIP = str(ROOT / "graphs" / "slip.yaml")
 
 
 def flowtact(*args):
-    return subprocess.run([sys.executable, "-m", "flowtact.cli", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "flowtact.cli", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +68,9 @@ def test_rerun_from_a_recording_is_identical(touch_h5, tmp_path):
 
 def test_replaying_the_sensor_reproduces_every_downstream_stream(touch_h5, tmp_path):
     out = tmp_path / "replayed.h5"
-    proc = flowtact("run", TOUCH, "--fast", "--duration", "3", "--replay", f"sensor={touch_h5}", "--record", str(out))
+    proc = flowtact(
+        "run", TOUCH, "--fast", "--duration", "3", "--replay", f"sensor={touch_h5}", "--record", str(out)
+    )
     assert proc.returncode == 0, proc.stderr
     a, b = read_recording(touch_h5), read_recording(out)
     for name in ("force.f", "dforce.y", "sa1.spikes", "fa1.spikes"):
@@ -113,7 +117,9 @@ def test_plot(touch_h5, tmp_path, capsys):
 
 def test_replaying_a_node_that_has_inputs_drops_them(touch_h5, tmp_path):
     out = tmp_path / "replayed_dforce.h5"
-    proc = flowtact("run", TOUCH, "--fast", "--duration", "3", "--replay", f"dforce={touch_h5}", "--record", str(out))
+    proc = flowtact(
+        "run", TOUCH, "--fast", "--duration", "3", "--replay", f"dforce={touch_h5}", "--record", str(out)
+    )
     assert proc.returncode == 0, proc.stderr
     a, b = read_recording(touch_h5), read_recording(out)
     assert np.array_equal(a.streams["sa1.spikes"].data, b.streams["sa1.spikes"].data)

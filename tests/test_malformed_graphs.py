@@ -39,7 +39,9 @@ def test_malformed_graph_is_reported_at_its_place(path, capsys):
 
 def test_the_command_line_prints_no_traceback():
     path = next(p for p in CORPUS if p.stem == "unknown_block")
-    proc = subprocess.run([sys.executable, "-m", "flowtact.cli", "validate", str(path)], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "flowtact.cli", "validate", str(path)], capture_output=True, text=True
+    )
     assert proc.returncode == 2
     assert "did you mean 'savgol'?" in proc.stderr
     assert "Traceback" not in proc.stderr
