@@ -13,7 +13,8 @@ __all__ = ["Chunk", "StreamSpec", "concat"]
 class Chunk:
     """``n`` time-stamped samples: ``t`` (float64 seconds, shape (n,)) and ``data`` (n, *shape).
 
-    Event streams (spikes) use the same type: ``t`` holds event times and ``data`` the unit index.
+    Event streams (spikes) use the same type: ``t`` holds event times and ``data`` the unit index
+    (or, for events that carry more, rows whose first column is the unit, e.g. stimulation pulses).
     ``end`` is a watermark: the stream holds nothing more before this time. Event producers set it
     so that consumers (rates, pulse trains) know time moved on even when no event came.
     """

@@ -83,6 +83,11 @@ def _crop(s: RecordedStream, t0: float, t1: float) -> tuple[np.ndarray, np.ndarr
     return s.t[i:j], s.data[i:j]
 
 
+def event_units(data: np.ndarray) -> np.ndarray:
+    """The unit of each event: the data itself, or the first column of multi-column events (pulses)."""
+    return data if data.ndim == 1 else data[:, 0]
+
+
 def _units(units: str) -> str:
     return "" if units in ("", "1") else f" [{units}]"
 
@@ -168,7 +173,7 @@ def _draw(ax: Any, p: _Panel, t0: float, t1: float) -> None:
         keep = (s.t >= t0) & (s.t < t1)
         ax.plot(
             s.t[keep],
-            s.data[keep],
+            event_units(s.data)[keep],
             linestyle="none",
             marker="|",
             markersize=float(np.clip(100.0 / n, 2.0, 10.0)),
@@ -176,19 +181,19 @@ def _draw(ax: Any, p: _Panel, t0: float, t1: float) -> None:
         )
         ax.set_ylim(n - 0.5, -0.5)
         ax.set_ylabel("unit", fontsize=8)
-        if spec.labels and len(spec.labels) == n and n <= 24:
+        if spec.labels and s.data.ndim == 1 and len(spec.labels) == n and n <= 24:
             ax.set_yticks(range(n), list(spec.labels))
         elif n <= 8:
             ax.set_yticks(range(n))
         ax.set_title(f"{p.name}: spikes ({int(keep.sum())} in view, {n} units)", loc="left", fontsize=9)
     else:
         n = max(spec.n_units or 1, 1)
-        starts, rates = binned_rates(s.t, s.data, n, t0, t1)
+        starts, rates = binned_rates(s.t, event_units(s.data), n, t0, t1)
         x = np.append(starts, starts[-1] + RATE_BIN_S)
         if n <= MAX_RATE_LINES:
             labels = (
                 list(spec.labels)
-                if spec.labels and len(spec.labels) == n
+                if spec.labels and s.data.ndim == 1 and len(spec.labels) == n
                 else [f"unit {i}" for i in range(n)]
             )
             for i in range(n):

@@ -124,3 +124,55 @@ def test_replaying_a_node_that_has_inputs_drops_them(touch_h5, tmp_path):
     a, b = read_recording(touch_h5), read_recording(out)
     assert np.array_equal(a.streams["sa1.spikes"].data, b.streams["sa1.spikes"].data)
     assert np.array_equal(a.streams["dforce.y"].data, b.streams["dforce.y"].data)
+
+
+def test_a_realtime_run_is_paced_by_the_wall_clock():
+    proc = flowtact("run", SLIP, "--duration", "0.6", "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["wall_s"] >= 0.6 and summary["realtime_factor"] <= 1.0
+
+
+def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "interrupted.h5"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "flowtact.cli", "run", TOUCH, "--duration", "60", "--record", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == 0, stderr
+    assert "interrupted" in stdout
+    rec = read_recording(out)
+    n = len(rec.streams["force.f"].t)
+    assert n >= 500  # well over half a second of 1 kHz samples survived
+    assert rec.summary is not None and rec.summary["stopped_by"] == "interrupted"
+
+
+def test_bad_samples_stop_the_run_naming_the_node_and_keep_what_came_before(tmp_path):
+    t = np.arange(2000) / 1000.0
+    x = np.sin(t)
+    x[1500] = np.nan
+    np.savez(tmp_path / "log.npz", t=t, data=x)
+    graph = tmp_path / "g.yaml"
+    graph.write_text(
+        "nodes:\n"
+        f"  log: {{block: replay, params: {{path: '{tmp_path / 'log.npz'}', units: N}}}}\n"
+        "  df:  {block: savgol, params: {deriv: 1}}\n"
+        "edges:\n  - log.y -> df.x\n"
+        "record: [log.y, df.y]\n"
+    )
+    out = tmp_path / "failed.h5"
+    proc = flowtact("run", str(graph), "--fast", "--duration", "2", "--tick", "0.25", "--record", str(out))
+    assert proc.returncode == 1
+    assert "node 'df' (savgol) failed at t=1.750 s" in proc.stderr
+    assert "non-finite sample(s) on input 'x', first at t=1.500000 s" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    rec = read_recording(out)
+    assert len(rec.streams["log.y"].t) >= 1500  # everything before the failing tick was kept

@@ -92,7 +92,7 @@ class RunSummary:
             lines.append(f"  {k:<28} {n:>10,} samples")
         for k, n in self.events.items():
             lines.append(
-                f"  {k:<28} {n:>10,} spikes  ({self.rate(k):.1f}/s per unit, {self.event_units.get(k, 1)} units)"
+                f"  {k:<28} {n:>10,} events  ({self.rate(k):.1f}/s per unit, {self.event_units.get(k, 1)} units)"
             )
         for node, cs in self.counters.items():
             if cs:
