@@ -205,7 +205,7 @@ def describe_block(cls: Any) -> str:
     lines = [f"{cls.name}  ({cls.__module__}.{cls.__name__})", ""]
     lines.append(textwrap.dedent(cls.__doc__ or "").strip())
     lines += ["", "Inputs:"]
-    for name, port in cls.inputs.items() or {}.items():
+    for name, port in cls.inputs.items():
         lines.append(f"  {name:<12} {_port_text(port)}  {port.doc}")
     if not cls.inputs:
         lines.append("  (none: a source)")

@@ -18,7 +18,7 @@ import numpy as np
 
 from flowtact.block import Block, Port, SpecError
 from flowtact.chunk import StreamSpec
-from flowtact.graph import Edge, Graph, GraphError, GraphErrors, Loc
+from flowtact.graph import Edge, Graph, GraphError, GraphErrors
 
 __all__ = ["Plan", "compile_graph", "node_seed"]
 
@@ -142,7 +142,7 @@ def compile_graph(graph: Graph) -> Plan:
     blocks = {n: graph.nodes[n].make() for n in order}
     specs: dict[Stream, StreamSpec] = {}
     broken: set[str] = set()
-    delayed: list[str] = []
+    delayed: dict[str, None] = {}  # nodes with an input fed back through a delay (ordered set)
     for n in order:
         node = graph.nodes[n]
         cls = node.cls
@@ -164,7 +164,7 @@ def compile_graph(graph: Graph) -> Plan:
                 broken.add(n)
                 continue
             if src not in specs:  # fed through a delay by a node later in the order
-                delayed.append(n)
+                delayed[n] = None
                 continue
             why = _check_port(cls.inputs[e.dst_port], specs[src])
             if why:
@@ -257,8 +257,3 @@ def _propagate_demand(
     ordered = [n for n in order if n in active]
     active_edges.sort(key=lambda e: (ordered.index(e.dst), e.dst_port))
     return ordered, {n: frozenset(demanded[n]) for n in ordered}, needed, active_edges, notes
-
-
-def record_locs(graph: Graph) -> dict[Stream, Loc]:
-    """Where each recorded stream is named in the file."""
-    return {(n, p): loc for n, p, loc in graph.record}

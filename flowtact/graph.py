@@ -121,10 +121,6 @@ class Graph:
     description: str = ""
     overrides: dict[str, Any] = field(default_factory=dict)
 
-    def consumers(self, node: str, port: str) -> list[Edge]:
-        """Edges leaving ``node.port``."""
-        return [e for e in self.edges if e.src == node and e.src_port == port]
-
 
 # -- YAML with locations ---------------------------------------------------------------------
 
@@ -478,8 +474,6 @@ def _node(
                 if key in (ndoc.get("params") or {})
                 else param_locs.get(key, loc)
             )
-        if ploc.path == "--set":
-            ploc = Loc("--set", ploc.line, ploc.col)
         errors.append(GraphError(ploc, str(e), f"`flowtact blocks {cls.name}` documents every parameter"))
         return None
     return NodeDef(

@@ -192,19 +192,19 @@ class Config:
 def _rule_breakers(rules: Rules, scalar: Any) -> Iterator[Any]:
     step = 1 if scalar is int else 1.0
     if rules.ge is not None:
-        yield type_cast(scalar, rules.ge - step)
+        yield _type_cast(scalar, rules.ge - step)
     if rules.gt is not None:
-        yield type_cast(scalar, rules.gt)
+        yield _type_cast(scalar, rules.gt)
     if rules.le is not None:
-        yield type_cast(scalar, rules.le + step)
+        yield _type_cast(scalar, rules.le + step)
     if rules.lt is not None:
-        yield type_cast(scalar, rules.lt)
+        yield _type_cast(scalar, rules.lt)
     if rules.odd:
         low = rules.ge if rules.ge is not None else (rules.gt or 0) + 1
         yield int(math.ceil(low / 2) * 2) if scalar is int else None
 
 
-def type_cast(scalar: Any, v: float) -> Any:
+def _type_cast(scalar: Any, v: float) -> Any:
     return int(v) if scalar is int else float(v)
 
 

@@ -39,7 +39,7 @@ def load_plan(
     if path.suffix in (".h5", ".hdf5"):
         from flowtact.record import read_recording
 
-        text = read_recording(path).provenance["graph_yaml"]
+        text = read_recording(path, streams=()).provenance["graph_yaml"]
         graph = load_graph(f"{path}#graph", text=text, overrides=overrides, replays=replays)
     else:
         graph = load_graph(resolve_graph_path(source), overrides=overrides, replays=replays)

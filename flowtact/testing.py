@@ -291,7 +291,6 @@ def check_config_yaml_roundtrip(cls: type[Block]) -> None:
 def check_invalid_config_rejected(cls: type[Block]) -> None:
     """Values that break each field's type or rules raise a ConfigError naming block and field."""
     base = dict(cls.example().params)
-    tried = 0
     for field, bad in cls.config_cls.invalid_values():
         params = {**base, field: bad}
         try:
@@ -301,7 +300,6 @@ def check_invalid_config_rejected(cls: type[Block]) -> None:
                 f"{cls.name}: error for {field}={bad!r} names another field: {e}"
             )
             assert cls.name in str(e), f"{cls.name}: error does not name the block: {e}"
-            tried += 1
             continue
         raise AssertionError(f"{cls.name}: {field}={bad!r} was accepted")
     unknown = {**base, "no_such_parameter": 1}
