@@ -63,10 +63,25 @@ def _parser() -> argparse.ArgumentParser:
         "--tick", type=float, metavar="S", help="clock tick (default 1 s with --fast, 5 ms real time)"
     )
     run.add_argument(
-        "--inproc", action="store_true", help="run every node in this process (the only mode so far)"
+        "--inproc",
+        action="store_true",
+        help="run every node in this process (default: one worker process per process group)",
     )
     run.add_argument("--json", action="store_true", help="print the final summary as JSON")
-    run.add_argument("--quiet", action="store_true", help="no progress and no summary (errors still print)")
+    run.add_argument(
+        "--quiet", action="store_true", help="no live view, progress or summary (errors still print)"
+    )
+
+    worker = sub.add_parser("worker", help="run one process group of a graph placed on this host")
+    worker.add_argument(
+        "connect", help="the supervisor's endpoint, tcp://HOST:PORT (printed by flowtact run)"
+    )
+    worker.add_argument("--process", required=True, help="the process group to run")
+    worker.add_argument("--keys", help="CURVE keys folder (default: $FLOWTACT_KEYS)")
+
+    keys = sub.add_parser("keys", help="create the CURVE key pair that hosts of a rig share")
+    keys.add_argument("folder", help="folder to write flowtact.key and flowtact.key_secret into")
+    keys.add_argument("--force", action="store_true", help="replace an existing key pair")
 
     val = sub.add_parser("validate", help="check a graph without running it")
     graph_args(val)
@@ -140,24 +155,30 @@ class _Progress:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from flowtact.run import run_plan
+    from flowtact.runtime.live import LiveView
 
     plan = _plan(args)
-    progress = _Progress(not args.quiet and not args.json)
+    quiet = args.quiet or args.json
+    live = LiveView(enabled=not quiet and not args.inproc)
+    progress = _Progress(not quiet and not live.enabled)
 
     def on_term(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_term)
     try:
-        summary = run_plan(
-            plan,
-            duration_s=args.duration,
-            fast=args.fast,
-            record=args.record,
-            tick_s=args.tick,
-            progress=progress,
-            argv=["flowtact", *sys.argv[1:]],
-        )
+        with live:
+            summary = run_plan(
+                plan,
+                duration_s=args.duration,
+                fast=args.fast,
+                inproc=args.inproc,
+                record=args.record,
+                tick_s=args.tick,
+                progress=progress,
+                live=live if live.enabled else None,
+                argv=["flowtact", *sys.argv[1:]],
+            )
     finally:
         progress.done()
     if args.json:
@@ -166,6 +187,24 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(summary.format())
         if args.record:
             print(f"  recorded {', '.join(f'{n}.{p}' for n, p in plan.record)} -> {args.record}")
+    return 0
+
+
+def _cmd_worker(args: argparse.Namespace) -> int:
+    from flowtact.runtime.worker import main as worker_main
+
+    argv = [args.connect, "--process", args.process]
+    if args.keys:
+        argv += ["--keys", args.keys]
+    return worker_main(argv)
+
+
+def _cmd_keys(args: argparse.Namespace) -> int:
+    from flowtact.runtime.security import generate_keys
+
+    folder = generate_keys(args.folder, force=args.force)
+    print(f"wrote {folder}/flowtact.key and flowtact.key_secret: copy the folder to every host of the rig")
+    print("and name it in the graph (network: {keys: FOLDER}) or in $FLOWTACT_KEYS")
     return 0
 
 
@@ -284,6 +323,8 @@ COMMANDS = {
     "graph": _cmd_graph,
     "plot": _cmd_plot,
     "bench": _cmd_bench,
+    "worker": _cmd_worker,
+    "keys": _cmd_keys,
 }
 
 
@@ -302,8 +343,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except Exception as e:  # a run-time failure: name it, no traceback unless asked
         from flowtact.runtime.inproc import NodeError
+        from flowtact.runtime.security import SecurityError
+        from flowtact.runtime.supervisor import WorkerFailed
 
-        if isinstance(e, (NodeError, FileNotFoundError, ValueError, ImportError, OSError)):
+        if isinstance(
+            e, (NodeError, WorkerFailed, SecurityError, FileNotFoundError, ValueError, ImportError, OSError)
+        ):
             print(f"flowtact: error: {e}", file=sys.stderr)
             return EXIT_RUN_ERROR
         raise

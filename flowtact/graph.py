@@ -18,6 +18,7 @@ from typing import Any
 import yaml
 
 from flowtact.block import Block
+from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, parse_deployment
 from flowtact.params import ConfigError, did_you_mean
 from flowtact.registry import UnknownBlockError, load_block
 
@@ -33,9 +34,20 @@ __all__ = [
     "resolve_graph_path",
 ]
 
-TOP_KEYS = ("name", "description", "seed", "duration_s", "nodes", "edges", "record")
+TOP_KEYS = (
+    "name",
+    "description",
+    "seed",
+    "duration_s",
+    "nodes",
+    "edges",
+    "record",
+    "processes",
+    "network",
+    "deadlines",
+)
 NODE_KEYS = ("block", "params", "process", "seed", "doc")
-EDGE_KEYS = ("from", "to")
+EDGE_KEYS = ("from", "to", "policy", "queue")
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 EDGE_RE = re.compile(r"^\s*([^\s.]+)\.([^\s.]+)\s*->\s*([^\s.]+)\.([^\s.]+)\s*$")
 
@@ -101,6 +113,10 @@ class Edge:
     dst: str
     dst_port: str
     loc: Loc
+    policy: str = "block"
+    """Across processes: ``block`` (lossless, back-pressure) or ``latest`` (drop the oldest)."""
+    queue: int = DEFAULT_QUEUE
+    """Bound of the edge's queue, in messages, when it crosses processes."""
 
     def __str__(self) -> str:
         return f"{self.src}.{self.src_port} -> {self.dst}.{self.dst_port}"
@@ -120,6 +136,7 @@ class Graph:
     duration_s: float | None = None
     description: str = ""
     overrides: dict[str, Any] = field(default_factory=dict)
+    deployment: Deployment = field(default_factory=Deployment)
 
 
 # -- YAML with locations ---------------------------------------------------------------------
@@ -343,6 +360,7 @@ def _build(
 
     edges = _edges(doc.get("edges", []), y, node_docs, classes, errors)
     record = _record(doc.get("record", []), y, node_docs, classes, errors)
+    deployment = parse_deployment(doc, y, node_docs)
     if errors:
         raise GraphErrors(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
     return Graph(
@@ -356,6 +374,7 @@ def _build(
         duration_s=float(duration) if duration is not None else None,
         description=str(doc.get("description", "")),
         overrides={o: parse_override(o)[2] for o in overrides},
+        deployment=deployment,
     )
 
 
@@ -537,14 +556,17 @@ def _edges(
                             f"unknown edge key '{key}'{did_you_mean(str(key), EDGE_KEYS)}",
                         )
                     )
+            policy, queue = _edge_flow(item, y, i, errors)
             item = f"{item.get('from')} -> {item.get('to')}"
+        else:
+            policy, queue = "block", DEFAULT_QUEUE
         m = EDGE_RE.match(item) if isinstance(item, str) else None
         if not m:
             errors.append(
                 GraphError(loc, f"malformed edge {item!r}", "write edges as 'node.port -> node.port'")
             )
             continue
-        edge = Edge(m.group(1), m.group(2), m.group(3), m.group(4), loc)
+        edge = Edge(m.group(1), m.group(2), m.group(3), m.group(4), loc, policy, queue)
         bad = [
             _endpoint_errors(edge.src, edge.src_port, "output", loc, node_docs, classes),
             _endpoint_errors(edge.dst, edge.dst_port, "input", loc, node_docs, classes),
@@ -569,6 +591,27 @@ def _edges(
         seen_inputs[key] = edge
         edges.append(edge)
     return edges
+
+
+def _edge_flow(item: dict[str, Any], y: _Located, i: int, errors: list[GraphError]) -> tuple[str, int]:
+    """An edge mapping's ``policy`` and ``queue``, checked."""
+    policy = item.get("policy", "block")
+    if policy not in POLICIES:
+        errors.append(
+            GraphError(
+                y.loc("edges", i, "policy"),
+                f"edge policy must be one of {', '.join(POLICIES)}; got {policy!r}",
+                "block: lossless with back-pressure; latest: drop the oldest messages (real time)",
+            )
+        )
+        policy = "block"
+    queue = item.get("queue", DEFAULT_QUEUE)
+    if isinstance(queue, bool) or not isinstance(queue, int) or queue < 1:
+        errors.append(
+            GraphError(y.loc("edges", i, "queue"), f"edge queue must be an integer >= 1; got {queue!r}")
+        )
+        queue = DEFAULT_QUEUE
+    return policy, queue
 
 
 def _record(

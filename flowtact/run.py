@@ -108,21 +108,39 @@ def run_plan(
     *,
     duration_s: float | None = None,
     fast: bool = True,
+    inproc: bool = False,
     record: str | Path | None = None,
     tick_s: float | None = None,
     progress: Callable[[float, float | None], None] | None = None,
+    live: Any = None,
+    warn: Callable[[str], None] | None = None,
     argv: list[str] | None = None,
 ) -> RunSummary:
-    """Run a compiled plan in this process, recording its ``record:`` streams to ``record``."""
+    """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
+    ``record:`` streams to ``record``. A failing worker raises
+    :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed."""
     duration = duration_s if duration_s is not None else plan.graph.duration_s
+
+    def executor(recorder: Any) -> Any:
+        if inproc:
+            return InprocExecutor(plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress)
+        from flowtact.runtime.supervisor import ProcessExecutor
+
+        return ProcessExecutor(
+            plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress, live=live, warn=warn
+        )
+
     if record is None:
-        return InprocExecutor(plan, fast=fast, tick_s=tick_s, progress=progress).run(duration)
+        return executor(None).run(duration)
     from flowtact.record import Recorder
 
     streams = {f"{n}.{p}": plan.specs[(n, p)] for n, p in plan.record}
     with Recorder(record, streams, provenance(plan, argv)) as recorder:
-        summary = InprocExecutor(plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress).run(
-            duration
-        )
+        try:
+            summary = executor(recorder).run(duration)
+        except Exception as e:
+            partial = getattr(e, "summary", None)
+            recorder.close({**(partial.to_dict() if partial else {}), "error": str(e)})
+            raise
         recorder.close(summary.to_dict())
     return summary

@@ -19,7 +19,7 @@ from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
 from flowtact.runtime.clock import Clock, FastClock, RealtimeClock
 
-__all__ = ["InprocExecutor", "NodeError", "RunSummary"]
+__all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk"]
 
 DEFAULT_TICK_FAST_S = 1.0
 DEFAULT_TICK_REALTIME_S = 0.005
@@ -55,6 +55,12 @@ class RunSummary:
     counters: dict[str, dict[str, int]] = field(default_factory=dict)
     pruned: list[str] = field(default_factory=list)
     ticks: int = 0
+    processes: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Multi-process runs: per process group, pid, host, nodes, CPU % of one core, restarts."""
+    streams: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Multi-process runs: per cross-process stream, messages, samples, drops, latency (µs)."""
+    paths: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Declared deadlines: latency p50/p99/max (µs), budget and violations per path."""
 
     @property
     def realtime_factor(self) -> float:
@@ -75,6 +81,9 @@ class RunSummary:
             "event_rate_hz_per_unit": {k: self.rate(k) for k in self.events},
             "counters": self.counters,
             "pruned": self.pruned,
+            "processes": self.processes,
+            "streams": self.streams,
+            "paths": self.paths,
         }
 
     def rate(self, stream: str) -> float:
@@ -97,6 +106,25 @@ class RunSummary:
         for node, cs in self.counters.items():
             if cs:
                 lines.append(f"  {node}: " + ", ".join(f"{k}={v}" for k, v in sorted(cs.items())))
+        for name, p in self.processes.items():
+            cpu = f"{p['cpu_pct']:.1f}% CPU" if p.get("cpu_pct") is not None else "CPU n/a"
+            restarts = f", {p['restarts']} restart(s)" if p.get("restarts") else ""
+            lines.append(f"  process {name:<20} {cpu}{restarts}  [{', '.join(p['nodes'])}]")
+        for name, st in self.streams.items():
+            lat = st["latency_us"]
+            latency = (
+                f"latency p50 {lat['p50']:.0f} µs p99 {lat['p99']:.0f} µs" if lat.get("n") else "no latency"
+            )
+            dropped = f", {st['dropped']} dropped" if st["dropped"] else ""
+            lines.append(
+                f"  stream {name:<21} {st['messages']:>8,} msgs ({st['policy']}), {latency}{dropped}"
+            )
+        for name, pa in self.paths.items():
+            if pa.get("n"):
+                lines.append(
+                    f"  deadline {name}: p50 {pa['p50_us']:.0f} µs, p99 {pa['p99_us']:.0f} µs "
+                    f"(budget {pa['budget_us']:.0f} µs, {pa['violations']} missed)"
+                )
         if self.pruned:
             lines.append(f"  not started: {', '.join(self.pruned)}")
         return "\n".join(lines)
@@ -147,7 +175,7 @@ class InprocExecutor:
             if port not in demanded:
                 continue
             spec = self.plan.specs[(node, port)]
-            _check_chunk(node, port, chunk, spec, now)
+            check_chunk(node, port, chunk, spec, now)
             key = (node, port)
             for dst, dport, delayed in self.routes.get(key, ()):
                 (later if delayed else pending)[(dst, dport)].append(chunk)
@@ -245,7 +273,7 @@ class InprocExecutor:
             self._deliver(node, out, now, pending, pending)
 
 
-def _check_chunk(node: str, port: str, chunk: Chunk, spec: StreamSpec, now: float) -> None:
+def check_chunk(node: str, port: str, chunk: Chunk, spec: StreamSpec, now: float) -> None:
     """Guard the stream contract: a block's output must match its declared spec."""
     n = len(chunk)
     if (

@@ -1,0 +1,573 @@
+"""Transport: flowtact's multi-process runtime against raw pyzmq (same framing) and, with --peers, Timeflux and ezmsg.
+
+Measures, in one run, the same source -> stage -> sink pipeline (each in its own process):
+  a. raw pyzmq with flowtact's wire format (bench/peers/raw.py): latency at 1 kHz (4 float64)
+     and 40 Hz (240x320 uint8 frames), the 2-process one-way floor, and flat-out throughput;
+  b. flowtact's chain bench/graphs/chain.yaml (sensor -> savgol -> nlif, 3 processes) at 1 kHz
+     in real time: latency from the sensor's stamp to arrival 2 hops later, CPU per process;
+  c. flowtact --fast (lossless backpressure) throughput of bench/graphs/fast.yaml, small and image;
+  d. with --peers: the pipeline in Timeflux and ezmsg (bench/peers/), each pip-installed into a
+     throw-away venv under ~/.cache/flowtact-bench/ (made on first use, then reused).
+Prints every figure, the ratios flowtact/raw and issue 3's targets as pass/fail.
+
+    python bench/transport.py [--quick] [--json out.json] [--peers] [--only raw|flowtact|peers]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import platform
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+BENCH = Path(__file__).resolve().parent
+ROOT = BENCH.parent
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
+import numpy as np  # noqa: E402
+import zmq  # noqa: E402
+from peers import raw  # noqa: E402
+from peers.measure import CpuSampler, summarize  # noqa: E402
+
+CHAIN = BENCH / "graphs" / "chain.yaml"
+FAST = BENCH / "graphs" / "fast.yaml"
+PEER_DIR = BENCH / "peers"
+VENVS = Path.home() / ".cache" / "flowtact-bench"
+PEERS: dict[str, dict[str, Any]] = {
+    "ezmsg": {"packages": ["ezmsg", "numpy"], "module": "ezmsg.core", "script": "ezmsg_pipe.py"},
+    "timeflux": {"packages": ["timeflux"], "module": "timeflux.core.manager", "script": "timeflux_pipe.py"},
+}
+NBYTES = {"small": 4 * 8, "image": 240 * 320}
+CHAIN_STREAM = "savgol.y"
+"""The chain's 2-hop stream: savgol's output arriving in the sink process (nlif's)."""
+FAST_STREAM = "stage.y"
+"""The --fast pipeline's last hop: what the sink process receives."""
+
+
+class ContractError(RuntimeError):
+    """flowtact's run summary lacks a key this bench reads."""
+
+
+# -- durations --------------------------------------------------------------------------------
+
+
+def durations(quick: bool) -> dict[str, float]:
+    """Seconds of each kind of run: paced latency and flat-out throughput."""
+    return {"paced": 3.0 if quick else 10.0, "flat": 2.0 if quick else 5.0}
+
+
+# -- a. raw pyzmq -----------------------------------------------------------------------------
+
+
+def bench_raw(quick: bool) -> dict[str, Any]:
+    """The raw baseline: paced small and image, the one-way floor, flat-out small and image."""
+    d = durations(quick)
+    out = {}
+    for key, args in {
+        "small_1khz": ("small", d["paced"], 1000.0, 1),
+        "image_40hz": ("image", d["paced"], 40.0, 1),
+        "floor_small_1khz": ("small", d["paced"], 1000.0, 0),
+        "small_flat": ("small", d["flat"], None, 1),
+        "image_flat": ("image", d["flat"], None, 1),
+    }.items():
+        print(f"   raw {key} ...", flush=True)
+        out[key] = raw.run_pipeline(args[0], args[1], args[2], stages=args[3])
+    return out
+
+
+# -- b, c. flowtact ---------------------------------------------------------------------------
+
+
+def flowtact_run(
+    graph: Path, duration: float, tick: float, fast: bool, sets: tuple[str, ...] = (), timeout_s: float = 300
+) -> dict[str, Any]:
+    """Run ``flowtact run GRAPH ... --json --quiet`` in a subprocess and return its JSON summary."""
+    cmd = [sys.executable, "-c", "import sys; from flowtact.cli import main; sys.exit(main())", "run"]
+    cmd += [str(graph), "--duration", repr(duration), "--tick", repr(tick), "--json", "--quiet"]
+    cmd += ["--fast"] if fast else []
+    for s in sets:
+        cmd += ["--set", s]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(BENCH), env.get("PYTHONPATH", "")) if p)
+    env["NUMBA_NUM_THREADS"] = "1"
+    try:
+        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"flowtact run {graph.name} did not finish within {timeout_s:.0f} s") from None
+    if proc.returncode != 0:
+        tail = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-15:])
+        raise RuntimeError(f"flowtact run {graph.name} exited with {proc.returncode}:\n{tail}")
+    return parse_summary(proc.stdout)
+
+
+def parse_summary(stdout: str) -> dict[str, Any]:
+    """The JSON summary ``flowtact run --json`` printed (the last top-level object on stdout)."""
+    text = stdout.strip()
+    starts = [i for i, line in enumerate(text.splitlines()) if line.startswith("{")]
+    lines = text.splitlines()
+    for i in reversed(starts):
+        try:
+            return json.loads("\n".join(lines[i:]))
+        except json.JSONDecodeError:
+            continue
+    raise ContractError(f"flowtact run --json printed no JSON summary; stdout was:\n{text[-2000:]}")
+
+
+def _need(d: Any, *path: str) -> Any:
+    """``d[path[0]][path[1]]...``, or a ContractError naming the missing key."""
+    cur = d
+    for i, key in enumerate(path):
+        if not isinstance(cur, dict) or key not in cur:
+            where = "summary" + "".join(f"[{k!r}]" for k in path[:i])
+            have = sorted(cur) if isinstance(cur, dict) else type(cur).__name__
+            raise ContractError(
+                f"flowtact run --json: {where} has no {key!r} (has {have}); the transport bench reads "
+                f"summary{''.join(f'[{k!r}]' for k in path)} (see bench/transport.py)"
+            )
+        cur = cur[key]
+    return cur
+
+
+def check_contract(summary: dict[str, Any], streams: tuple[str, ...], processes: int) -> None:
+    """Fail clearly unless the summary has what the bench reads (the runtime's JSON contract)."""
+    procs = _need(summary, "processes")
+    if len(procs) != processes:
+        raise ContractError(f"expected {processes} processes in summary['processes'], got {sorted(procs)}")
+    for name in procs:
+        for key in ("pid", "cpu_pct", "nodes"):
+            _need(summary, "processes", name, key)
+    for s in streams:
+        for key in ("messages", "samples", "dropped", "policy"):
+            _need(summary, "streams", s, key)
+        for key in ("p50", "p99", "max", "n"):
+            _need(summary, "streams", s, "latency_us", key)
+    _need(summary, "wall_s")
+
+
+def bench_chain(quick: bool) -> dict[str, Any]:
+    """b. bench/graphs/chain.yaml at 1 kHz in real time, 3 processes."""
+    seconds = durations(quick)["paced"]
+    summary = flowtact_run(CHAIN, seconds, 0.001, fast=False, timeout_s=seconds + 120)
+    check_contract(summary, (CHAIN_STREAM,), 3)
+    streams = summary["streams"]
+    lat = streams[CHAIN_STREAM]["latency_us"]
+    cpu = {name: p["cpu_pct"] for name, p in summary["processes"].items()}
+    return {
+        "seconds": seconds,
+        "latency_us": {k: lat[k] for k in ("p50", "p99", "max", "n")},
+        "hop_latency_us": {s: v["latency_us"] for s, v in streams.items()},
+        "messages": streams[CHAIN_STREAM]["messages"],
+        "samples": streams[CHAIN_STREAM]["samples"],
+        "dropped": sum(v["dropped"] for v in streams.values()),
+        "loss_pct": 100.0 * streams[CHAIN_STREAM]["dropped"] / max(streams[CHAIN_STREAM]["samples"], 1),
+        "cpu_pct": cpu,
+        "cpu_max_pct": max((c for c in cpu.values() if c is not None), default=None),
+        "summary": summary,
+    }
+
+
+def bench_fast(payload: str, quick: bool) -> dict[str, Any]:
+    """c. bench/graphs/fast.yaml --fast, sized to last about `flat` seconds of wall time.
+
+    ``wall_s`` includes a fixed start-up cost, so a short pilot run and the following ones give a
+    marginal rate (start-up free) that sizes the next run; the figure reported is the brief's
+    ``samples / wall_s`` of the last run, with the marginal rate beside it.
+    """
+    tick = 0.001 if payload == "small" else 0.025
+    sets = (f"source.payload={payload}", f"source.rate_hz={1 / tick:g}")
+    target = durations(quick)["flat"]
+
+    def one(n_messages: int) -> dict[str, Any]:
+        s = flowtact_run(FAST, n_messages * tick, tick, fast=True, sets=sets, timeout_s=300)
+        check_contract(s, (FAST_STREAM,), 3)
+        samples = s["streams"][FAST_STREAM]["samples"]
+        return {"messages": n_messages, "samples": samples, "wall_s": s["wall_s"], "summary": s}
+
+    runs = [one(2000 if payload == "small" else 500)]
+    for _ in range(4):
+        last = runs[-1]
+        if last["wall_s"] >= 0.7 * target and len(runs) > 1:
+            break
+        rate = last["samples"] / max(last["wall_s"], 1e-6)
+        if len(runs) > 1 and runs[-1]["wall_s"] > runs[-2]["wall_s"]:
+            rate = max(
+                rate, (runs[-1]["samples"] - runs[-2]["samples"]) / (runs[-1]["wall_s"] - runs[-2]["wall_s"])
+            )
+        runs.append(one(int(min(max(rate * target, 2000), 5_000_000))))
+    main = runs[-1]
+    prev = runs[-2]
+    marginal = None
+    if main["wall_s"] > prev["wall_s"]:
+        marginal = (main["samples"] - prev["samples"]) / (main["wall_s"] - prev["wall_s"])
+    rate = main["samples"] / main["wall_s"]
+    s = main["summary"]["streams"]
+    return {
+        "payload": payload,
+        "tick_s": tick,
+        "sent": main["messages"],
+        "delivered": main["samples"],
+        "wall_s": main["wall_s"],
+        "samples_s": rate,
+        "bytes_s": rate * NBYTES[payload],
+        "marginal_samples_s": marginal,
+        "dropped": sum(v["dropped"] for v in s.values()),
+        "latency_us_under_load": s[FAST_STREAM]["latency_us"],
+        "cpu_pct": {name: p["cpu_pct"] for name, p in main["summary"]["processes"].items()},
+        "sizing_runs": [{k: r[k] for k in ("messages", "samples", "wall_s")} for r in runs[:-1]],
+        "summary": main["summary"],
+    }
+
+
+# -- d. peers ---------------------------------------------------------------------------------
+
+
+def peer_python(name: str) -> Path | None:
+    """The venv Python for a peer, creating the venv on first use; None (with a message) if pip fails."""
+    spec = PEERS[name]
+    venv = VENVS / name
+    py = venv / "bin" / "python"
+    if (
+        py.exists()
+        and subprocess.run([py, "-c", f"import {spec['module']}"], capture_output=True).returncode == 0
+    ):
+        return py
+    print(f"   creating {venv} (pip install {' '.join(spec['packages'])}) ...", flush=True)
+    shutil.rmtree(venv, ignore_errors=True)
+    venv.parent.mkdir(parents=True, exist_ok=True)
+    steps = [
+        [sys.executable, "-m", "venv", str(venv)],
+        [str(py), "-m", "pip", "install", "--disable-pip-version-check", "-q", *spec["packages"]],
+    ]
+    for cmd in steps:
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode != 0:
+            tail = "\n".join((r.stderr or r.stdout).strip().splitlines()[-5:])
+            print(f"   {name}: '{' '.join(cmd[:4])} ...' failed, skipping {name}:\n{tail}", flush=True)
+            return None
+    return py
+
+
+def run_peer(py: Path, name: str, payload: str, seconds: float, rate_hz: float | None) -> dict[str, Any]:
+    """Run one peer pipeline; CPU is its whole process tree's, measured like the raw baseline's."""
+    script = PEER_DIR / PEERS[name]["script"]
+    with tempfile.TemporaryDirectory(prefix=f"ftbench-{name}-") as tmp:
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+        env["FTBENCH_PAYLOAD"] = payload
+        cmd = [
+            str(py),
+            str(script),
+            "--payload",
+            payload,
+            "--rate",
+            repr(rate_hz or 0),
+            "--seconds",
+            repr(seconds),
+        ]
+        log = Path(tmp) / "log.txt"
+        with open(log, "w") as logf:
+            proc = subprocess.Popen(
+                [*cmd, "--out", tmp],
+                cwd=PEER_DIR,
+                env=env,
+                stdout=logf,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+            sampler = CpuSampler({"tree": proc.pid}, tree=True).start()
+            try:
+                rc = proc.wait(timeout=seconds + 60)
+            except subprocess.TimeoutExpired:
+                rc = None
+            finally:
+                sampler.stop()
+                _kill_group(proc)
+        src_file, sink_file = Path(tmp, "source.json"), Path(tmp, "sink.npz")
+        if rc != 0 or not src_file.exists() or not sink_file.exists():
+            tail = "\n".join(log.read_text(errors="replace").strip().splitlines()[-10:])
+            why = "timed out" if rc is None else f"exited with {rc}"
+            raise RuntimeError(f"{name} {payload} pipeline {why}:\n{tail}")
+        source = json.loads(src_file.read_text())
+        with np.load(sink_file) as sink:
+            sent_ns, recv_ns = sink["sent_ns"], sink["recv_ns"]
+    out = summarize(source, sent_ns, recv_ns, sampler, NBYTES[payload], rate_hz)
+    out["cpu_pct"] = out["cpu_pct"]["tree"]
+    out.pop("cpu_total_pct", None)
+    return {"payload": payload, "seconds": seconds, **out}
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    """Kill what is left of a peer's process group (its framework may leave workers behind)."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+
+
+def bench_peers(quick: bool) -> dict[str, Any]:
+    """d. Each peer: small @ 1 kHz latency, small and image flat out."""
+    d = durations(quick)
+    out: dict[str, Any] = {}
+    for name in PEERS:
+        py = peer_python(name)
+        if py is None:
+            out[name] = {"skipped": "pip install failed"}
+            continue
+        res: dict[str, Any] = {"versions": _peer_versions(py, name)}
+        for key, (payload, seconds, rate) in {
+            "small_1khz": ("small", d["paced"], 1000.0),
+            "small_flat": ("small", d["flat"], None),
+            "image_flat": ("image", d["flat"], None),
+        }.items():
+            print(f"   {name} {key} ...", flush=True)
+            try:
+                res[key] = run_peer(py, name, payload, seconds, rate)
+            except RuntimeError as e:
+                print(f"   {e}", flush=True)
+                res[key] = {"error": str(e)}
+        out[name] = res
+    return out
+
+
+def _peer_versions(py: Path, name: str) -> dict[str, str]:
+    """Installed versions of the peer and of the packages that matter for it."""
+    code = (
+        "import importlib.metadata as m, json, sys\n"
+        "out = {}\n"
+        "for p in sys.argv[1:]:\n"
+        "    try: out[p] = m.version(p)\n"
+        "    except m.PackageNotFoundError: pass\n"
+        "print(json.dumps(out))"
+    )
+    r = subprocess.run([py, "-c", code, name, "numpy", "pyzmq", "pandas"], capture_output=True, text=True)
+    return json.loads(r.stdout) if r.returncode == 0 else {}
+
+
+# -- report -----------------------------------------------------------------------------------
+
+
+def _f(x: float | None, fmt: str = ".0f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def _lat_row(label: str, r: dict[str, Any]) -> str:
+    lat = r["latency_us"]
+    cpu = r.get("cpu_pct")
+    if isinstance(cpu, dict):
+        cpu_s = (
+            " ".join(f"{n} {_f(v, '.1f')}" for n, v in cpu.items())
+            + f" (sum {_f(r.get('cpu_total_pct'), '.1f')})"
+        )
+    else:
+        cpu_s = _f(cpu, ".1f")
+    return (
+        f"   {label:<34} {_f(lat['p50']):>7} {_f(lat['p99']):>7} {_f(lat['max']):>7} "
+        f"{_f(r['loss_pct'], '.2f'):>6}  {cpu_s}"
+    )
+
+
+def _thr_row(label: str, r: dict[str, Any]) -> str:
+    t = r["throughput"]
+    return (
+        f"   {label:<34} {t['delivered_msg_s']:>11,.0f} {t['sent_msg_s']:>11,.0f} "
+        f"{t['bytes_s'] / 1e6:>9,.1f} {t['loss_pct']:>6.2f} {_f(r['latency_us']['p50'] / 1e3, '.1f'):>8}"
+    )
+
+
+def ratios_and_targets(res: dict[str, Any]) -> dict[str, Any]:
+    """flowtact/raw ratios and issue 3's targets (None where a part was not run)."""
+    rw, chain, fast, peers = res.get("raw"), res.get("chain"), res.get("fast"), res.get("peers") or {}
+    out: dict[str, Any] = {"ratios": {}, "targets": {}}
+    if rw and chain:
+        out["ratios"]["p99_latency_flowtact_over_raw"] = (
+            chain["latency_us"]["p99"] / rw["small_1khz"]["latency_us"]["p99"]
+        )
+        out["ratios"]["p50_latency_flowtact_over_raw"] = (
+            chain["latency_us"]["p50"] / rw["small_1khz"]["latency_us"]["p50"]
+        )
+        bound = 3 * rw["floor_small_1khz"]["latency_us"]["p99"] + 100
+        peer_p99 = {
+            n: p["small_1khz"]["latency_us"]["p99"]
+            for n, p in peers.items()
+            if "latency_us" in p.get("small_1khz", {})
+        }
+        ok = chain["latency_us"]["p99"] <= bound and all(
+            chain["latency_us"]["p99"] < v for v in peer_p99.values()
+        )
+        out["targets"]["p99 <= 3 x raw one-way p99 + 100 us and below every peer's p99"] = {
+            "value_us": chain["latency_us"]["p99"],
+            "bound_us": bound,
+            "peers_p99_us": peer_p99,
+            "pass": ok,
+            "note": "" if peer_p99 else "no peers measured (run with --peers)",
+        }
+    if chain:
+        cpu = chain["cpu_max_pct"]
+        out["targets"]["<= 10 % of a core per process at 1 kHz"] = {
+            "value_pct": cpu,
+            "per_process": chain["cpu_pct"],
+            "pass": cpu is not None and cpu <= 10.0,
+        }
+    if fast:
+        small = fast["small"]["samples_s"]
+        out["targets"][">= 50 k small msg/s end to end"] = {"value_msg_s": small, "pass": small >= 50_000}
+        if rw:
+            raw_small = rw["small_flat"]["throughput"]["delivered_msg_s"]
+            raw_img = rw["image_flat"]["throughput"]["bytes_s"]
+            out["ratios"]["throughput_small_flowtact_over_raw"] = small / raw_small
+            out["ratios"]["frame_bytes_s_flowtact_over_raw"] = fast["image"]["bytes_s"] / raw_img
+            out["targets"]["frames >= 80 % of raw bytes/s"] = {
+                "value_bytes_s": fast["image"]["bytes_s"],
+                "raw_bytes_s": raw_img,
+                "pass": fast["image"]["bytes_s"] >= 0.8 * raw_img,
+            }
+    return out
+
+
+def print_report(res: dict[str, Any]) -> None:
+    head = f"   {'case':<34} {'p50 µs':>7} {'p99 µs':>7} {'max µs':>7} {'loss %':>6}  CPU % of one core"
+    thead = f"   {'case':<34} {'deliv msg/s':>11} {'sent msg/s':>11} {'MB/s':>9} {'loss %':>6} {'p50 ms':>8}"
+    if "raw" in res:
+        r = res["raw"]
+        print("\na. raw pyzmq + flowtact framing (ipc PUSH/PULL, HWM 1000, blocking)")
+        print(head + " (per process)")
+        print(_lat_row("small @ 1 kHz (2 hops)", r["small_1khz"]))
+        print(_lat_row("image @ 40 Hz (2 hops)", r["image_40hz"]))
+        print(_lat_row("floor: small @ 1 kHz, 1 hop", r["floor_small_1khz"]))
+        print(thead + " (p50 latency under load)")
+        print(_thr_row("small, flat out", r["small_flat"]))
+        print(_thr_row("image, flat out", r["image_flat"]))
+    if "chain" in res:
+        c = res["chain"]
+        print(
+            "\nb. flowtact chain.yaml at 1 kHz, real time, 3 processes (sensor+force | savgol | drive+nlif)"
+        )
+        for s, lat in c["hop_latency_us"].items():
+            print(
+                f"   {s:<40} p50 {_f(lat.get('p50')):>6} µs  p99 {_f(lat.get('p99')):>6} µs  max {_f(lat.get('max')):>6} µs"
+            )
+        cpu = "  ".join(f"{n} {_f(v, '.1f')}" for n, v in c["cpu_pct"].items())
+        print(f"   dropped {c['dropped']}, CPU % of one core per process: {cpu}")
+    if "fast" in res:
+        print("\nc. flowtact --fast (lossless), source -> stage -> sink, 3 processes")
+        for payload, f in res["fast"].items():
+            print(
+                f"   {payload:<6} {f['samples_s']:>11,.0f} samples/s  {f['bytes_s'] / 1e6:>9,.1f} MB/s  "
+                f"({f['delivered']:,} in {f['wall_s']:.2f} s wall, dropped {f['dropped']}; "
+                f"start-up free: {_f(f['marginal_samples_s'], ',.0f')}/s)"
+            )
+    if "peers" in res:
+        print("\nd. peers (same pipeline; CPU = whole process tree)")
+        print(head)
+        for name, p in res["peers"].items():
+            if "skipped" in p:
+                print(f"   {name}: skipped ({p['skipped']})")
+                continue
+            v = ", ".join(f"{k} {x}" for k, x in p.get("versions", {}).items())
+            print(f"   {name} ({v})")
+            if "latency_us" in p.get("small_1khz", {}):
+                print(_lat_row(f"{name} small @ 1 kHz", p["small_1khz"]))
+        print(thead)
+        for name, p in res["peers"].items():
+            for key in ("small_flat", "image_flat"):
+                if "throughput" in p.get(key, {}):
+                    print(_thr_row(f"{name} {key.replace('_flat', '')}, flat out", p[key]))
+    rt = res["ratios_targets"]
+    if rt["ratios"]:
+        print("\nratios flowtact / raw")
+        for k, v in rt["ratios"].items():
+            print(f"   {k:<40} {v:6.2f}")
+    if rt["targets"]:
+        print("\ntargets (issue 3)")
+        for k, v in rt["targets"].items():
+            key, val = next((key, x) for key, x in v.items() if key.startswith("value"))
+            if val is None:
+                shown = "-"
+            elif key == "value_bytes_s":
+                shown = f"{val / 1e6:,.1f} MB/s"
+            else:
+                unit = {"value_us": " µs", "value_pct": " %", "value_msg_s": " msg/s"}[key]
+                shown = (f"{val:,.0f}" if abs(val) >= 100 else f"{val:.1f}") + unit
+            extra = ""
+            if "bound_us" in v:
+                peers = ", ".join(f"{n} {x:.0f}" for n, x in v["peers_p99_us"].items()) or "not run"
+                extra = f" (bound {v['bound_us']:.0f} µs; peers' p99: {peers})"
+            elif "raw_bytes_s" in v:
+                extra = f" (raw {v['raw_bytes_s'] / 1e6:,.1f} MB/s)"
+            print(f"   {'PASS' if v['pass'] else 'FAIL'}  {k}: {shown}{extra}")
+    if rt["targets"] and "raw" in res and "chain" in res:
+        print(
+            "   (flowtact's latencies are the runtime's own figures; the raw and peer ones drop the first 0.5 s)"
+        )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument(
+        "--quick", action="store_true", help="3 s paced and 2 s flat-out runs (instead of 10 s and 5 s)"
+    )
+    ap.add_argument("--json", help="write every figure to this file")
+    ap.add_argument("--peers", action="store_true", help="also measure Timeflux and ezmsg (throw-away venvs)")
+    ap.add_argument("--only", choices=["raw", "flowtact", "peers"], help="run one part only")
+    args = ap.parse_args()
+    parts = {args.only} if args.only else {"raw", "flowtact"} | ({"peers"} if args.peers else set())
+    res: dict[str, Any] = {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "pyzmq": zmq.__version__,
+            "libzmq": zmq.zmq_version(),
+            "numpy": np.__version__,
+            "platform": platform.platform(),
+        },
+        "quick": args.quick,
+        "durations_s": durations(args.quick),
+        "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+    }
+    m = res["machine"]
+    print(
+        f"transport bench: {m['cpus']} CPUs, Python {m['python']}, pyzmq {m['pyzmq']} (libzmq {m['libzmq']}), "
+        f"{'quick' if args.quick else 'full'} runs"
+    )
+    if "raw" in parts:
+        print("a. raw pyzmq baseline")
+        res["raw"] = bench_raw(args.quick)
+    if "flowtact" in parts:
+        print("b/c. flowtact")
+        try:
+            res["chain"] = bench_chain(args.quick)
+            res["fast"] = {p: bench_fast(p, args.quick) for p in ("small", "image")}
+        except (ContractError, RuntimeError) as e:
+            print(f"   flowtact: {e}", flush=True)
+            res["flowtact_error"] = str(e)
+    if "peers" in parts:
+        print("d. peers")
+        res["peers"] = bench_peers(args.quick)
+    res["ratios_targets"] = ratios_and_targets(res)
+    print_report(res)
+    if args.json:
+        Path(args.json).write_text(json.dumps(res, indent=2, default=_json_default))
+        print(f"\nwrote {args.json}")
+    return 1 if "flowtact_error" in res else 0
+
+
+def _json_default(x: Any) -> Any:
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(type(x).__name__)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,209 @@
+"""Where and how a graph runs: process groups, restarts, hosts, network keys and path deadlines.
+
+These are the graph file's ``processes:``, ``network:`` and ``deadlines:`` sections. They never
+change what a graph computes, only how it is spread over processes and hosts and what the run
+reports; :mod:`flowtact.graph` calls :func:`parse_deployment` and reports problems with locations.
+
+.. code-block:: yaml
+
+    processes:
+      neurons: {restart: on-failure, max_restarts: 3}
+      vision:  {host: 10.0.0.2}          # started there by `flowtact worker`
+    network: {listen: 10.0.0.1, port: 5550, keys: ~/.flowtact/keys}
+    deadlines:
+      - {from: sensor, to: sa1_stim, budget: 4ms}
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from flowtact.params import did_you_mean
+
+if TYPE_CHECKING:
+    from flowtact.graph import GraphError, Loc, _Located
+
+__all__ = ["Deadline", "Deployment", "Network", "ProcessDef", "parse_deployment", "parse_duration"]
+
+PROCESS_KEYS = ("restart", "max_restarts", "host")
+NETWORK_KEYS = ("listen", "port", "keys")
+DEADLINE_KEYS = ("from", "to", "budget")
+RESTARTS = ("never", "on-failure")
+POLICIES = ("block", "latest")
+DEFAULT_QUEUE = 64
+_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
+
+
+@dataclass(frozen=True)
+class ProcessDef:
+    """A process group: its restart policy and the host it runs on (None: this machine)."""
+
+    name: str
+    restart: str = "never"
+    max_restarts: int = 3
+    host: str | None = None
+
+
+@dataclass(frozen=True)
+class Network:
+    """Off-host transport: the supervisor's listen address and port, and the CURVE keys folder."""
+
+    listen: str = "127.0.0.1"
+    port: int = 5550
+    keys: str | None = None
+
+
+@dataclass(frozen=True)
+class Deadline:
+    """A latency budget from a source node's emission to a node's output."""
+
+    src: str
+    dst: str
+    budget_s: float
+    loc: Loc | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.src} -> {self.dst}"
+
+
+@dataclass
+class Deployment:
+    """Everything about placement and supervision a graph declares."""
+
+    processes: dict[str, ProcessDef] = field(default_factory=dict)
+    network: Network = field(default_factory=Network)
+    deadlines: list[Deadline] = field(default_factory=list)
+
+    def process(self, name: str) -> ProcessDef:
+        """The declared group, or the defaults for one named only on nodes."""
+        return self.processes.get(name) or ProcessDef(name)
+
+    @property
+    def remote(self) -> bool:
+        """Does any group run on another host?"""
+        return any(p.host for p in self.processes.values())
+
+
+def parse_duration(value: Any) -> float | None:
+    """``4ms``, ``500us``, ``0.004s`` or a number of seconds -> seconds (None if malformed)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return float(value) if value > 0 else None
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:e-?[0-9]+)?)\s*(s|ms|us|µs)\s*", str(value))
+    if not m:
+        return None
+    seconds = float(m.group(1)) * _UNITS[m.group(2)]
+    return seconds if seconds > 0 else None
+
+
+def _unknown(keys: Any, allowed: tuple[str, ...], where: str, y: _Located, path: tuple[Any, ...]) -> list:
+    from flowtact.graph import GraphError
+
+    return [
+        GraphError(y.key_loc(*path, k), f"{where}: unknown key '{k}'{did_you_mean(str(k), allowed)}")
+        for k in keys
+        if k not in allowed
+    ]
+
+
+def parse_deployment(doc: dict[str, Any], y: _Located, node_docs: dict[str, Any]) -> Deployment:
+    """Read ``processes:``, ``network:`` and ``deadlines:``; append problems to ``y.errors``."""
+    from flowtact.graph import GraphError
+
+    errors: list[GraphError] = y.errors
+    dep = Deployment()
+    used = {n.get("process") for n in node_docs.values() if isinstance(n, dict)}
+    raw = doc.get("processes") or {}
+    if not isinstance(raw, dict):
+        errors.append(GraphError(y.loc("processes"), "'processes' must map a process name to its settings"))
+        raw = {}
+    for name, pdoc in raw.items():
+        where = f"process '{name}'"
+        if name not in used:
+            errors.append(
+                GraphError(
+                    y.key_loc("processes", name),
+                    f"{where} has no nodes{did_you_mean(str(name), [u for u in used if u])}",
+                    "place nodes in it with `process: NAME` on each node",
+                )
+            )
+            continue
+        pdoc = pdoc or {}
+        if not isinstance(pdoc, dict):
+            errors.append(GraphError(y.loc("processes", name), f"{where} must be a mapping"))
+            continue
+        errors.extend(_unknown(pdoc, PROCESS_KEYS, where, y, ("processes", name)))
+        restart = pdoc.get("restart", "never")
+        if restart not in RESTARTS:
+            errors.append(
+                GraphError(
+                    y.loc("processes", name, "restart"),
+                    f"{where}: restart must be one of {', '.join(RESTARTS)}; got {restart!r}",
+                )
+            )
+            restart = "never"
+        max_restarts = pdoc.get("max_restarts", 3)
+        if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
+            errors.append(
+                GraphError(
+                    y.loc("processes", name, "max_restarts"), f"{where}: max_restarts must be an integer >= 0"
+                )
+            )
+            max_restarts = 3
+        host = pdoc.get("host")
+        if host is not None and not (isinstance(host, str) and host):
+            errors.append(GraphError(y.loc("processes", name, "host"), f"{where}: host must be an address"))
+            host = None
+        dep.processes[str(name)] = ProcessDef(str(name), restart, max_restarts, host)
+
+    net = doc.get("network") or {}
+    if not isinstance(net, dict):
+        errors.append(GraphError(y.loc("network"), "'network' must be a mapping (listen, port, keys)"))
+        net = {}
+    errors.extend(_unknown(net, NETWORK_KEYS, "network", y, ("network",)))
+    port = net.get("port", 5550)
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port < 65536:
+        errors.append(GraphError(y.loc("network", "port"), f"network: port must be 0..65535; got {port!r}"))
+        port = 5550
+    listen = net.get("listen", "127.0.0.1")
+    keys = net.get("keys")
+    dep.network = Network(str(listen), port, str(keys) if keys is not None else None)
+
+    raw_dl = doc.get("deadlines") or []
+    if not isinstance(raw_dl, list):
+        errors.append(GraphError(y.loc("deadlines"), "'deadlines' must be a list of {from, to, budget}"))
+        raw_dl = []
+    for i, d in enumerate(raw_dl):
+        loc = y.loc("deadlines", i)
+        if not isinstance(d, dict):
+            errors.append(
+                GraphError(loc, "a deadline is a mapping like {from: sensor, to: stim, budget: 4ms}")
+            )
+            continue
+        errors.extend(_unknown(d, DEADLINE_KEYS, "deadline", y, ("deadlines", i)))
+        ends = []
+        for key in ("from", "to"):
+            node = d.get(key)
+            if node not in node_docs:
+                errors.append(
+                    GraphError(
+                        y.loc("deadlines", i, key),
+                        f"deadline '{key}': unknown node {node!r}{did_you_mean(str(node), map(str, node_docs))}",
+                    )
+                )
+            ends.append(node)
+        budget = parse_duration(d.get("budget"))
+        if budget is None:
+            errors.append(
+                GraphError(
+                    y.loc("deadlines", i, "budget"),
+                    f"deadline budget must be a positive duration such as 4ms or 500us; got {d.get('budget')!r}",
+                )
+            )
+        if all(e in node_docs for e in ends) and budget is not None:
+            dep.deadlines.append(Deadline(str(ends[0]), str(ends[1]), budget, loc))
+    return dep

@@ -1,0 +1,207 @@
+"""Split a compiled plan into process groups, and each group's part into a plain worker plan.
+
+Placement: a node runs in the group its ``process:`` names; a node without one runs with the
+producer of its first input (so a chain follows its source), and a source without one in the
+group ``main``. Streams that cross groups become ZeroMQ edges with the policy and queue bound of
+their graph edges. A worker plan is plain data (msgpack-able): blocks are re-created from their
+registry name, parameters and seed, so blocks are the same objects in every mode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from flowtact.block import Source
+from flowtact.chunk import StreamSpec
+from flowtact.compile import Plan
+from flowtact.deployment import ProcessDef
+from flowtact.graph import GraphError, GraphErrors
+
+__all__ = ["DEFAULT_GROUP", "Placement", "place", "spec_from_wire", "spec_to_wire"]
+
+DEFAULT_GROUP = "main"
+
+
+def spec_to_wire(spec: StreamSpec) -> dict[str, Any]:
+    """A stream spec as plain data."""
+    return {
+        "dtype": spec.dtype,
+        "shape": list(spec.shape),
+        "units": spec.units,
+        "rate_hz": spec.rate_hz,
+        "events": spec.events,
+        "n_units": spec.n_units,
+        "labels": list(spec.labels) if spec.labels is not None else None,
+    }
+
+
+def spec_from_wire(d: dict[str, Any]) -> StreamSpec:
+    """Inverse of :func:`spec_to_wire`."""
+    return StreamSpec(
+        dtype=d["dtype"],
+        shape=tuple(d["shape"]),
+        units=d["units"],
+        rate_hz=d["rate_hz"],
+        events=d["events"],
+        n_units=d["n_units"],
+        labels=tuple(d["labels"]) if d["labels"] is not None else None,
+    )
+
+
+@dataclass
+class Placement:
+    """Which group runs each node, the cross-group streams, and every group's worker plan."""
+
+    plan: Plan
+    group_of: dict[str, str]
+    groups: dict[str, list[str]]
+    processes: dict[str, ProcessDef]
+    stream_ids: dict[tuple[str, str], int]
+    #: (stream id, consumer group) -> (policy, queue) for every stream that crosses groups
+    crossings: dict[tuple[int, str], tuple[str, int]] = field(default_factory=dict)
+
+    def stream_name(self, sid: int) -> str:
+        return self._names[sid]
+
+    def __post_init__(self) -> None:
+        self._names = {sid: f"{n}.{p}" for (n, p), sid in self.stream_ids.items()}
+
+    def consumers(self, sid: int) -> list[str]:
+        """Groups that receive stream ``sid`` over the network."""
+        return sorted({g for (s, g) in self.crossings if s == sid})
+
+    def worker_plan(
+        self, group: str, *, fast: bool, tick_s: float, duration_s: float | None
+    ) -> dict[str, Any]:
+        """Everything worker ``group`` needs, as plain data."""
+        plan, graph = self.plan, self.plan.graph
+        mine = self.groups[group]
+        src_index = {
+            n: i for i, n in enumerate(n for n in plan.order if issubclass(graph.nodes[n].cls, Source))
+        }
+        host = self.processes[group].host
+        nodes = []
+        for n in mine:
+            node = graph.nodes[n]
+            nodes.append(
+                {
+                    "name": n,
+                    "block": node.block,
+                    "params": node.config.to_dict(),
+                    "seed": plan.seeds[n],
+                    "inputs": {p: spec_to_wire(s) for p, s in plan.input_specs(n).items()},
+                    "demanded": sorted(plan.demanded[n]),
+                    "needed": sorted(plan.needed[n]),
+                    "src_idx": src_index.get(n),
+                }
+            )
+        edges, inbound = [], {}
+        for e in plan.active_edges:
+            if e.dst not in mine:
+                continue
+            delayed = graph.nodes[e.dst].cls.inputs[e.dst_port].delay
+            if e.src in mine:
+                edges.append([e.src, e.src_port, e.dst, e.dst_port, delayed])
+                continue
+            sid = self.stream_ids[(e.src, e.src_port)]
+            policy, queue = self.crossings[(sid, group)]
+            entry = inbound.setdefault(
+                sid,
+                {
+                    "id": sid,
+                    "stream": f"{e.src}.{e.src_port}",
+                    "spec": spec_to_wire(plan.specs[(e.src, e.src_port)]),
+                    "policy": policy,
+                    "queue": queue,
+                    "dsts": [],
+                    "same_host": self.processes[self.group_of[e.src]].host == host,
+                },
+            )
+            entry["dsts"].append([e.dst, e.dst_port, delayed])
+        outbound = [
+            {
+                "id": sid,
+                "node": n,
+                "port": p,
+                "group": g,
+                "policy": self.crossings[(sid, g)][0],
+                "queue": self.crossings[(sid, g)][1],
+            }
+            for (n, p), sid in self.stream_ids.items()
+            if n in mine
+            for g in self.consumers(sid)
+        ]
+        record = [[n, p, self.stream_ids[(n, p)]] for n, p in plan.record if n in mine]
+        deadlines = [
+            {"name": d.name, "src_idx": src_index[d.src], "dst": d.dst, "budget_s": d.budget_s}
+            for d in graph.deployment.deadlines
+            if d.dst in mine and d.src in src_index
+        ]
+        return {
+            "process": group,
+            "graph": graph.name,
+            "fast": fast,
+            "tick_s": tick_s,
+            "duration_s": duration_s,
+            "nodes": nodes,
+            "edges": edges,
+            "inbound": list(inbound.values()),
+            "outbound": outbound,
+            "record": record,
+            "deadlines": deadlines,
+        }
+
+
+def _default_group(plan: Plan) -> dict[str, str]:
+    graph = plan.graph
+    first_input: dict[str, str] = {}
+    for e in plan.active_edges:
+        first_input.setdefault(e.dst, e.src)
+    group_of: dict[str, str] = {}
+    for n in plan.order:  # topological: a node's producers are placed before it
+        declared = graph.nodes[n].process
+        if declared:
+            group_of[n] = declared
+        elif n in first_input and first_input[n] in group_of:
+            group_of[n] = group_of[first_input[n]]
+        else:
+            group_of[n] = DEFAULT_GROUP
+    return group_of
+
+
+def place(plan: Plan, *, fast: bool) -> Placement:
+    """Group the plan's active nodes into processes and find the streams that cross groups.
+
+    In ``fast`` mode every edge is ``block`` (lossless), whatever the graph says, so that a
+    virtual-clock run is deterministic.
+    """
+    graph = plan.graph
+    group_of = _default_group(plan)
+    groups: dict[str, list[str]] = {}
+    for n in plan.order:
+        groups.setdefault(group_of[n], []).append(n)
+    processes = {g: graph.deployment.process(g) for g in groups}
+    stream_ids = {
+        (n, p): i for i, (n, p) in enumerate((n, p) for n in plan.order for p in sorted(plan.demanded[n]))
+    }
+    crossings: dict[tuple[int, str], tuple[str, int]] = {}
+    errors = []
+    for e in plan.active_edges:
+        g_src, g_dst = group_of[e.src], group_of[e.dst]
+        if g_src == g_dst:
+            continue
+        key = (stream_ids[(e.src, e.src_port)], g_dst)
+        flow = ("block" if fast else e.policy, e.queue)
+        if key in crossings and crossings[key] != flow:
+            errors.append(
+                GraphError(
+                    e.loc,
+                    f"{e}: the edges from '{e.src}.{e.src_port}' into process '{g_dst}' disagree on policy/queue",
+                    "a stream enters a process once: give its edges into that process the same policy and queue",
+                )
+            )
+        crossings[key] = flow
+    if errors:
+        raise GraphErrors(errors)
+    return Placement(plan, group_of, groups, processes, stream_ids, crossings)

@@ -1,0 +1,617 @@
+"""A worker process: runs one process group's nodes, joined to the others by ZeroMQ streams.
+
+The worker follows the same tick schedule as the in-process executor, so a ``--fast`` run gives
+the same chunks, hence the same results, in both modes. Tick ``k`` covers graph time up to
+``k * tick_s``; every chunk a node emits at tick ``k`` becomes available to its consumers at tick
+``k`` (or ``k + 1`` through a delay port). A ``block`` stream carries one message per tick (an
+empty one when nothing came out), so a consumer knows when it has all of tick ``k``; a ``latest``
+stream carries only data and the consumer takes whatever is newest. ``END`` messages carry each
+node's end-of-stream output (its flush). Nodes wait for remote input just before they step, so
+chains that leave a process and come back within a tick do not deadlock.
+
+Lifecycle, driven by the supervisor over the control socket (msgpack dicts): hello -> plan ->
+ready (bound endpoints) -> wire (connect) -> wired -> start -> stats heartbeats -> done -> exit.
+A worker that stops hearing the supervisor for :data:`ORPHAN_S` exits on its own; on Linux it
+also dies with its parent (``PR_SET_PDEATHSIG``), so no process outlives a run.
+
+Run as ``python -m flowtact.runtime.worker --connect ENDPOINT --process NAME`` (the supervisor
+does this) or ``flowtact worker ENDPOINT --process NAME`` on another host.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import math
+import os
+import signal
+import socket
+import sys
+import time
+import traceback
+from collections import deque
+from typing import Any
+
+import msgpack
+import numpy as np
+import zmq
+
+from flowtact.block import Block, Source
+from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.registry import load_block
+from flowtact.runtime.inproc import check_chunk
+from flowtact.runtime.placement import spec_from_wire
+from flowtact.runtime.stats import LatencyHistogram
+from flowtact.runtime.wire import END, recv_message, send_message
+
+__all__ = ["ORPHAN_S", "Worker", "main"]
+
+ORPHAN_S = 3.0
+"""A worker that has not heard the supervisor for this long exits (no orphans)."""
+HEARTBEAT_S = 0.25
+POLL_MS = 100
+INF = math.inf
+FOREVER = 2**62
+
+
+class Stop(Exception):
+    """The supervisor asked this worker to abort at once."""
+
+
+class _Inbound:
+    """A stream arriving from another process: its socket, what was received, its statistics."""
+
+    def __init__(self, d: dict[str, Any]) -> None:
+        self.id: int = d["id"]
+        self.name: str = d["stream"]
+        self.spec: StreamSpec = spec_from_wire(d["spec"])
+        self.policy: str = d["policy"]
+        self.queue: int = d["queue"]
+        self.dsts: list[tuple[str, str, bool]] = [tuple(x) for x in d["dsts"]]  # type: ignore[misc]
+        self.same_host: bool = d["same_host"]
+        self.sock: zmq.Socket | None = None
+        self.upto = 0  # highest tick received
+        self.ended = False
+        self.messages = self.samples = self.dropped = self.gaps = 0
+        self.next_seq = 0
+        self.hist = LatencyHistogram()
+
+
+class _Outbound:
+    """A stream leaving for another process."""
+
+    def __init__(self, d: dict[str, Any]) -> None:
+        self.id: int = d["id"]
+        self.node: str = d["node"]
+        self.port: str = d["port"]
+        self.group: str = d["group"]
+        self.policy: str = d["policy"]
+        self.queue: int = d["queue"]
+        self.sock: zmq.Socket | None = None
+        self.seq = 0
+        self.sent_tick = 0
+        self.dropped = 0
+
+
+class _Deadline:
+    def __init__(self, d: dict[str, Any]) -> None:
+        self.name: str = d["name"]
+        self.src: int = d["src_idx"]
+        self.dst: str = d["dst"]
+        self.budget_ns = int(d["budget_s"] * 1e9)
+        self.hist = LatencyHistogram()
+        self.violations = 0
+        self.worst_ns = 0
+
+
+class Worker:
+    """One process group of a running graph."""
+
+    def __init__(self, control: str, process: str, *, keys_dir: str | None = None) -> None:
+        self.process = process
+        self.ctx = zmq.Context()
+        self.keys = None
+        self.ctl = self.ctx.socket(zmq.DEALER)
+        self.ctl.setsockopt(zmq.LINGER, 2000)
+        self.auth = None
+        if control.startswith("tcp://"):  # another host: CURVE on every tcp socket, keys checked now
+            from flowtact.runtime.security import Authenticator, HandshakeWatch, load_keys, secure_client
+
+            self.keys = load_keys(keys_dir)
+            self.auth = Authenticator(self.ctx, self.keys).start()
+            secure_client(self.ctl, self.keys)
+            watch = HandshakeWatch(self.ctl)
+            self.ctl.connect(control)
+            try:
+                watch.wait(10.0, endpoint=control)
+            finally:
+                watch.close()
+        else:
+            self.ctl.connect(control)
+        self.last_ping = time.monotonic()
+        self.stopping = False
+        self.rec: zmq.Socket | None = None
+
+    # -- control ----------------------------------------------------------------------------
+    def _send(self, op: str, **kw: Any) -> None:
+        kw["op"] = op
+        self.ctl.send(msgpack.packb(kw, default=_plain))
+
+    def _recv_ctl(self, timeout_ms: int) -> dict[str, Any] | None:
+        if not self.ctl.poll(timeout_ms):
+            return None
+        msg = msgpack.unpackb(self.ctl.recv(), strict_map_key=False)
+        self.last_ping = time.monotonic()
+        return msg
+
+    def _expect(self, op: str, timeout_s: float = 120.0) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            msg = self._recv_ctl(POLL_MS)
+            if msg is None:
+                self._check_orphan()
+                continue
+            if msg["op"] == op:
+                return msg
+            if msg["op"] in ("abort", "exit"):
+                raise Stop
+        raise TimeoutError(f"no '{op}' from the supervisor within {timeout_s:.0f} s")
+
+    def _check_orphan(self) -> None:
+        if time.monotonic() - self.last_ping > ORPHAN_S:
+            raise Stop("the supervisor is gone")
+
+    def _service(self) -> None:
+        """Handle pending control messages (pings, stop, abort) without blocking."""
+        while True:
+            msg = self._recv_ctl(0)
+            if msg is None:
+                break
+            op = msg["op"]
+            if op == "stop":
+                self.stopping = True
+            elif op in ("abort", "exit"):
+                raise Stop
+        self._check_orphan()
+        now = time.monotonic()
+        if now >= self.next_beat:
+            self.next_beat = now + HEARTBEAT_S
+            self._send("stats", **self._stats())
+
+    # -- set-up -----------------------------------------------------------------------------
+    def serve(self) -> int:
+        """Run the whole lifecycle; returns the process exit status."""
+        self._send("hello", process=self.process, pid=os.getpid(), host=socket.gethostname())
+        try:
+            msg = self._expect("plan")
+            self._build(msg["plan"])
+            self._bind(msg["bind"])
+            self._send(
+                "ready", endpoints={i.id: i.sock.last_endpoint.decode() for i in self.inbound.values()}
+            )
+            wire = self._expect("wire")
+            self._connect(wire["connect"], wire["record"])
+            self._send("wired")
+            start = self._expect("start")
+            self.t0_ns = start["t0_ns"] or time.monotonic_ns()
+            self.k = int(start.get("k0", 0))
+            self._open()
+            try:
+                self._run(resume=bool(start.get("resume")))
+            finally:
+                self._close_blocks()
+            self._finish()
+            self._expect("exit", timeout_s=3600)
+            return 0
+        except Stop:
+            return 0
+        except _NodeFailure as f:
+            self._send("error", **f.report)
+            return 1
+        except Exception as e:  # a framework failure: report it rather than vanish
+            self._send(
+                "error",
+                node=None,
+                block=None,
+                now=None,
+                message=f"{type(e).__name__}: {e}",
+                traceback=traceback.format_exc(),
+            )
+            return 1
+        finally:
+            if self.auth is not None:
+                self.auth.stop()
+            self.ctx.destroy()  # each socket's own linger: the control socket's last words get out
+
+    def _build(self, plan: dict[str, Any]) -> None:
+        self.fast: bool = plan["fast"]
+        self.tick_s: float = plan["tick_s"]
+        self.duration_s: float | None = plan["duration_s"]
+        self.n_ticks = (
+            math.ceil(self.duration_s / self.tick_s - 1e-9) if self.duration_s is not None else None
+        )
+        self.order: list[str] = []
+        self.blocks: dict[str, Block] = {}
+        self.src_idx: dict[str, int] = {}
+        self.needed: dict[str, list[str]] = {}
+        self.demanded: dict[str, frozenset[str]] = {}
+        self.out_specs: dict[str, dict[str, StreamSpec]] = {}
+        for nd in plan["nodes"]:
+            cls = load_block(nd["block"])
+            block = cls(cls.config_cls.build(nd["params"], owner=nd["name"]), node=nd["name"])
+            specs = block.bind(
+                {p: spec_from_wire(s) for p, s in nd["inputs"].items()},
+                seed=nd["seed"],
+                demanded=frozenset(nd["demanded"]),
+            )
+            name = nd["name"]
+            self.order.append(name)
+            self.blocks[name] = block
+            self.needed[name] = nd["needed"]
+            self.demanded[name] = frozenset(nd["demanded"])
+            self.out_specs[name] = specs
+            if nd["src_idx"] is not None:
+                self.src_idx[name] = nd["src_idx"]
+        self.sources = [n for n in self.order if isinstance(self.blocks[n], Source)]
+        # queues[(node, port)] -> deque of (available from tick, chunk, origins)
+        self.queues: dict[tuple[str, str], deque[tuple[float, Chunk, dict[int, int]]]] = {
+            (n, p): deque() for n in self.order for p in self.needed[n]
+        }
+        self.local: dict[tuple[str, str], list[tuple[str, str, bool]]] = {}
+        for src, sport, dst, dport, delayed in plan["edges"]:
+            self.local.setdefault((src, sport), []).append((dst, dport, delayed))
+        self.inbound = {d["id"]: _Inbound(d) for d in plan["inbound"]}
+        self.remote_inputs: dict[str, list[tuple[_Inbound, bool]]] = {n: [] for n in self.order}
+        for ib in self.inbound.values():
+            for dst, _port, delayed in ib.dsts:
+                if (ib, delayed) not in self.remote_inputs[dst]:
+                    self.remote_inputs[dst].append((ib, delayed))
+        self.outbound = [_Outbound(d) for d in plan["outbound"]]
+        self.out_by_port: dict[tuple[str, str], list[_Outbound]] = {}
+        for ob in self.outbound:
+            self.out_by_port.setdefault((ob.node, ob.port), []).append(ob)
+        self.recorded = {(n, p): sid for n, p, sid in plan["record"]}
+        self.deadlines = {}
+        for d in plan["deadlines"]:
+            self.deadlines.setdefault(d["dst"], []).append(_Deadline(d))
+        self.counts: dict[str, int] = {}
+        self.event_streams = {
+            f"{n}.{p}" for n in self.order for p in self.demanded[n] if self.out_specs[n][p].events
+        }
+        self.block_inputs = [ib for ib in self.inbound.values() if ib.policy == "block"]
+        self.latest_inputs = [ib for ib in self.inbound.values() if ib.policy == "latest"]
+        self.now = 0.0
+        self.next_beat = 0.0
+
+    def _socket(self, kind: int, endpoint: str, hwm: int) -> zmq.Socket:
+        s = self.ctx.socket(kind)
+        s.setsockopt(zmq.SNDHWM if kind == zmq.PUSH else zmq.RCVHWM, hwm)
+        s.setsockopt(zmq.LINGER, 0)
+        if endpoint.startswith("tcp://") and self.keys is not None:
+            from flowtact.runtime.security import secure_client, secure_server
+
+            (secure_client if kind == zmq.PUSH else secure_server)(s, self.keys)
+        return s
+
+    def _bind(self, bind: dict[int, str]) -> None:
+        for ib in self.inbound.values():
+            endpoint = bind[ib.id]
+            ib.sock = self._socket(zmq.PULL, endpoint, ib.queue)
+            if endpoint.startswith("tcp://") and endpoint.endswith(":0"):
+                ib.sock.bind_to_random_port(endpoint.rsplit(":", 1)[0])
+            else:
+                ib.sock.bind(endpoint)
+
+    def _connect(self, connect: dict[int, dict[str, str]], record: str | None) -> None:
+        self._latest_poller = zmq.Poller()
+        for ib in self.latest_inputs:
+            self._latest_poller.register(ib.sock, zmq.POLLIN)
+        for ob in self.outbound:
+            ob.sock = self._socket(zmq.PUSH, connect[ob.id][ob.group], ob.queue)
+            ob.sock.connect(connect[ob.id][ob.group])
+        if record is not None and self.recorded:
+            self.rec = self._socket(zmq.PUSH, record, 1000)
+            self.rec.setsockopt(zmq.LINGER, 500)
+            self.rec.connect(record)
+
+    def _open(self) -> None:
+        self.opened: list[Block] = []
+        for n in self.order:
+            try:
+                self.blocks[n].open()
+            except Exception as e:
+                raise _NodeFailure(n, self.blocks[n], 0.0, e) from e
+            self.opened.append(self.blocks[n])
+
+    def _close_blocks(self) -> None:
+        for block in reversed(getattr(self, "opened", [])):
+            try:
+                block.close()
+            except Exception:  # a failing close must not hide the run's outcome
+                traceback.print_exc()
+
+    # -- the tick loop ----------------------------------------------------------------------
+    def _tick_time(self, k: int) -> float:
+        if self.n_ticks is not None and k >= self.n_ticks:
+            return float(self.duration_s)  # type: ignore[arg-type]
+        return k * self.tick_s
+
+    def _run(self, *, resume: bool) -> None:
+        sources_on = bool(self.sources)
+        if resume and self.sources and not self.fast:  # skip what the clock already passed
+            self.k = max(self.k, int((time.monotonic_ns() - self.t0_ns) / 1e9 / self.tick_s))
+            for n in self.sources:
+                self.blocks[n](self.k * self.tick_s)
+        self.next_beat = time.monotonic() + HEARTBEAT_S
+        while True:
+            if self.n_ticks is not None and self.k >= self.n_ticks:
+                break
+            if self.stopping:
+                sources_on = False
+            if not sources_on and not self.block_inputs and not self.latest_inputs:
+                break
+            if not sources_on and self.block_inputs and all(ib.ended for ib in self.block_inputs):
+                break
+            if not sources_on and not self.block_inputs and not self._wait_latest():
+                break
+            self.k += 1
+            self.now = self._tick_time(self.k)
+            if sources_on and not self.fast:
+                self._wait_clock(self.now)
+            self._service()
+            self._tick(self.k, self.now, sources_on)
+
+    def _wait_clock(self, now: float) -> None:
+        target = self.t0_ns + int(now * 1e9)
+        while True:
+            remaining = (target - time.monotonic_ns()) / 1e9
+            if remaining <= 0:
+                return
+            if remaining > 0.06:
+                msg = self._recv_ctl(50)
+                if msg is not None:
+                    self._control(msg)
+                self._service()
+            else:
+                time.sleep(remaining)
+
+    def _control(self, msg: dict[str, Any]) -> None:
+        if msg["op"] == "stop":
+            self.stopping = True
+        elif msg["op"] in ("abort", "exit"):
+            raise Stop
+
+    def _wait_latest(self) -> bool:
+        """A worker fed only by ``latest`` streams waits for any of them; False once all ended."""
+        poller = self._latest_poller
+        while not all(ib.ended for ib in self.latest_inputs):
+            if poller.poll(POLL_MS):
+                return True
+            self._service()
+        return False
+
+    def _tick(self, k: int, now: float, sources_on: bool) -> None:
+        for n in self.order:
+            block = self.blocks[n]
+            if isinstance(block, Source):
+                if not sources_on:
+                    continue
+                origins = {self.src_idx[n]: time.monotonic_ns()}
+                try:
+                    out = block(now)
+                except Exception as e:
+                    raise _NodeFailure(n, block, now, e) from e
+                self._deliver(n, out, k, origins)
+                continue
+            for ib, delayed in self.remote_inputs[n]:
+                self._fetch(ib, k - 1 if delayed else k)
+            self._step(n, k, now, k)
+        for ob in self.outbound:  # a block stream carries every tick, empty or not
+            if ob.policy == "block" and ob.sent_tick < k:
+                spec = self.out_specs[ob.node][ob.port]
+                self._send_out(ob, k, Chunk.empty(spec), {})
+
+    def _step(self, n: str, k: int, now: float, avail: float) -> None:
+        block = self.blocks[n]
+        ins, origins = {}, {}
+        empty = True
+        for p in self.needed[n]:
+            q = self.queues[(n, p)]
+            parts = []
+            while q and q[0][0] <= avail:
+                _, c, o = q.popleft()
+                parts.append(c)
+                for s, ns in o.items():
+                    if ns < origins.get(s, ns + 1):
+                        origins[s] = ns
+            c = concat(parts, block.input_specs[p])
+            if len(c) or c.end is not None:
+                empty = False
+            ins[p] = c
+        if empty:
+            return
+        try:
+            out = block(**ins)
+        except Exception as e:
+            raise _NodeFailure(n, block, now, e) from e
+        if n in self.deadlines:
+            t = time.monotonic_ns()
+            for d in self.deadlines[n]:
+                if d.src in origins:
+                    lat = t - origins[d.src]
+                    d.hist.add(lat)
+                    if lat > d.budget_ns:
+                        d.violations += 1
+                        d.worst_ns = max(d.worst_ns, lat)
+        self._deliver(n, out, k, origins)
+
+    def _deliver(self, n: str, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
+        demanded = self.demanded[n]
+        for port, chunk in out.items():
+            if port not in demanded:
+                continue
+            spec = self.out_specs[n][port]
+            check_chunk(n, port, chunk, spec, self.now)
+            key = (n, port)
+            if len(chunk):
+                self.counts[f"{n}.{port}"] = self.counts.get(f"{n}.{port}", 0) + len(chunk)
+            for dst, dport, delayed in self.local.get(key, ()):
+                self.queues[(dst, dport)].append((k + 1 if delayed else k, chunk, origins))
+            for ob in self.out_by_port.get(key, ()):
+                self._send_out(ob, k, chunk, origins)
+            sid = self.recorded.get(key)
+            if sid is not None and (len(chunk) or chunk.end is not None):
+                send_message(self.rec, sid, 0, k, chunk)  # type: ignore[arg-type]
+
+    def _send_out(self, ob: _Outbound, k: int, chunk: Chunk, origins: dict[int, int]) -> None:
+        """Send a chunk; ``latest`` streams skip empty chunks and drop what the queue cannot hold."""
+        if not len(chunk) and chunk.end is None and (ob.policy == "latest" or ob.sent_tick == k):
+            return
+        if send_message(ob.sock, ob.id, ob.seq, k, chunk, origins, nowait=ob.policy == "latest"):  # type: ignore[arg-type]
+            ob.seq += 1
+        else:
+            ob.dropped += 1
+        ob.sent_tick = k
+
+    def _fetch(self, ib: _Inbound, tick: int) -> None:
+        """Receive what stream ``ib`` holds for ticks up to ``tick`` (block) or what is there (latest)."""
+        if ib.ended:
+            return
+        if ib.policy == "latest":
+            got = []
+            while True:
+                try:
+                    got.append(recv_message(ib.sock, zmq.NOBLOCK))  # type: ignore[arg-type]
+                except zmq.Again:
+                    break
+            if len(got) > ib.queue:
+                ib.dropped += len(got) - ib.queue
+                got = got[-ib.queue :]
+            for m in got:
+                self._accept(ib, m, -INF)
+            return
+        while ib.upto < tick and not ib.ended:
+            if not ib.sock.poll(POLL_MS):  # type: ignore[union-attr]
+                self._service()
+                continue
+            m = recv_message(ib.sock)  # type: ignore[arg-type]
+            self._accept(ib, m, m.tick)
+
+    def _accept(self, ib: _Inbound, m: Any, tick: float) -> None:
+        if m.seq != ib.next_seq and not m.flags & END:
+            ib.gaps += 1
+        ib.next_seq = m.seq + 1
+        if m.flags & END:
+            ib.ended = True
+            tick = INF
+        else:
+            ib.upto = max(ib.upto, m.tick)
+        n = len(m.chunk)
+        if n:
+            ib.messages += 1
+            ib.samples += n
+            if ib.same_host and m.origins:
+                ib.hist.add(time.monotonic_ns() - min(m.origins.values()))
+        for dst, dport, delayed in ib.dsts:
+            avail = tick + (1 if delayed and tick != INF else 0)
+            self.queues[(dst, dport)].append((avail, m.chunk, m.origins))
+
+    # -- end of stream ----------------------------------------------------------------------
+    def _finish(self) -> None:
+        """Flush every node in order, feeding it what its producers flushed, then say done.
+
+        As in the in-process executor: each node steps once more on everything that reached it,
+        then flushes; consumers later in the order receive both. A remote consumer receives them
+        as ordinary messages, then an ``END`` marker.
+        """
+        k = self.k + 1
+        for n in self.order:
+            block = self.blocks[n]
+            if not isinstance(block, Source):
+                for ib, delayed in self.remote_inputs[n]:
+                    self._fetch(ib, self.k if delayed else FOREVER)
+                self._step(n, k, self.now, INF)
+            try:
+                out = block.flush()
+            except Exception as e:
+                raise _NodeFailure(n, block, self.now, e) from e
+            self._deliver(n, out, k, {})
+        for ob in self.outbound:
+            send_message(ob.sock, ob.id, ob.seq, k, Chunk.empty(self.out_specs[ob.node][ob.port]), flags=END)  # type: ignore[arg-type]
+        if self.rec is not None:
+            send_message(self.rec, -1, 0, k, Chunk(np.empty(0), np.empty(0)), flags=END)
+        counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
+        self._send("done", **self._stats(), counters=counters)
+
+    # -- statistics -------------------------------------------------------------------------
+    def _stats(self) -> dict[str, Any]:
+        return {
+            "k": self.k,
+            "now": self.now,
+            "cpu_s": time.process_time(),
+            "wall_ns": time.monotonic_ns(),
+            "counts": self.counts,
+            "inbound": {
+                ib.id: {
+                    "messages": ib.messages,
+                    "samples": ib.samples,
+                    "dropped": ib.dropped,
+                    "gaps": ib.gaps,
+                    "lat": ib.hist.to_wire(),
+                }
+                for ib in self.inbound.values()
+            },
+            "sent_dropped": {ob.id: ob.dropped for ob in self.outbound if ob.dropped},
+            "paths": {
+                d.name: {"lat": d.hist.to_wire(), "violations": d.violations, "worst_ns": d.worst_ns}
+                for ds in self.deadlines.values()
+                for d in ds
+            },
+        }
+
+
+class _NodeFailure(Exception):
+    def __init__(self, node: str, block: Block, now: float, cause: BaseException) -> None:
+        super().__init__(str(cause))
+        self.report = {
+            "node": node,
+            "block": block.name,
+            "now": now,
+            "message": f"{type(cause).__name__}: {cause}",
+            "traceback": traceback.format_exc(),
+        }
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"cannot send {type(obj).__name__}")
+
+
+def _die_with_parent() -> None:
+    """Linux: this process gets SIGKILL when the process that started it dies."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        if os.getppid() == 1:  # the parent died before prctl
+            os._exit(1)
+    except OSError:
+        pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m flowtact.runtime.worker``."""
+    p = argparse.ArgumentParser(prog="flowtact worker", description="run one process group of a graph")
+    p.add_argument("connect", help="the supervisor's control endpoint (ipc://... or tcp://host:port)")
+    p.add_argument("--process", required=True, help="the process group to run")
+    p.add_argument("--keys", help="CURVE keys folder for tcp (default: $FLOWTACT_KEYS)")
+    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the supervisor coordinates a Ctrl-C
+    if args.child and sys.platform.startswith("linux"):
+        _die_with_parent()
+    return Worker(args.connect, args.process, keys_dir=args.keys).serve()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,180 @@
+"""The transport bench's machinery (bench/transport.py and bench/peers/): measurement, raw pipeline, blocks.
+
+The figures themselves are the bench's business; these tests check that what produces them
+measures what it claims: every message is delivered and checked, latencies and CPU figures are
+computed over the right window, a runtime summary missing a key fails loudly, and the bench-only
+blocks obey the block contract. No timing is asserted.
+"""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flowtact.compile import compile_graph
+from flowtact.graph import load_graph
+from flowtact.testing import CHECKS, run_offline, run_source
+
+BENCH = Path(__file__).resolve().parent.parent / "bench"
+
+
+def _load_transport():
+    spec = importlib.util.spec_from_file_location("bench_transport", BENCH / "transport.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)  # puts bench/ on sys.path (peers, transport_blocks)
+    return module
+
+
+transport = _load_transport()
+measure = sys.modules["peers.measure"]
+raw = transport.raw
+import transport_blocks as tb  # noqa: E402  (importable once bench/ is on sys.path)
+
+MS = 1_000_000
+
+
+# -- measurement helpers ------------------------------------------------------------------------
+
+
+def test_latency_stats_ignore_the_warm_up_and_use_each_messages_own_stamp():
+    start = 10 * 1000 * MS
+    sent = start + np.arange(1000) * MS  # 1 kHz for 1 s
+    lat_us = np.where(np.arange(1000) < 500, 5000, 100)  # slow during the first 0.5 s only
+    stats = measure.latency_stats(sent, sent + lat_us * 1000, start, drop_s=0.5)
+    assert stats["n"] == 500
+    assert stats["p50"] == stats["p99"] == stats["max"] == 100.0
+    assert measure.latency_stats(sent, sent + lat_us * 1000, start, drop_s=0.0)["max"] == 5000.0
+    assert measure.latency_stats([], [], start)["n"] == 0
+
+
+def test_throughput_counts_from_the_first_send_to_the_last_receipt():
+    t = measure.throughput_stats(
+        n_sent=1000, n_received=900, first_send_ns=0, last_send_ns=500 * MS, last_recv_ns=2000 * MS, nbytes=10
+    )
+    assert t["delivered_msg_s"] == pytest.approx(450.0)  # 900 in 2 s, not in the 0.5 s of sending
+    assert t["sent_msg_s"] == pytest.approx(2000.0)
+    assert t["loss_pct"] == pytest.approx(10.0)
+    assert t["bytes_s"] == pytest.approx(4500.0)
+
+
+def test_cpu_sampler_reads_this_process_busy_time_over_the_window():
+    sampler = measure.CpuSampler({"me": measure.os.getpid()}, period_s=0.02, window=(0.0, 0.0)).start()
+    start = measure.time.monotonic_ns()
+    while measure.time.monotonic_ns() - start < 300 * MS:  # busy: close to 100 % of a core
+        pass
+    end = measure.time.monotonic_ns()
+    sampler.stop()
+    pct = sampler.cpu_pct(start, end)["me"]
+    assert pct is not None and pct > 30.0
+    assert sampler.window_s(start, end) > 0.1
+    # the steady window of a 0.3 s run holds no samples: no figure rather than a wrong one
+    late = measure.CpuSampler({"me": 1}, window=(1.0, 0.5))
+    late.samples = sampler.samples
+    assert late.cpu_pct(start, end) == {"me": None}
+
+
+# -- the raw pyzmq pipeline -----------------------------------------------------------------------
+
+
+def test_raw_paced_small_delivers_every_message_with_the_stages_result():
+    r = raw.run_pipeline("small", 0.2, 1000.0, drop_s=0.0, cpu_window=(0.0, 0.0), cpu_period_s=0.05)
+    assert r["sent"] == r["received"] == 200
+    assert r["loss_pct"] == 0.0
+    assert r["payload_ok"]  # each message arrived as 2 x its sequence number
+    lat = r["latency_us"]
+    assert lat["n"] == 200 and 0 < lat["min"] <= lat["p50"] <= lat["p99"] <= lat["max"]
+    assert set(r["cpu_pct"]) == {"source", "stage", "sink"}
+    assert all(v is not None and v >= 0 for v in r["cpu_pct"].values())
+    assert "throughput" not in r
+
+
+def test_raw_flat_out_images_one_hop_report_throughput_in_bytes():
+    r = raw.run_pipeline("image", 0.2, None, stages=0, drop_s=0.0, cpu_window=(0.0, 0.0), cpu_period_s=0.05)
+    assert r["processes"] == 2
+    assert r["payload_ok"] and r["loss_pct"] == 0.0 and r["received"] == r["sent"] > 0
+    t = r["throughput"]
+    assert t["bytes_s"] == pytest.approx(t["delivered_msg_s"] * 240 * 320)
+    assert t["delivered_msg_s"] <= t["sent_msg_s"] * (1 + 1e-9) or t["received"] == 1
+
+
+# -- flowtact's run summary contract ----------------------------------------------------------------
+
+
+def _summary():
+    lat = {"p50": 1.0, "p99": 2.0, "max": 3.0, "n": 10}
+    stream = {"messages": 10, "samples": 10, "dropped": 0, "policy": "block", "latency_us": lat}
+    procs = {n: {"pid": i, "cpu_pct": 1.0, "nodes": [n]} for i, n in enumerate(("a", "b", "c"))}
+    return {"wall_s": 1.0, "processes": procs, "streams": {"stage.y": stream}}
+
+
+def test_contract_accepts_a_complete_summary_and_names_a_missing_key():
+    transport.check_contract(_summary(), ("stage.y",), 3)
+    broken = _summary()
+    del broken["streams"]["stage.y"]["latency_us"]["p99"]
+    with pytest.raises(transport.ContractError, match=r"'p99'.*streams"):
+        transport.check_contract(broken, ("stage.y",), 3)
+    with pytest.raises(transport.ContractError, match=r"'savgol\.y'"):
+        transport.check_contract(_summary(), ("savgol.y",), 3)
+    with pytest.raises(transport.ContractError, match="expected 4 processes"):
+        transport.check_contract(_summary(), ("stage.y",), 4)
+
+
+def test_parse_summary_takes_the_json_after_any_other_output():
+    assert transport.parse_summary('warming up\n{\n  "wall_s": 2.5\n}\n') == {"wall_s": 2.5}
+    with pytest.raises(transport.ContractError, match="no JSON summary"):
+        transport.parse_summary("Traceback: boom\n")
+
+
+def test_targets_compare_with_the_right_baselines():
+    lat = {"p50": 100.0, "p99": 400.0, "max": 900.0, "n": 10}
+    res = {
+        "raw": {
+            "small_1khz": {"latency_us": {**lat, "p99": 300.0}},
+            "floor_small_1khz": {"latency_us": {**lat, "p99": 100.0}},
+            "small_flat": {"throughput": {"delivered_msg_s": 100_000.0}},
+            "image_flat": {"throughput": {"bytes_s": 1e9}},
+        },
+        "chain": {"latency_us": lat, "cpu_max_pct": 8.0, "cpu_pct": {"a": 8.0}},
+        "fast": {"small": {"samples_s": 60_000.0}, "image": {"bytes_s": 0.7e9}},
+        "peers": {"ezmsg": {"small_1khz": {"latency_us": {**lat, "p99": 350.0}}}},
+    }
+    rt = transport.ratios_and_targets(res)
+    t = rt["targets"]
+    latency = t["p99 <= 3 x raw one-way p99 + 100 us and below every peer's p99"]
+    assert latency["bound_us"] == 400.0 and not latency["pass"]  # within the bound, but above ezmsg's
+    assert t["<= 10 % of a core per process at 1 kHz"]["pass"]
+    assert t[">= 50 k small msg/s end to end"]["pass"]
+    assert not t["frames >= 80 % of raw bytes/s"]["pass"]
+    assert rt["ratios"]["p99_latency_flowtact_over_raw"] == pytest.approx(400 / 300)
+    assert rt["ratios"]["frame_bytes_s_flowtact_over_raw"] == pytest.approx(0.7)
+
+
+# -- bench-only blocks and graphs ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
+@pytest.mark.parametrize("cls", [tb.BenchSource, tb.BenchStage, tb.BenchSink], ids=lambda c: c.__name__)
+def test_bench_blocks_conform(cls, check):
+    check(cls)
+
+
+def test_bench_blocks_compute_the_pipeline():
+    frames = run_source(tb.BenchSource(payload="image", rate_hz=40.0), 0.1)["y"]
+    assert frames.data.shape == (4, 240, 320) and frames.data.dtype == np.uint8
+    assert np.array_equal(frames.t, np.arange(4) / 40.0)
+    out = run_offline(tb.BenchStage(), x=frames.data, rate_hz=40.0)["y"]
+    assert out.data.dtype == np.uint8 and np.array_equal(out.data, 255 - frames.data)
+    small = run_source(tb.BenchSource(payload="small", rate_hz=1000.0), 0.005)["y"]
+    assert np.array_equal(small.data, np.repeat(np.arange(5.0)[:, None], 4, axis=1))
+    assert np.array_equal(run_offline(tb.BenchStage(), x=small.data)["y"].data, 2 * small.data)
+    assert tb.BenchSink.sink and not tb.BenchSink.outputs
+
+
+@pytest.mark.parametrize("name", ["chain.yaml", "fast.yaml"])
+def test_bench_graphs_place_three_processes(name):
+    graph = load_graph(BENCH / "graphs" / name)
+    plan = compile_graph(graph)
+    assert not plan.pruned
+    assert len({graph.nodes[n].process for n in graph.nodes}) == 3
