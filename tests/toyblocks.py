@@ -151,3 +151,86 @@ class Loop(Block):
     @classmethod
     def example(cls):
         return Example(inputs={"x": np.ones((10, 1))})
+
+
+@dataclass(frozen=True)
+class FramesConfig(Config):
+    rate_hz: float = param(40.0, doc="frames per second", gt=0)
+    size: int = param(8, doc="frame side (pixels)", ge=1)
+
+
+class Frames(Source):
+    """A camera stand-in: uint8 frames whose pixels are (frame index + pixel index) mod 256."""
+
+    config_cls = FramesConfig
+    outputs = {"y": Port(doc="frames")}
+
+    def specs(self, inputs):
+        c = self.config
+        return {"y": StreamSpec(dtype="uint8", shape=(c.size, c.size), units="1", rate_hz=c.rate_hz)}
+
+    def reset(self):
+        self.i = 0
+
+    def step(self, now):
+        c = self.config
+        n = self.due(now, c.rate_hz) - self.i
+        idx = self.i + np.arange(n)
+        self.i += n
+        pix = np.arange(c.size * c.size).reshape(c.size, c.size)
+        frames = ((idx[:, None, None] + pix[None]) % 256).astype(np.uint8)
+        return {"y": Chunk(idx / c.rate_hz, frames)}
+
+    @classmethod
+    def example(cls):
+        return Example()
+
+
+class FrameMean(Block):
+    """Mean pixel value of each frame."""
+
+    inputs = {"x": Port(dtype="uint8", doc="frames")}
+    outputs = {"y": Port(dtype="float64", shape=(), doc="mean")}
+
+    def specs(self, inputs):
+        return {"y": StreamSpec(units="1", rate_hz=inputs["x"].rate_hz)}
+
+    def step(self, x):
+        return {"y": Chunk(x.t, x.data.reshape(len(x), -1).mean(axis=1))}
+
+    @classmethod
+    def example(cls):
+        frames = np.arange(5 * 4, dtype=np.uint8).reshape(5, 2, 2)
+        return Example(inputs={"x": frames}, rate_hz=40.0)
+
+
+@dataclass(frozen=True)
+class SlowSinkConfig(Config):
+    delay_s: float = param(0.01, doc="wall time spent per step (a deliberately slow consumer)", ge=0)
+
+
+class SlowSink(Block):
+    """Consumes a stream slowly (sleeps per step: a test stand-in for a slow consumer) and counts."""
+
+    config_cls = SlowSinkConfig
+    inputs = {"x": Port(dtype=None, doc="anything")}
+    outputs = {}
+    sink = True
+
+    def specs(self, inputs):
+        return {}
+
+    def reset(self):
+        self.n = 0
+
+    def step(self, x):
+        import time
+
+        if len(x):
+            self.count("received", len(x))
+            time.sleep(self.config.delay_s)
+        return {}
+
+    @classmethod
+    def example(cls):
+        return Example(params={"delay_s": 0.0}, inputs={"x": np.arange(5.0)})

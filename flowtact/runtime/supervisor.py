@@ -233,6 +233,10 @@ class ProcessExecutor:
         """Handshake: hello -> plan -> ready -> wire -> wired -> start, for every worker."""
         deadline = time.monotonic() + STARTUP_S
         while not all(p.wired for p in self.procs.values()):
+            if self.auth is not None and len(self.auth.refused) > getattr(self, "_refused_seen", 0):
+                for refused in self.auth.refused[getattr(self, "_refused_seen", 0) :]:
+                    self.warn(f"refused a connection: {refused}")
+                self._refused_seen = len(self.auth.refused)
             if time.monotonic() > deadline:
                 missing = [p.name for p in self.procs.values() if not p.wired]
                 raise WorkerFailed(f"processes {', '.join(missing)} did not start within {STARTUP_S:.0f} s")
@@ -452,8 +456,6 @@ class ProcessExecutor:
                 if sock is not None:
                     self._drain_records(sock)
         if self.auth is not None:
-            for refused in self.auth.refused:
-                self.warn(f"refused a connection: {refused}")
             self.auth.stop()
         self.ctx.destroy(linger=0)
         shutil.rmtree(self.rundir, ignore_errors=True)

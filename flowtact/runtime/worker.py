@@ -610,7 +610,14 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the supervisor coordinates a Ctrl-C
     if args.child and sys.platform.startswith("linux"):
         _die_with_parent()
-    return Worker(args.connect, args.process, keys_dir=args.keys).serve()
+    from flowtact.runtime.security import SecurityError
+
+    try:
+        worker = Worker(args.connect, args.process, keys_dir=args.keys)
+    except SecurityError as e:
+        print(f"flowtact worker: {e}", file=sys.stderr)
+        return 1
+    return worker.serve()
 
 
 if __name__ == "__main__":

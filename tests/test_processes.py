@@ -1,0 +1,291 @@
+"""The multi-process runtime: same results as in-process, failures named, nothing left behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flowtact.graph import GraphErrors
+from flowtact.record import read_recording
+from flowtact.run import load_plan, run_plan
+from flowtact.runtime.placement import place
+
+ROOT = Path(__file__).resolve().parent.parent
+TESTS = Path(__file__).resolve().parent
+pytestmark = pytest.mark.slow
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(TESTS), env.get("PYTHONPATH", "")])
+    return env
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _same(a: Path, b: Path) -> None:
+    ra, rb = read_recording(a), read_recording(b)
+    assert set(ra.streams) == set(rb.streams)
+    for name in rb.streams:
+        x, y = ra.streams[name], rb.streams[name]
+        assert len(y.t) > 0, name
+        assert np.array_equal(x.t, y.t) and np.array_equal(x.data, y.data), name
+
+
+@pytest.mark.parametrize("graph", ["touch", "slip"])
+def test_fast_runs_are_bit_identical_in_process_and_across_processes(graph, tmp_path):
+    plan = load_plan(ROOT / "graphs" / f"{graph}.yaml")
+    assert len(place(plan, fast=True).groups) == 3  # really spread over processes
+    run_plan(plan, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    summary = run_plan(load_plan(ROOT / "graphs" / f"{graph}.yaml"), fast=True, record=tmp_path / "procs.h5")
+    _same(tmp_path / "procs.h5", tmp_path / "inproc.h5")
+    assert set(summary.processes) == {"sensing", "encoding", "afferents"}
+    assert {"force.f", "sa1_drive.y", "fa1_drive.y"} <= set(summary.streams)
+    assert all(s["dropped"] == 0 for s in summary.streams.values())
+
+
+def test_placement_follows_the_first_input_and_defaults_to_main():
+    plan = load_plan(ROOT / "graphs" / "touch.yaml")
+    p = place(plan, fast=True)
+    assert p.group_of["force"] == "sensing"  # no process: runs with its producer
+    assert p.group_of["sa1_stim"] == "afferents"
+    crossing = {p.stream_name(sid) for sid, _ in p.crossings}
+    assert crossing == {"force.f", "sa1_drive.y", "fa1_drive.y"}
+
+
+MULTIRATE = """
+name: multirate
+seed: 3
+nodes:
+  sensor: {block: "toyblocks:Ramp", process: fast_sensor, params: {rate_hz: 1000, noise: 0.5}}
+  gain:   {block: "toyblocks:Scale", process: filters, params: {gain: 3.0}}
+  camera: {block: "toyblocks:Frames", process: camera, params: {rate_hz: 40, size: 16}}
+  mean:   {block: "toyblocks:FrameMean", process: filters}
+edges:
+  - sensor.y -> gain.x
+  - camera.y -> mean.x
+record: [gain.y, mean.y, camera.y]
+"""
+
+
+def test_a_multi_rate_graph_gives_the_same_outputs_in_real_time_and_fast(tmp_path):
+    path = tmp_path / "multirate.yaml"
+    path.write_text(MULTIRATE)
+    run_plan(load_plan(path), duration_s=1.0, fast=False, record=tmp_path / "rt.h5")
+    run_plan(load_plan(path), duration_s=1.0, fast=True, record=tmp_path / "fast.h5")
+    _same(tmp_path / "rt.h5", tmp_path / "fast.h5")
+    rec = read_recording(tmp_path / "fast.h5")
+    assert len(rec.streams["gain.y"].t) == 1000 and len(rec.streams["mean.y"].t) == 40
+
+
+def test_latest_policy_is_declared_per_edge_and_checked():
+    text = (
+        "nodes:\n  src: {block: 'toyblocks:Ramp', process: a}\n  dst: {block: 'toyblocks:Scale', process: b}\n"
+        "edges:\n  - {from: src.y, to: dst.x, policy: newest, queue: 0}\n"
+    )
+    from flowtact.graph import load_graph
+
+    with pytest.raises(GraphErrors) as e:
+        load_graph("g.yaml", text=text)
+    assert "edge policy must be one of block, latest; got 'newest'" in str(e.value)
+    assert "edge queue must be an integer >= 1" in str(e.value)
+
+
+def _flowtact(*args: str, **kw) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "flowtact.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_env(),
+        **kw,
+    )
+
+
+def _wait_children(pid: int, n: int, timeout: float = 30.0) -> list[int]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        kids = [k for k in _children(pid) if "flowtact.runtime.worker" in Path(f"/proc/{k}/cmdline").read_text()]
+        if len(kids) >= n:
+            return kids
+        time.sleep(0.05)
+    raise AssertionError(f"expected {n} workers")
+
+
+def _worker_of(kids: list[int], process: str) -> int:
+    return next(k for k in kids if process in Path(f"/proc/{k}/cmdline").read_bytes().decode().split("\0"))
+
+
+def test_kill_9_of_a_worker_ends_the_run_naming_it_and_keeps_the_recording(tmp_path):
+    out = tmp_path / "killed.h5"
+    proc = _flowtact("run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--record", str(out))
+    kids = _wait_children(proc.pid, 3)
+    time.sleep(2.0)  # running
+    victim = _worker_of(kids, "afferents")
+    t_kill = time.monotonic()
+    os.kill(victim, signal.SIGKILL)
+    _, stderr = proc.communicate(timeout=30)
+    elapsed = time.monotonic() - t_kill
+    assert proc.returncode == 1, stderr
+    assert elapsed < 2.0, elapsed
+    assert "process 'afferents' (nodes sa1, fa1, sa1_stim) killed by SIGKILL" in stderr
+    assert not [k for k in kids if _alive(k)]  # no orphans
+    rec = read_recording(out)
+    assert len(rec.streams["force.f"].t) >= 500  # what came before the kill is there
+    assert "afferents" in rec.summary["error"]
+
+
+def test_ctrl_c_stops_every_worker_cleanly(tmp_path):
+    out = tmp_path / "stopped.h5"
+    proc = _flowtact("run", str(ROOT / "graphs" / "slip.yaml"), "--duration", "60", "--record", str(out))
+    kids = _wait_children(proc.pid, 3)
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == 0, stderr
+    assert "interrupted" in stdout
+    assert not [k for k in kids if _alive(k)]
+    rec = read_recording(out)
+    n = len(rec.streams["force.f"].t)
+    assert n >= 1000
+    # every stage flushed: downstream streams hold as much as their producers sent
+    assert len(rec.streams["sa1_drive.y"].t) == n and len(rec.streams["dforce.y"].t) == n
+
+
+def test_workers_die_with_a_killed_supervisor():
+    proc = _flowtact("run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--quiet")
+    kids = _wait_children(proc.pid, 3)
+    time.sleep(1.0)
+    proc.kill()
+    proc.communicate(timeout=10)
+    deadline = time.monotonic() + 5.0
+    while [k for k in kids if _alive(k)] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [k for k in kids if _alive(k)]
+
+
+RESTART = """
+name: restart
+nodes:
+  src:  {block: "toyblocks:Ramp", process: source}
+  gain: {block: "toyblocks:Scale", process: filter}
+edges: [src.y -> gain.x]
+processes:
+  filter: {restart: on-failure, max_restarts: 2}
+record: [gain.y]
+"""
+
+
+def test_restart_on_failure_brings_a_killed_worker_back(tmp_path):
+    path = tmp_path / "restart.yaml"
+    path.write_text(RESTART)
+    proc = _flowtact("run", str(path), "--duration", "4", "--json", "--record", str(tmp_path / "r.h5"))
+    kids = _wait_children(proc.pid, 2)
+    time.sleep(1.5)
+    os.kill(_worker_of(kids, "filter"), signal.SIGKILL)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 0, stderr
+    assert "restarting it (1/2)" in stderr
+    summary = json.loads(stdout)
+    assert summary["processes"]["filter"]["restarts"] == 1
+    t = read_recording(tmp_path / "r.h5").streams["gain.y"].t
+    assert t[-1] > 3.0 and t[0] < 1.0  # data from before and after the restart
+
+
+SLOW = """
+name: slow
+nodes:
+  src:  {block: "toyblocks:Ramp", process: source, params: {rate_hz: 1000, channels: 64}}
+  sink: {block: "toyblocks:SlowSink", process: sink, params: {delay_s: 0.05}}
+edges:
+  - {from: src.y, to: sink.x, policy: POLICY, queue: 8}
+"""
+
+
+def _rss_kib(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    return 0
+
+
+def test_a_slow_consumer_under_latest_drops_with_flat_memory(tmp_path):
+    """The sink takes 50 ms per message that arrives every 5 ms (10x too slow) for 60 s."""
+    path = tmp_path / "slow.yaml"
+    path.write_text(SLOW.replace("POLICY", "latest"))
+    proc = _flowtact("run", str(path), "--duration", "60", "--json")
+    kids = _wait_children(proc.pid, 2)
+    time.sleep(8.0)
+    rss = {k: _rss_kib(k) for k in kids}
+    time.sleep(50.0)
+    grown = {k: _rss_kib(k) - rss[k] for k in kids if _alive(k)}
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 0, stderr
+    assert max(grown.values()) < 8 * 1024, grown  # KiB: flat, not growing with the backlog
+    summary = json.loads(stdout)
+    stream = summary["streams"]["src.y"]
+    assert stream["policy"] == "latest" and stream["dropped"] > 5000
+    # the sink keeps up with the newest data rather than falling behind
+    assert summary["counters"]["sink"]["received"] < 60_000
+
+
+def test_a_slow_consumer_under_block_loses_nothing(tmp_path):
+    path = tmp_path / "slow.yaml"
+    path.write_text(SLOW.replace("POLICY", "block").replace("0.05", "0.01"))
+    proc = _flowtact("run", str(path), "--duration", "2", "--json")
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    summary = json.loads(stdout)
+    assert summary["streams"]["src.y"]["dropped"] == 0
+    assert summary["counters"]["sink"]["received"] == 2000
+
+
+DEADLINE = """
+name: deadline
+nodes:
+  src:  {block: "toyblocks:Ramp", process: a}
+  gain: {block: "toyblocks:Scale", process: b}
+edges: [src.y -> gain.x]
+deadlines:
+  - {from: src, to: gain, budget: BUDGET}
+record: [gain.y]
+"""
+
+
+@pytest.mark.parametrize(("budget", "missed"), [("500ms", False), ("1us", True)])
+def test_deadlines_report_p50_p99_and_warn_on_violations(tmp_path, budget, missed):
+    path = tmp_path / "deadline.yaml"
+    path.write_text(DEADLINE.replace("BUDGET", budget))
+    proc = _flowtact("run", str(path), "--duration", "1.5", "--json")
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 0, stderr
+    path_stats = json.loads(stdout)["paths"]["src -> gain"]
+    assert path_stats["n"] > 100 and 0 < path_stats["p50_us"] <= path_stats["p99_us"]
+    assert (path_stats["violations"] > 0) is missed
+    assert ("deadline src -> gain" in stderr) is missed
