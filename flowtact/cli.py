@@ -300,7 +300,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if folder is None:
         print("flowtact: no bench/ folder here: benchmarks run from a source checkout", file=sys.stderr)
         return EXIT_RUN_ERROR
-    scripts = {p.stem: p for p in sorted(folder.glob("*.py")) if not p.stem.startswith("_")}
+    scripts = {
+        p.stem: p
+        for p in sorted(folder.glob("*.py"))
+        if not p.stem.startswith("_") and '__name__ == "__main__"' in p.read_text()
+    }
     if not args.name:
         for name, path in scripts.items():
             doc = (path.read_text().split('"""')[1].strip().splitlines() or [""])[0]

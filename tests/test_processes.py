@@ -131,7 +131,9 @@ def _flowtact(*args: str, **kw) -> subprocess.Popen:
 def _wait_children(pid: int, n: int, timeout: float = 30.0) -> list[int]:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        kids = [k for k in _children(pid) if "flowtact.runtime.worker" in Path(f"/proc/{k}/cmdline").read_text()]
+        kids = [
+            k for k in _children(pid) if "flowtact.runtime.worker" in Path(f"/proc/{k}/cmdline").read_text()
+        ]
         if len(kids) >= n:
             return kids
         time.sleep(0.05)
@@ -222,7 +224,7 @@ SLOW = """
 name: slow
 nodes:
   src:  {block: "toyblocks:Ramp", process: source, params: {rate_hz: 1000, channels: 64}}
-  sink: {block: "toyblocks:SlowSink", process: sink, params: {delay_s: 0.05}}
+  sink: {block: "toyblocks:SlowSink", process: sink, params: {delay_s: 0.01}}
 edges:
   - {from: src.y, to: sink.x, policy: POLICY, queue: 8}
 """
@@ -236,7 +238,7 @@ def _rss_kib(pid: int) -> int:
 
 
 def test_a_slow_consumer_under_latest_drops_with_flat_memory(tmp_path):
-    """The sink takes 50 ms per message that arrives every 5 ms (10x too slow) for 60 s."""
+    """The sink takes 10 ms per sample of a 1 kHz stream (10x too slow), for 60 s."""
     path = tmp_path / "slow.yaml"
     path.write_text(SLOW.replace("POLICY", "latest"))
     proc = _flowtact("run", str(path), "--duration", "60", "--json")
@@ -252,12 +254,12 @@ def test_a_slow_consumer_under_latest_drops_with_flat_memory(tmp_path):
     stream = summary["streams"]["src.y"]
     assert stream["policy"] == "latest" and stream["dropped"] > 5000
     # the sink keeps up with the newest data rather than falling behind
-    assert summary["counters"]["sink"]["received"] < 60_000
+    assert summary["counters"]["sink"]["received"] < 12_000
 
 
 def test_a_slow_consumer_under_block_loses_nothing(tmp_path):
     path = tmp_path / "slow.yaml"
-    path.write_text(SLOW.replace("POLICY", "block").replace("0.05", "0.01"))
+    path.write_text(SLOW.replace("POLICY", "block").replace("0.01", "0.002"))
     proc = _flowtact("run", str(path), "--duration", "2", "--json")
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 0, stderr
@@ -282,7 +284,7 @@ record: [gain.y]
 def test_deadlines_report_p50_p99_and_warn_on_violations(tmp_path, budget, missed):
     path = tmp_path / "deadline.yaml"
     path.write_text(DEADLINE.replace("BUDGET", budget))
-    proc = _flowtact("run", str(path), "--duration", "1.5", "--json")
+    proc = _flowtact("run", str(path), "--duration", "2.5", "--json")
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
     path_stats = json.loads(stdout)["paths"]["src -> gain"]

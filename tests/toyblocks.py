@@ -206,11 +206,11 @@ class FrameMean(Block):
 
 @dataclass(frozen=True)
 class SlowSinkConfig(Config):
-    delay_s: float = param(0.01, doc="wall time spent per step (a deliberately slow consumer)", ge=0)
+    delay_s: float = param(0.01, doc="wall time spent per sample (a deliberately slow consumer)", ge=0)
 
 
 class SlowSink(Block):
-    """Consumes a stream slowly (sleeps per step: a test stand-in for a slow consumer) and counts."""
+    """Consumes a stream slowly (sleeps per sample: a test stand-in for a slow consumer) and counts."""
 
     config_cls = SlowSinkConfig
     inputs = {"x": Port(dtype=None, doc="anything")}
@@ -228,7 +228,7 @@ class SlowSink(Block):
 
         if len(x):
             self.count("received", len(x))
-            time.sleep(self.config.delay_s)
+            time.sleep(self.config.delay_s * len(x))
         return {}
 
     @classmethod

@@ -8,11 +8,14 @@ every node is flushed in order so held-back samples (a centred filter's tail) re
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
+
+import numpy as np
 
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
@@ -273,14 +276,16 @@ class InprocExecutor:
             self._deliver(node, out, now, pending, pending)
 
 
+@functools.cache
+def _dtype(name: str) -> np.dtype:
+    return np.dtype(name)
+
+
 def check_chunk(node: str, port: str, chunk: Chunk, spec: StreamSpec, now: float) -> None:
     """Guard the stream contract: a block's output must match its declared spec."""
-    n = len(chunk)
-    if (
-        chunk.data.shape[:1] != (n,)
-        or chunk.data.shape[1:] != tuple(spec.shape)
-        or str(chunk.data.dtype) != spec.dtype
-    ):
+    n = chunk.t.shape[0]
+    shape = chunk.data.shape
+    if shape[0:1] != (n,) or shape[1:] != spec.shape or chunk.data.dtype != _dtype(spec.dtype):
         raise RuntimeError(
             f"node '{node}' produced {chunk.data.dtype}{list(chunk.data.shape)} with {n} timestamps on "
             f"'{port}' at t={now:.3f} s, but the stream is {spec.describe()} (a bug in the block)"

@@ -22,6 +22,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import msgpack
@@ -162,14 +163,23 @@ class ProcessExecutor:
         self.tcp_ctl = self.tcp_rec = None
         self.auth = None
         if remote:
-            from flowtact.runtime.security import Authenticator, load_keys, secure_server
+            from flowtact.runtime.security import Authenticator, HandshakeWatch, load_keys, secure_server
 
             net = self.plan.graph.deployment.network
-            self.keys = load_keys(net.keys)
+            keys = net.keys
+            if (
+                keys is not None
+                and not Path(keys).expanduser().is_absolute()
+                and Path(self.plan.graph.path).is_file()
+            ):
+                keys = str(Path(self.plan.graph.path).parent / keys)  # relative to the graph file
+            self.keys = load_keys(Path(keys).expanduser() if keys else None)
+            self.keys_dir = str(Path(keys).expanduser()) if keys else os.environ["FLOWTACT_KEYS"]
             self.auth = Authenticator(self.ctx, self.keys).start()
             self.ctl_tcp = self.ctx.socket(zmq.ROUTER)
             self.ctl_tcp.setsockopt(zmq.LINGER, 0)
             secure_server(self.ctl_tcp, self.keys)
+            self.ctl_watch = HandshakeWatch(self.ctl_tcp)
             self.ctl_tcp.bind(f"tcp://{net.listen}:{net.port}")
             self.tcp_ctl = self.ctl_tcp.last_endpoint.decode()
             self.rec_tcp = self.ctx.socket(zmq.PULL)
@@ -194,7 +204,7 @@ class ProcessExecutor:
             "--child",
         ]
         if self.auth is not None:
-            cmd += ["--keys", self.keys.source]
+            cmd += ["--keys", self.keys_dir]
         proc.popen = subprocess.Popen(cmd, env=env, start_new_session=True)
         proc.pid = proc.popen.pid
         proc.state = "starting"
@@ -233,10 +243,8 @@ class ProcessExecutor:
         """Handshake: hello -> plan -> ready -> wire -> wired -> start, for every worker."""
         deadline = time.monotonic() + STARTUP_S
         while not all(p.wired for p in self.procs.values()):
-            if self.auth is not None and len(self.auth.refused) > getattr(self, "_refused_seen", 0):
-                for refused in self.auth.refused[getattr(self, "_refused_seen", 0) :]:
-                    self.warn(f"refused a connection: {refused}")
-                self._refused_seen = len(self.auth.refused)
+            if self.auth is not None:
+                self._report_refusals()
             if time.monotonic() > deadline:
                 missing = [p.name for p in self.procs.values() if not p.wired]
                 raise WorkerFailed(f"processes {', '.join(missing)} did not start within {STARTUP_S:.0f} s")
@@ -258,6 +266,21 @@ class ProcessExecutor:
             p.state = "running"
         self.t_run = time.monotonic()
         self.next_ping = time.monotonic()
+
+    def _report_refusals(self) -> None:
+        """Say so when a host tries to join with another key (ZAP refusal or a failed handshake)."""
+        from flowtact.runtime.security import SecurityError
+
+        seen = getattr(self, "_refused_seen", 0)
+        for refused in self.auth.refused[seen:]:  # type: ignore[union-attr]
+            self.warn(f"refused a connection: {refused}")
+        self._refused_seen = len(self.auth.refused)  # type: ignore[union-attr]
+        while True:
+            try:
+                self.ctl_watch.check()
+                return
+            except SecurityError as e:
+                self.warn(f"refused a connection: {e}")
 
     def _wire(self, proc: _Proc) -> None:
         connect: dict[int, dict[str, str]] = {}
@@ -456,6 +479,7 @@ class ProcessExecutor:
                 if sock is not None:
                     self._drain_records(sock)
         if self.auth is not None:
+            self.ctl_watch.close()
             self.auth.stop()
         self.ctx.destroy(linger=0)
         shutil.rmtree(self.rundir, ignore_errors=True)

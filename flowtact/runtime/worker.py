@@ -49,6 +49,9 @@ __all__ = ["ORPHAN_S", "Worker", "main"]
 ORPHAN_S = 3.0
 """A worker that has not heard the supervisor for this long exits (no orphans)."""
 HEARTBEAT_S = 0.25
+LATENCY_WARMUP_S = 1.0
+"""Latencies count for data that left its source this long after the start: loading JIT-compiled
+kernels and first allocations are start-up, not transport."""
 POLL_MS = 100
 INF = math.inf
 FOREVER = 2**62
@@ -70,6 +73,7 @@ class _Inbound:
         self.dsts: list[tuple[str, str, bool]] = [tuple(x) for x in d["dsts"]]  # type: ignore[misc]
         self.same_host: bool = d["same_host"]
         self.sock: zmq.Socket | None = None
+        self.poller: zmq.Poller | None = None
         self.upto = 0  # highest tick received
         self.ended = False
         self.messages = self.samples = self.dropped = self.gaps = 0
@@ -114,11 +118,14 @@ class Worker:
         self.ctl = self.ctx.socket(zmq.DEALER)
         self.ctl.setsockopt(zmq.LINGER, 2000)
         self.auth = None
-        if control.startswith("tcp://"):  # another host: CURVE on every tcp socket, keys checked now
-            from flowtact.runtime.security import Authenticator, HandshakeWatch, load_keys, secure_client
+        if control.startswith("tcp://") or keys_dir:  # a graph across hosts: CURVE on every tcp socket
+            from flowtact.runtime.security import Authenticator, load_keys
 
             self.keys = load_keys(keys_dir)
             self.auth = Authenticator(self.ctx, self.keys).start()
+        if control.startswith("tcp://"):
+            from flowtact.runtime.security import HandshakeWatch, secure_client
+
             secure_client(self.ctl, self.keys)
             watch = HandshakeWatch(self.ctl)
             self.ctl.connect(control)
@@ -163,17 +170,12 @@ class Worker:
 
     def _service(self) -> None:
         """Handle pending control messages (pings, stop, abort) without blocking."""
-        while True:
-            msg = self._recv_ctl(0)
-            if msg is None:
-                break
-            op = msg["op"]
-            if op == "stop":
-                self.stopping = True
-            elif op in ("abort", "exit"):
-                raise Stop
-        self._check_orphan()
+        while self.ctl.get(zmq.EVENTS) & zmq.POLLIN:
+            self._control(msgpack.unpackb(self.ctl.recv(), strict_map_key=False))
+            self.last_ping = time.monotonic()
         now = time.monotonic()
+        if now - self.last_ping > ORPHAN_S:
+            raise Stop("the supervisor is gone")
         if now >= self.next_beat:
             self.next_beat = now + HEARTBEAT_S
             self._send("stats", **self._stats())
@@ -194,6 +196,7 @@ class Worker:
             self._send("wired")
             start = self._expect("start")
             self.t0_ns = start["t0_ns"] or time.monotonic_ns()
+            self.warm_ns = self.t0_ns + int(LATENCY_WARMUP_S * 1e9)
             self.k = int(start.get("k0", 0))
             self._open()
             try:
@@ -282,6 +285,7 @@ class Worker:
         self.latest_inputs = [ib for ib in self.inbound.values() if ib.policy == "latest"]
         self.now = 0.0
         self.next_beat = 0.0
+        self.warm_ns = 0  # data that left its source before this is start-up, not transport
 
     def _socket(self, kind: int, endpoint: str, hwm: int) -> zmq.Socket:
         s = self.ctx.socket(kind)
@@ -297,6 +301,8 @@ class Worker:
         for ib in self.inbound.values():
             endpoint = bind[ib.id]
             ib.sock = self._socket(zmq.PULL, endpoint, ib.queue)
+            ib.poller = zmq.Poller()
+            ib.poller.register(ib.sock, zmq.POLLIN)
             if endpoint.startswith("tcp://") and endpoint.endswith(":0"):
                 ib.sock.bind_to_random_port(endpoint.rsplit(":", 1)[0])
             else:
@@ -437,7 +443,7 @@ class Worker:
         if n in self.deadlines:
             t = time.monotonic_ns()
             for d in self.deadlines[n]:
-                if d.src in origins:
+                if origins.get(d.src, 0) >= self.warm_ns:
                     lat = t - origins[d.src]
                     d.hist.add(lat)
                     if lat > d.budget_ns:
@@ -491,10 +497,12 @@ class Worker:
                 self._accept(ib, m, -INF)
             return
         while ib.upto < tick and not ib.ended:
-            if not ib.sock.poll(POLL_MS):  # type: ignore[union-attr]
-                self._service()
+            try:
+                m = recv_message(ib.sock, zmq.NOBLOCK)  # type: ignore[arg-type]
+            except zmq.Again:
+                if not ib.poller.poll(POLL_MS):
+                    self._service()
                 continue
-            m = recv_message(ib.sock)  # type: ignore[arg-type]
             self._accept(ib, m, m.tick)
 
     def _accept(self, ib: _Inbound, m: Any, tick: float) -> None:
@@ -511,7 +519,9 @@ class Worker:
             ib.messages += 1
             ib.samples += n
             if ib.same_host and m.origins:
-                ib.hist.add(time.monotonic_ns() - min(m.origins.values()))
+                origin = min(m.origins.values())
+                if origin >= self.warm_ns:
+                    ib.hist.add(time.monotonic_ns() - origin)
         for dst, dport, delayed in ib.dsts:
             avail = tick + (1 if delayed and tick != INF else 0)
             self.queues[(dst, dport)].append((avail, m.chunk, m.origins))
