@@ -20,6 +20,7 @@ import yaml
 
 import flowtact
 from flowtact.compile import Plan, compile_graph
+from flowtact.deployment import DEFAULT_QUEUE
 from flowtact.graph import load_graph, resolve_graph_path
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
 
@@ -65,8 +66,33 @@ def resolved_graph(plan: Plan) -> dict[str, Any]:
             entry["process"] = node.process
         nodes[name] = entry
     doc["nodes"] = nodes
-    doc["edges"] = [str(e) for e in g.edges]
+    doc["edges"] = [
+        str(e)
+        if (e.policy, e.queue) == ("block", DEFAULT_QUEUE)
+        else {
+            "from": f"{e.src}.{e.src_port}",
+            "to": f"{e.dst}.{e.dst_port}",
+            "policy": e.policy,
+            "queue": e.queue,
+        }
+        for e in g.edges
+    ]
     doc["record"] = [f"{n}.{p}" for n, p in plan.record]
+    dep = g.deployment
+    if dep.processes:
+        doc["processes"] = {
+            name: {
+                "restart": p.restart,
+                "max_restarts": p.max_restarts,
+                **({"host": p.host} if p.host else {}),
+            }
+            for name, p in dep.processes.items()
+        }
+    if dep.remote:
+        net = dep.network
+        doc["network"] = {"listen": net.listen, "port": net.port, **({"keys": net.keys} if net.keys else {})}
+    if dep.deadlines:
+        doc["deadlines"] = [{"from": d.src, "to": d.dst, "budget": d.budget_s} for d in dep.deadlines]
     return doc
 
 

@@ -104,6 +104,40 @@ def test_a_multi_rate_graph_gives_the_same_outputs_in_real_time_and_fast(tmp_pat
     assert len(rec.streams["gain.y"].t) == 1000 and len(rec.streams["mean.y"].t) == 40
 
 
+FANOUT = """
+name: fanout
+seed: 5
+nodes:
+  src: {block: "toyblocks:Ramp", process: a, params: {noise: 0.1, channels: 3}}
+  g2:  {block: "toyblocks:Scale", process: b, params: {gain: 2.0}}
+  g3:  {block: "toyblocks:Scale", process: c, params: {gain: 3.0}}
+  g4:  {block: "toyblocks:Scale", process: c, params: {gain: 4.0}}
+edges:
+  - src.y -> g2.x
+  - {from: src.y, to: g3.x, policy: latest, queue: 2}
+  - {from: src.y, to: g4.x, policy: latest, queue: 2}
+processes:
+  c: {restart: on-failure}
+deadlines:
+  - {from: src, to: g4, budget: 20ms}
+record: [g2.y, g3.y, g4.y]
+"""
+
+
+def test_one_output_fans_out_to_several_processes_and_recordings_keep_the_placement(tmp_path):
+    path = tmp_path / "fanout.yaml"
+    path.write_text(FANOUT)
+    summary = run_plan(load_plan(path), duration_s=2.0, fast=True, record=tmp_path / "procs.h5")
+    assert set(summary.streams) == {"src.y@b", "src.y@c"}
+    run_plan(load_plan(path), duration_s=2.0, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    _same(tmp_path / "procs.h5", tmp_path / "inproc.h5")
+    again = load_plan(tmp_path / "procs.h5")  # re-created from the recording's provenance
+    assert again.graph.deployment.processes["c"].restart == "on-failure"
+    assert again.graph.deployment.deadlines[0].budget_s == pytest.approx(0.02)
+    assert [(e.policy, e.queue) for e in again.graph.edges] == [("block", 64), ("latest", 2), ("latest", 2)]
+    assert place(again, fast=False).group_of == place(load_plan(path), fast=False).group_of
+
+
 def test_latest_policy_is_declared_per_edge_and_checked():
     text = (
         "nodes:\n  src: {block: 'toyblocks:Ramp', process: a}\n  dst: {block: 'toyblocks:Scale', process: b}\n"
