@@ -114,6 +114,7 @@ class ProcessExecutor:
         self.procs: dict[str, _Proc] = {}
         self.by_ident: dict[bytes, _Proc] = {}
         self.samples: dict[str, int] = {}
+        self.rec_ends = 0
         self.t_start = time.monotonic()
         stopped_by = "duration"
         failure: str | None = None
@@ -310,8 +311,9 @@ class ProcessExecutor:
                 m = recv_message(sock, zmq.NOBLOCK)
             except zmq.Again:
                 return
-            if m.flags & END:
-                continue  # the worker's last record message: handled with its 'done'
+            if m.flags & END:  # a worker's last record message
+                self.rec_ends += 1
+                continue
             name = self.names[m.stream]
             self.samples[name] = self.samples.get(name, 0) + len(m.chunk)
             if self.recorder is not None:
@@ -453,10 +455,11 @@ class ProcessExecutor:
         self._drain_until_records_end()
 
     def _drain_until_records_end(self) -> None:
-        deadline = time.monotonic() + 2.0
-        while time.monotonic() < deadline:
-            if not self.poller.poll(50):
-                break
+        """Write what is still in flight: every recording worker ends its records with a marker."""
+        expected = sum(1 for g in self.procs if self._wplan(g)["record"])
+        deadline = time.monotonic() + 5.0
+        while self.rec_ends < expected and time.monotonic() < deadline:
+            self.poller.poll(50)
             for sock in (self.rec, getattr(self, "rec_tcp", None)):
                 if sock is not None:
                     self._drain_records(sock)
