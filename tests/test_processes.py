@@ -325,3 +325,30 @@ def test_deadlines_report_p50_p99_and_warn_on_violations(tmp_path, budget, misse
     assert path_stats["n"] > 100 and 0 < path_stats["p50_us"] <= path_stats["p99_us"]
     assert (path_stats["violations"] > 0) is missed
     assert ("deadline src -> gain" in stderr) is missed
+
+
+def test_the_live_view_gets_rates_latencies_and_cpu_while_running(tmp_path):
+    from rich.console import Console
+
+    from flowtact.runtime.live import render
+
+    class Capture:
+        def __init__(self):
+            self.snapshots = []
+
+        def update(self, snapshot):
+            self.snapshots.append(snapshot)
+
+    path = tmp_path / "deadline.yaml"
+    path.write_text(DEADLINE.replace("BUDGET", "50ms"))
+    live = Capture()
+    run_plan(load_plan(path), duration_s=2.5, fast=False, live=live)
+    last = live.snapshots[-1]
+    assert last["processes"]["a"]["state"] == "running" and last["processes"]["b"]["cpu_pct"] is not None
+    stream = last["streams"]["src.y"]
+    assert stream["rate_hz"] > 100 and stream["p50_us"] > 0 and stream["dropped"] == 0
+    assert last["paths"]["src -> gain"]["budget_us"] == pytest.approx(50_000)
+    console = Console(record=True, width=120)
+    console.print(render(last))
+    text = console.export_text()
+    assert "src.y" in text and "src -> gain" in text

@@ -96,7 +96,6 @@ class ProcessExecutor:
         self.live = live
         self.warn = warn or (lambda text: print(f"flowtact: {text}", file=sys.stderr))
         self.placement: Placement = place(plan, fast=fast)
-        self.names = {sid: f"{n}.{p}" for (n, p), sid in self.placement.stream_ids.items()}
         self.rec_specs = {
             self.placement.stream_ids[(n, p)]: plan.specs[(n, p)]
             for n, p in plan.record
@@ -314,7 +313,7 @@ class ProcessExecutor:
             if m.flags & END:  # a worker's last record message
                 self.rec_ends += 1
                 continue
-            name = self.names[m.stream]
+            name = self.placement.stream_name(m.stream)
             self.samples[name] = self.samples.get(name, 0) + len(m.chunk)
             if self.recorder is not None:
                 self.recorder.write(name, m.chunk)
@@ -539,7 +538,7 @@ class ProcessExecutor:
                     sent_dropped[int(sid)] = sent_dropped.get(int(sid), 0) + n
             for sid, s in p.stats.get("inbound", {}).items():
                 sid = int(sid)
-                name = self.names[sid]
+                name = self.placement.stream_name(sid)
                 key = name if len(self.placement.consumers(sid)) == 1 else f"{name}@{p.name}"
                 policy, _queue = self.placement.crossings[(sid, p.name)]
                 out[key] = {
@@ -548,6 +547,7 @@ class ProcessExecutor:
                     "messages": s["messages"],
                     "samples": s["samples"],
                     "dropped": s["dropped"] + sent_dropped.get(sid, 0),
+                    "gaps": s["gaps"],
                     "latency_us": LatencyHistogram.from_wire(s["lat"]).summary(),
                 }
         return out

@@ -278,9 +278,6 @@ class Worker:
         for d in plan["deadlines"]:
             self.deadlines.setdefault(d["dst"], []).append(_Deadline(d))
         self.counts: dict[str, int] = {}
-        self.event_streams = {
-            f"{n}.{p}" for n in self.order for p in self.demanded[n] if self.out_specs[n][p].events
-        }
         self.block_inputs = [ib for ib in self.inbound.values() if ib.policy == "block"]
         self.latest_inputs = [ib for ib in self.inbound.values() if ib.policy == "latest"]
         self.now = 0.0
