@@ -12,11 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import toyblocks
 
 from flowtact.graph import GraphErrors
 from flowtact.record import read_recording
 from flowtact.run import load_plan, run_plan
 from flowtact.runtime.placement import place
+from flowtact.testing import CHECKS
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTS = Path(__file__).resolve().parent
@@ -47,6 +49,14 @@ def _alive(pid: int) -> bool:
     except OSError:
         return False
     return state != "Z"
+
+
+@pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
+@pytest.mark.parametrize(
+    "cls", [toyblocks.Frames, toyblocks.FrameMean, toyblocks.SlowSink], ids=lambda c: c.__name__
+)
+def test_the_test_blocks_used_here_conform(cls, check):
+    check(cls)
 
 
 def _same(a: Path, b: Path) -> None:

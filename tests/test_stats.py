@@ -1,16 +1,12 @@
-"""Latency histograms and CPU readings (flowtact.runtime.stats)."""
+"""Latency histograms (flowtact.runtime.stats)."""
 
 import math
-import os
-import subprocess
-import sys
-import time
 
 import msgpack
 import numpy as np
 import pytest
 
-from flowtact.runtime.stats import BUCKETS, CpuMeter, LatencyHistogram, cpu_seconds
+from flowtact.runtime.stats import BUCKETS, LatencyHistogram
 
 
 @pytest.fixture(scope="module")
@@ -118,44 +114,3 @@ def test_reset_empties():
     assert h.n == 0 and h.counts.sum() == 0 and h.min is None and h.percentile(50) is None
     h.add(7_000)
     assert h.summary()["p50"] == 7.0 and h.summary()["max"] == 7.0
-
-
-@pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="needs /proc")
-def test_cpu_seconds_of_a_busy_child_grows_and_of_a_dead_one_is_none():
-    child = subprocess.Popen([sys.executable, "-c", "while True: pass"])
-    meter = CpuMeter()
-    try:
-        first = cpu_seconds(child.pid)
-        assert first is not None
-        assert meter.sample(child.pid) is None  # no interval yet
-        later = first
-        deadline = time.monotonic() + 20
-        while later == first and time.monotonic() < deadline:  # a CPU tick is 10 ms
-            time.sleep(0.02)
-            later = cpu_seconds(child.pid)
-        assert later is not None and later > first
-        pct = meter.sample(child.pid)
-        assert pct is not None and pct > 0
-    finally:
-        child.kill()
-        child.wait(timeout=10)
-    assert cpu_seconds(child.pid) is None
-    assert meter.sample(child.pid) is None
-
-
-def test_cpu_seconds_of_this_process_is_a_number():
-    if os.path.exists("/proc/self/stat"):
-        assert cpu_seconds(os.getpid()) >= 0.0
-    else:
-        assert cpu_seconds(os.getpid()) is None
-
-
-def test_cpu_meter_percent_of_one_core_from_fed_readings():
-    meter = CpuMeter()
-    assert meter.feed("w", 1.0, wall=10.0) is None
-    assert meter.feed("w", 1.25, wall=11.0) == pytest.approx(25.0)
-    assert meter.feed("w", 3.25, wall=12.0) == pytest.approx(200.0)  # two busy threads
-    assert meter.feed("w", 0.1, wall=13.0) is None  # went backwards: a new process behind the key
-    assert meter.feed("w", 0.6, wall=14.0) == pytest.approx(50.0)
-    meter.forget("w")
-    assert meter.feed("w", 0.7, wall=15.0) is None

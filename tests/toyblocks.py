@@ -196,7 +196,7 @@ class FrameMean(Block):
         return {"y": StreamSpec(units="1", rate_hz=inputs["x"].rate_hz)}
 
     def step(self, x):
-        return {"y": Chunk(x.t, x.data.reshape(len(x), -1).mean(axis=1))}
+        return {"y": Chunk(x.t, x.data.mean(axis=tuple(range(1, x.data.ndim))))}
 
     @classmethod
     def example(cls):

@@ -9,7 +9,25 @@ from __future__ import annotations
 
 import time
 
-__all__ = ["Clock", "FastClock", "RealtimeClock"]
+__all__ = [
+    "DEFAULT_TICK_FAST_S",
+    "DEFAULT_TICK_REALTIME_S",
+    "Clock",
+    "FastClock",
+    "RealtimeClock",
+    "tick_for",
+]
+
+DEFAULT_TICK_FAST_S = 1.0
+DEFAULT_TICK_REALTIME_S = 0.005
+
+
+def tick_for(fast: bool, tick_s: float | None) -> float:
+    """The tick a run uses: ``tick_s`` when given, else 1 s on the virtual clock, 5 ms in real time."""
+    tick = tick_s or (DEFAULT_TICK_FAST_S if fast else DEFAULT_TICK_REALTIME_S)
+    if not tick > 0:
+        raise ValueError("tick_s must be > 0")
+    return tick
 
 
 class Clock:

@@ -20,12 +20,9 @@ import numpy as np
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
-from flowtact.runtime.clock import Clock, FastClock, RealtimeClock
+from flowtact.runtime.clock import Clock, FastClock, RealtimeClock, tick_for
 
 __all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk"]
-
-DEFAULT_TICK_FAST_S = 1.0
-DEFAULT_TICK_REALTIME_S = 0.005
 
 
 class Sink(Protocol):
@@ -147,9 +144,7 @@ class InprocExecutor:
     ) -> None:
         self.plan = plan
         self.fast = fast
-        self.tick_s = tick_s or (DEFAULT_TICK_FAST_S if fast else DEFAULT_TICK_REALTIME_S)
-        if not self.tick_s > 0:
-            raise ValueError("tick_s must be > 0")
+        self.tick_s = tick_for(fast, tick_s)
         self.recorder = recorder
         self.progress = progress
         self.blocks: dict[str, Block] = {n: plan.graph.nodes[n].make() for n in plan.order}

@@ -1,4 +1,4 @@
-"""Run statistics that every worker keeps cheaply: latency histograms and CPU use per process.
+"""Latency histograms that every worker keeps cheaply and sends in its heartbeats.
 
 :class:`LatencyHistogram` counts latencies (ns in, µs out) in fixed log-spaced buckets from 1 µs
 to 100 s, each at most 1 % wide, so that p50/p99 come out within 1 % of the exact values at a
@@ -6,23 +6,18 @@ fixed memory cost, histograms from several workers or heartbeats merge by adding
 heartbeat carries only the non-zero buckets. ``add`` runs once per message: it costs one
 ``math.log`` and one increment of a plain ``array.array`` (the numpy ``counts`` array is a view
 of the same memory), with no numpy call per sample.
-
-:func:`cpu_seconds` reads a process's user+system CPU time from ``/proc/<pid>/stat``;
-:class:`CpuMeter` turns successive readings into % of one core.
+(CPU per process comes from each worker's own ``time.process_time()`` in its heartbeats.)
 """
 
 from __future__ import annotations
 
 import array
 import math
-import os
-import time
-from collections.abc import Callable, Hashable
 from typing import Any
 
 import numpy as np
 
-__all__ = ["BUCKETS", "CpuMeter", "LatencyHistogram", "cpu_seconds"]
+__all__ = ["BUCKETS", "LatencyHistogram"]
 
 _LO_NS = 1_000.0
 """Lower edge of the first bucket: 1 µs."""
@@ -188,56 +183,3 @@ class LatencyHistogram:
     def __repr__(self) -> str:
         s = self.summary()
         return f"LatencyHistogram(n={s['n']}, p50={s['p50']}, p99={s['p99']}, max={s['max']} µs)"
-
-
-_CLK_TCK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-
-
-def cpu_seconds(pid: int) -> float | None:
-    """User + system CPU seconds used so far by process ``pid`` (its own threads, not its children).
-
-    None where ``/proc`` is absent (not Linux), or the process is gone or a zombie.
-    """
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            stat = f.read()
-    except OSError:
-        return None
-    # The command name (field 2) is in parentheses and may itself hold spaces or ')'.
-    fields = stat[stat.rfind(b")") + 2 :].split()
-    if len(fields) < 13 or fields[0] in (b"Z", b"X"):
-        return None
-    return (int(fields[11]) + int(fields[12])) / _CLK_TCK
-
-
-class CpuMeter:
-    """% of one core used by each process between successive samples.
-
-    ``sample(pid)`` reads ``/proc``; ``feed(key, cpu_s)`` takes a CPU time measured elsewhere (e.g. a
-    worker's own ``time.process_time()`` sent in a heartbeat, which avoids reading ``/proc`` of a
-    busy process from the supervisor). The first reading of a key gives None (no interval yet).
-    """
-
-    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
-        self._clock = clock
-        self._last: dict[Hashable, tuple[float, float]] = {}
-
-    def feed(self, key: Hashable, cpu_s: float | None, wall: float | None = None) -> float | None:
-        """Record ``cpu_s`` for ``key`` at wall time ``wall`` (default: now); return % since the last."""
-        if cpu_s is None:
-            self._last.pop(key, None)
-            return None
-        now = self._clock() if wall is None else wall
-        prev = self._last.get(key)
-        self._last[key] = (now, cpu_s)
-        if prev is None or now <= prev[0] or cpu_s < prev[1]:
-            return None
-        return 100.0 * (cpu_s - prev[1]) / (now - prev[0])
-
-    def sample(self, pid: int) -> float | None:
-        """Read process ``pid``'s CPU time; % of one core since the previous ``sample(pid)``."""
-        return self.feed(pid, cpu_seconds(pid))
-
-    def forget(self, key: Hashable) -> None:
-        """Drop ``key``'s last reading (a process that ended or was replaced)."""
-        self._last.pop(key, None)

@@ -29,10 +29,11 @@ import msgpack
 import zmq
 
 from flowtact.compile import Plan
-from flowtact.runtime.inproc import DEFAULT_TICK_FAST_S, DEFAULT_TICK_REALTIME_S, RunSummary, Sink
+from flowtact.runtime.clock import tick_for
+from flowtact.runtime.inproc import RunSummary, Sink
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.stats import LatencyHistogram
-from flowtact.runtime.wire import END, recv_message
+from flowtact.runtime.wire import recv_message
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
 
@@ -88,9 +89,7 @@ class ProcessExecutor:
     ) -> None:
         self.plan = plan
         self.fast = fast
-        self.tick_s = tick_s or (DEFAULT_TICK_FAST_S if fast else DEFAULT_TICK_REALTIME_S)
-        if not self.tick_s > 0:
-            raise ValueError("tick_s must be > 0")
+        self.tick_s = tick_for(fast, tick_s)
         self.recorder = recorder
         self.progress = progress
         self.live = live
@@ -111,9 +110,17 @@ class ProcessExecutor:
         self.ctx = zmq.Context()
         self.rundir = tempfile.mkdtemp(prefix="flowtact-")
         self.procs: dict[str, _Proc] = {}
+        self.auth = None
         self.by_ident: dict[bytes, _Proc] = {}
         self.samples: dict[str, int] = {}
         self.rec_ends = 0
+        self.stopped = False
+        self.refused_seen = 0
+        self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
+        self.wplans = {
+            g: self.placement.worker_plan(g, fast=self.fast, tick_s=self.tick_s, duration_s=duration_s)
+            for g in self.placement.groups
+        }
         self.t_start = time.monotonic()
         stopped_by = "duration"
         failure: str | None = None
@@ -161,7 +168,6 @@ class ProcessExecutor:
         self.poller.register(self.ctl, zmq.POLLIN)
         self.poller.register(self.rec, zmq.POLLIN)
         self.tcp_ctl = self.tcp_rec = None
-        self.auth = None
         if remote:
             from flowtact.runtime.security import Authenticator, HandshakeWatch, load_keys, secure_server
 
@@ -214,7 +220,7 @@ class ProcessExecutor:
     def _bind_addresses(self, proc: _Proc) -> dict[int, str]:
         """Where each of the group's incoming streams is bound."""
         out = {}
-        for d in self._wplan(proc.name)["inbound"]:
+        for d in self.wplans[proc.name]["inbound"]:
             sid = d["id"]
             if sid in proc.endpoints:  # a restart binds where the producers already connect
                 out[sid] = proc.endpoints[sid]
@@ -224,15 +230,6 @@ class ProcessExecutor:
                 host = proc.host or self.plan.graph.deployment.network.listen
                 out[sid] = f"tcp://{host}:0"
         return out
-
-    def _wplan(self, group: str) -> dict[str, Any]:
-        if not hasattr(self, "_wplans"):
-            self._wplans: dict[str, dict[str, Any]] = {}
-        if group not in self._wplans:
-            self._wplans[group] = self.placement.worker_plan(
-                group, fast=self.fast, tick_s=self.tick_s, duration_s=self.duration_s
-            )
-        return self._wplans[group]
 
     def _send(self, proc: _Proc, op: str, **kw: Any) -> None:
         kw["op"] = op
@@ -253,7 +250,7 @@ class ProcessExecutor:
                 self._watch()
             except _Failure as f:
                 raise WorkerFailed(describe_failure(f.proc, f.report)) from None
-            if all(p.endpoints or not self._wplan(p.name)["inbound"] for p in self.procs.values()) and all(
+            if all(p.endpoints or not self.wplans[p.name]["inbound"] for p in self.procs.values()) and all(
                 p.state in ("ready", "wiring", "wired") for p in self.procs.values()
             ):
                 for p in self.procs.values():
@@ -271,10 +268,10 @@ class ProcessExecutor:
         """Say so when a host tries to join with another key (ZAP refusal or a failed handshake)."""
         from flowtact.runtime.security import SecurityError
 
-        seen = getattr(self, "_refused_seen", 0)
+        seen = self.refused_seen
         for refused in self.auth.refused[seen:]:  # type: ignore[union-attr]
             self.warn(f"refused a connection: {refused}")
-        self._refused_seen = len(self.auth.refused)  # type: ignore[union-attr]
+        self.refused_seen = len(self.auth.refused)  # type: ignore[union-attr]
         while True:
             try:
                 self.ctl_watch.check()
@@ -284,7 +281,7 @@ class ProcessExecutor:
 
     def _wire(self, proc: _Proc) -> None:
         connect: dict[int, dict[str, str]] = {}
-        for d in self._wplan(proc.name)["outbound"]:
+        for d in self.wplans[proc.name]["outbound"]:
             connect.setdefault(d["id"], {})[d["group"]] = self.procs[d["group"]].endpoints[d["id"]]
         remote = proc.host is not None
         record = self.tcp_rec if remote else f"ipc://{self.rundir}/rec"
@@ -294,7 +291,7 @@ class ProcessExecutor:
     # -- messages ---------------------------------------------------------------------------
     def _poll(self, timeout_ms: int) -> None:
         for sock, _ in self.poller.poll(timeout_ms):
-            if sock is self.ctl or sock is getattr(self, "ctl_tcp", None):
+            if sock is self.ctl or sock is self.ctl_tcp:
                 while True:
                     try:
                         ident, raw = sock.recv_multipart(zmq.NOBLOCK)
@@ -310,7 +307,7 @@ class ProcessExecutor:
                 m = recv_message(sock, zmq.NOBLOCK)
             except zmq.Again:
                 return
-            if m.flags & END:  # a worker's last record message
+            if m.is_end:  # a worker's last record message
                 self.rec_ends += 1
                 continue
             name = self.placement.stream_name(m.stream)
@@ -328,10 +325,8 @@ class ProcessExecutor:
                 return  # a stale worker
             proc.ident, proc.sock, proc.pid = ident, sock, msg["pid"]
             self.by_ident[ident] = proc
-            resume = proc.restarts > 0
-            self._send(proc, "plan", plan=self._wplan(proc.name), bind=self._bind_addresses(proc))
+            self._send(proc, "plan", plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
             proc.state = "planned"
-            proc.resume = resume  # type: ignore[attr-defined]
             return
         proc = self.by_ident.get(ident)
         if proc is None:
@@ -339,11 +334,11 @@ class ProcessExecutor:
         if op == "ready":
             proc.endpoints = {int(k): v for k, v in msg["endpoints"].items()}
             proc.state = "ready"
-            if getattr(proc, "resume", False):
+            if proc.restarts:
                 self._wire(proc)
         elif op == "wired":
             proc.wired = True
-            if getattr(proc, "resume", False):
+            if proc.restarts:
                 self._send(proc, "start", t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
                 proc.state = "running"
             else:
@@ -386,7 +381,7 @@ class ProcessExecutor:
                 self._failed(f)
             self._tick_housekeeping()
         self._drain_until_records_end()
-        return "interrupted" if getattr(self, "_stopped", False) else "duration"
+        return "interrupted" if self.stopped else "duration"
 
     def _failed(self, f: _Failure) -> None:
         """Restart the worker when its group asks for it and may; otherwise end the run."""
@@ -395,7 +390,7 @@ class ProcessExecutor:
             proc.restart != "on-failure"
             or proc.restarts >= proc.max_restarts
             or proc.host is not None
-            or getattr(self, "_stopped", False)
+            or self.stopped
         ):
             raise WorkerFailed(text)
         proc.restarts += 1
@@ -438,7 +433,7 @@ class ProcessExecutor:
 
     def _stop_all(self) -> None:
         """Ctrl-C: sources stop, everything downstream drains and flushes."""
-        self._stopped = True
+        self.stopped = True
         for p in self.procs.values():
             if p.ident is not None:
                 self._send(p, "stop")
@@ -455,11 +450,11 @@ class ProcessExecutor:
 
     def _drain_until_records_end(self) -> None:
         """Write what is still in flight: every recording worker ends its records with a marker."""
-        expected = sum(1 for g in self.procs if self._wplan(g)["record"])
+        expected = sum(1 for g in self.procs if self.wplans[g]["record"])
         deadline = time.monotonic() + 5.0
         while self.rec_ends < expected and time.monotonic() < deadline:
             self.poller.poll(50)
-            for sock in (self.rec, getattr(self, "rec_tcp", None)):
+            for sock in (self.rec, self.rec_tcp):
                 if sock is not None:
                     self._drain_records(sock)
 
@@ -477,7 +472,7 @@ class ProcessExecutor:
                 p.popen.kill()
                 p.popen.wait()
         if failed:
-            for sock in (self.rec, getattr(self, "rec_tcp", None)):
+            for sock in (self.rec, self.rec_tcp):
                 if sock is not None:
                     self._drain_records(sock)
         if self.auth is not None:
@@ -496,17 +491,7 @@ class ProcessExecutor:
             "now": self._graph_now(),
             "duration": self.duration_s,
             "wall": time.monotonic() - self.t_start,
-            "processes": {
-                p.name: {
-                    "pid": p.pid,
-                    "host": p.host or "local",
-                    "state": p.state,
-                    "cpu_pct": p.cpu_pct,
-                    "restarts": p.restarts,
-                    "nodes": p.nodes,
-                }
-                for p in self.procs.values()
-            },
+            "processes": self._process_table(),
             "streams": {
                 name: {
                     "rate_hz": s["messages"] / max(self._graph_now(), 1e-9),
@@ -529,13 +514,26 @@ class ProcessExecutor:
             },
         }
 
+    def _process_table(self) -> dict[str, dict[str, Any]]:
+        return {
+            p.name: {
+                "pid": p.pid,
+                "host": p.host or "local",
+                "nodes": p.nodes,
+                "cpu_pct": p.cpu_pct,
+                "restarts": p.restarts,
+                "state": p.state,
+            }
+            for p in self.procs.values()
+        }
+
     def _stream_stats(self) -> dict[str, dict[str, Any]]:
         out: dict[str, dict[str, Any]] = {}
+        sent_dropped: dict[int, int] = {}  # drops at the sending end ('latest' queue full)
+        for q in self.procs.values():
+            for sid, n in q.stats.get("sent_dropped", {}).items():
+                sent_dropped[int(sid)] = sent_dropped.get(int(sid), 0) + n
         for p in self.procs.values():
-            sent_dropped: dict[int, int] = {}
-            for q in self.procs.values():
-                for sid, n in q.stats.get("sent_dropped", {}).items():
-                    sent_dropped[int(sid)] = sent_dropped.get(int(sid), 0) + n
             for sid, s in p.stats.get("inbound", {}).items():
                 sid = int(sid)
                 name = self.placement.stream_name(sid)
@@ -598,17 +596,7 @@ class ProcessExecutor:
             counters={n: c for p in self.procs.values() for n, c in p.counters.items()},
             pruned=list(plan.pruned),
             ticks=max((p.last_k for p in self.procs.values()), default=0),
-            processes={
-                p.name: {
-                    "pid": p.pid,
-                    "host": p.host or "local",
-                    "nodes": p.nodes,
-                    "cpu_pct": p.cpu_pct,
-                    "restarts": p.restarts,
-                    "state": p.state,
-                }
-                for p in self.procs.values()
-            },
+            processes=self._process_table(),
             streams=self._stream_stats(),
             paths=self._path_stats(),
         )

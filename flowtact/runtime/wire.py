@@ -5,9 +5,8 @@ The header is a msgpack list ``[stream, seq, tick, flags, end, origins, dtype, s
 chunk left that source, for latency. A large chunk (data of :data:`COPY_THRESHOLD` bytes or more,
 a camera frame) travels as the multipart message ``[header, t, data]``, sent without copying
 and received as read-only numpy views of the ZeroMQ frames. A small one travels as a single
-frame ``len(header) (4 bytes) + header + t + data``: one frame costs a fraction of three, and
-zero-copy only pays above ~64 KiB (pyzmq's own advice; measured in bench/transport.py).
-Never pickle.
+frame ``len(header) (4 bytes) + header + t + data``: per-message costs dominate small messages,
+and pyzmq advises zero-copy only above ~64 KiB. Never pickle.
 """
 
 from __future__ import annotations
@@ -15,6 +14,7 @@ from __future__ import annotations
 import functools
 import math
 import struct
+from dataclasses import dataclass
 
 import msgpack
 import numpy as np
@@ -34,25 +34,20 @@ _EMPTY_T = np.empty(0, np.float64)
 _LEN = struct.Struct("<I")
 
 
+@dataclass(slots=True)
 class Message:
     """One decoded stream message."""
 
-    __slots__ = ("chunk", "flags", "origins", "seq", "stream", "tick")
-
-    def __init__(
-        self, stream: int, seq: int, tick: int, flags: int, origins: dict[int, int], chunk: Chunk
-    ) -> None:
-        self.stream, self.seq, self.tick, self.flags, self.origins, self.chunk = (
-            stream,
-            seq,
-            tick,
-            flags,
-            origins,
-            chunk,
-        )
+    stream: int
+    seq: int
+    tick: int
+    flags: int
+    origins: dict[int, int]
+    chunk: Chunk
 
     @property
     def is_end(self) -> bool:
+        """Is this the producer's end-of-stream marker?"""
         return bool(self.flags & END)
 
 

@@ -173,9 +173,8 @@ class Worker:
         while self.ctl.get(zmq.EVENTS) & zmq.POLLIN:
             self._control(msgpack.unpackb(self.ctl.recv(), strict_map_key=False))
             self.last_ping = time.monotonic()
+        self._check_orphan()
         now = time.monotonic()
-        if now - self.last_ping > ORPHAN_S:
-            raise Stop("the supervisor is gone")
         if now >= self.next_beat:
             self.next_beat = now + HEARTBEAT_S
             self._send("stats", **self._stats())
@@ -277,7 +276,8 @@ class Worker:
         self.deadlines = {}
         for d in plan["deadlines"]:
             self.deadlines.setdefault(d["dst"], []).append(_Deadline(d))
-        self.counts: dict[str, int] = {}
+        self.names = {(n, p): f"{n}.{p}" for n in self.order for p in self.demanded[n]}
+        self.counts = dict.fromkeys(self.names.values(), 0)
         self.block_inputs = [ib for ib in self.inbound.values() if ib.policy == "block"]
         self.latest_inputs = [ib for ib in self.inbound.values() if ib.policy == "latest"]
         self.now = 0.0
@@ -371,9 +371,7 @@ class Worker:
             if remaining <= 0:
                 return
             if remaining > 0.06:
-                msg = self._recv_ctl(50)
-                if msg is not None:
-                    self._control(msg)
+                self.ctl.poll(50)
                 self._service()
             else:
                 time.sleep(remaining)
@@ -457,7 +455,7 @@ class Worker:
             check_chunk(n, port, chunk, spec, self.now)
             key = (n, port)
             if len(chunk):
-                self.counts[f"{n}.{port}"] = self.counts.get(f"{n}.{port}", 0) + len(chunk)
+                self.counts[self.names[key]] += len(chunk)
             for dst, dport, delayed in self.local.get(key, ()):
                 self.queues[(dst, dport)].append((k + 1 if delayed else k, chunk, origins))
             for ob in self.out_by_port.get(key, ()):
@@ -503,10 +501,10 @@ class Worker:
             self._accept(ib, m, m.tick)
 
     def _accept(self, ib: _Inbound, m: Any, tick: float) -> None:
-        if m.seq != ib.next_seq and not m.flags & END:
+        if m.seq != ib.next_seq and not m.is_end:
             ib.gaps += 1
         ib.next_seq = m.seq + 1
-        if m.flags & END:
+        if m.is_end:
             ib.ended = True
             tick = INF
         else:
