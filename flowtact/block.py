@@ -201,19 +201,22 @@ class Block:
 
 
 class Source(Block):
-    """A block with no inputs that the runtime ticks with the graph time ``now``.
+    """A block the runtime ticks with the graph time ``now``, whether or not data came in.
 
     ``step(now)`` emits every sample whose time is before ``now`` that was not emitted yet. A
     source never sleeps or loops; its sample times come from an integer counter, ``i / rate``.
+    A source may also declare inputs (a device that takes commands, a simulator driven by a
+    feedback loop): ``step(now, **chunks)`` then receives, for each connected input it needs,
+    what arrived since the last tick (possibly an empty chunk).
     """
 
-    def step(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, now: float, **chunks: Chunk) -> dict[str, Chunk]:  # type: ignore[override]
         raise NotImplementedError
 
-    def __call__(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+    def __call__(self, now: float, **chunks: Chunk) -> dict[str, Chunk]:  # type: ignore[override]
         if not self._bound:
             raise RuntimeError(f"{self.node}: bind() the source before ticking it")
-        return self.step(now)
+        return self.step(now, **{k: c.readonly() for k, c in chunks.items()})
 
     @staticmethod
     def due(now: float, rate_hz: float) -> int:

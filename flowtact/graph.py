@@ -39,6 +39,7 @@ TOP_KEYS = (
     "description",
     "seed",
     "duration_s",
+    "tick_s",
     "nodes",
     "edges",
     "record",
@@ -134,6 +135,7 @@ class Graph:
     edges: list[Edge]
     record: list[tuple[str, str, Loc]]
     duration_s: float | None = None
+    tick_s: float | None = None
     description: str = ""
     overrides: dict[str, Any] = field(default_factory=dict)
     deployment: Deployment = field(default_factory=Deployment)
@@ -333,6 +335,12 @@ def _build(
             GraphError(y.loc("duration_s"), f"'duration_s' must be a positive number; got {duration!r}")
         )
         duration = None
+    tick = doc.get("tick_s")
+    if tick is not None and (isinstance(tick, bool) or not isinstance(tick, (int, float)) or tick <= 0):
+        errors.append(
+            GraphError(y.loc("tick_s"), f"'tick_s' must be a positive number of seconds; got {tick!r}")
+        )
+        tick = None
     name = doc.get("name", Path(path).stem)
     if not isinstance(name, str):
         errors.append(GraphError(y.loc("name"), f"'name' must be a string; got {name!r}"))
@@ -372,6 +380,7 @@ def _build(
         edges=edges,
         record=record,
         duration_s=float(duration) if duration is not None else None,
+        tick_s=float(tick) if tick is not None else None,
         description=str(doc.get("description", "")),
         overrides={o: parse_override(o)[2] for o in overrides},
         deployment=deployment,

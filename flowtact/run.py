@@ -22,6 +22,7 @@ import flowtact
 from flowtact.compile import Plan, compile_graph
 from flowtact.deployment import DEFAULT_QUEUE
 from flowtact.graph import load_graph, resolve_graph_path
+from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
 
 __all__ = ["load_plan", "provenance", "resolved_graph", "run_plan", "versions"]
@@ -55,6 +56,8 @@ def resolved_graph(plan: Plan) -> dict[str, Any]:
         doc["description"] = g.description
     if g.duration_s is not None:
         doc["duration_s"] = g.duration_s
+    if g.tick_s is not None:
+        doc["tick_s"] = g.tick_s
     nodes = {}
     for name, node in g.nodes.items():
         entry: dict[str, Any] = {
@@ -129,6 +132,13 @@ def provenance(plan: Plan, argv: list[str] | None = None) -> dict[str, Any]:
     }
 
 
+def has_feedback(plan: Plan) -> bool:
+    """Whether the graph closes a loop (an edge into a delayed input): then the tick shapes its
+    dynamics, so a ``--fast`` run keeps the real-time tick to behave as the live graph does."""
+    g = plan.graph
+    return any(g.nodes[e.dst].cls.inputs[e.dst_port].delay for e in g.edges)
+
+
 def run_plan(
     plan: Plan,
     *,
@@ -146,6 +156,7 @@ def run_plan(
     ``record:`` streams to ``record``. A failing worker raises
     :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed."""
     duration = duration_s if duration_s is not None else plan.graph.duration_s
+    tick_s = tick_s or plan.graph.tick_s or (DEFAULT_TICK_REALTIME_S if has_feedback(plan) else None)
 
     def executor(recorder: Any) -> Any:
         if inproc:

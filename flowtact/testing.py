@@ -145,17 +145,34 @@ def run_source(
     tick_s: float | Sequence[float] = 0.1,
     seed: int = 0,
     empty_between: bool = False,
+    inputs: Mapping[str, np.ndarray | Chunk] | None = None,
+    rate_hz: float = 1000.0,
+    units: Mapping[str, str] | None = None,
 ) -> dict[str, Chunk]:
-    """Tick a source from 0 to ``duration_s`` (ticks of ``tick_s``, a list used in turn)."""
-    out_specs = block.bind({}, seed=seed)
+    """Tick a source from 0 to ``duration_s`` (ticks of ``tick_s``, a list used in turn).
+
+    A source with inputs gets ``inputs`` (arrays stamped ``i / rate_hz``, or Chunks) split on
+    the tick boundaries: each tick receives the samples with ``prev <= t < now``, watermarked
+    ``end=now``.
+    """
+    feeds = {
+        p: (v if isinstance(v, Chunk) else Chunk(np.arange(len(v)) / rate_hz, np.asarray(v)))
+        for p, v in (inputs or {}).items()
+    }
+    specs = infer_specs(block, feeds, rate_hz, units)
+    out_specs = block.bind(specs, seed=seed)
     outs: dict[str, list[Chunk]] = {k: [] for k in out_specs}
     ticks = itertools.cycle([tick_s] if isinstance(tick_s, (int, float)) else list(tick_s))
     now = 0.0
     while now < duration_s - 1e-12:
-        now = min(now + next(ticks), duration_s)
-        _collect(outs, block(now))
+        prev, now = now, min(now + next(ticks), duration_s)
+        feed = {}
+        for p, c in feeds.items():
+            sel = (c.t >= prev) & (c.t < now)
+            feed[p] = Chunk(c.t[sel], c.data[sel], now)
+        _collect(outs, block(now, **feed))
         if empty_between:
-            _collect(outs, block(now))
+            _collect(outs, block(now, **{p: Chunk.empty(specs[p]) for p in feeds}))
     _collect(outs, block.flush())
     return {p: concat(cs, out_specs[p]) for p, cs in outs.items()}
 
@@ -262,7 +279,16 @@ def run_block_example(
             sizes = [chunk] if isinstance(chunk, int) else list(chunk)
             rate = float(ex.params.get("rate_hz", ex.rate_hz))
             tick = [s / rate for s in sizes]
-        return run_source(block, ex.duration_s, tick_s=tick, seed=seed, empty_between=empty_between)
+        return run_source(
+            block,
+            ex.duration_s,
+            tick_s=tick,
+            seed=seed,
+            empty_between=empty_between,
+            inputs=ex.inputs,
+            rate_hz=ex.rate_hz,
+            units=ex.units,
+        )
     inputs = {}
     for k, v in ex.inputs.items():
         if isinstance(v, np.ndarray) and check_readonly:

@@ -234,3 +234,39 @@ class SlowSink(Block):
     @classmethod
     def example(cls):
         return Example(params={"delay_s": 0.0}, inputs={"x": np.arange(5.0)})
+
+
+@dataclass(frozen=True)
+class PlantConfig(Config):
+    rate_hz: float = param(100.0, doc="sample rate", gt=0)
+    gain: float = param(0.5, doc="how much of the fed-back command the plant adds each sample")
+
+
+class Plant(Source):
+    """A source in a feedback loop: y[i] = 1 + gain · (latest command stamped before sample i)."""
+
+    config_cls = PlantConfig
+    inputs = {"u": Port(shape=(), units="1", delay=True, optional=True, doc="command fed back")}
+    outputs = {"y": Port(shape=(), units="1", doc="the plant's output")}
+
+    def specs(self, inputs):
+        return {"y": StreamSpec(units="1", rate_hz=self.config.rate_hz)}
+
+    def reset(self):
+        self.i = 0
+        self.ut = np.empty(0)
+        self.u = np.zeros(1)  # u[0]: the command before any came
+
+    def step(self, now, u=None):
+        if u is not None and len(u):
+            self.ut = np.concatenate([self.ut, u.t])
+            self.u = np.concatenate([self.u, u.data])
+        n = self.due(now, self.config.rate_hz) - self.i
+        t = (self.i + np.arange(n)) / self.config.rate_hz
+        self.i += n
+        latest = self.u[np.searchsorted(self.ut, t, side="left")]
+        return {"y": Chunk(t, 1.0 + self.config.gain * latest, end=now)}
+
+    @classmethod
+    def example(cls):
+        return Example(params={}, inputs={"u": np.linspace(0, 1, 50)}, rate_hz=100.0, duration_s=0.5)

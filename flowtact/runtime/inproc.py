@@ -194,10 +194,10 @@ class InprocExecutor:
     ) -> None:
         block = self.blocks[node]
         try:
+            ins = {p: concat(pending.pop((node, p), []), block.input_specs[p]) for p in self.inputs[node]}
             if isinstance(block, Source):
-                out = block(now)
+                out = block(now, **ins)
             else:
-                ins = {p: concat(pending.pop((node, p), []), block.input_specs[p]) for p in self.inputs[node]}
                 if all(len(c) == 0 and c.end is None for c in ins.values()):
                     return
                 out = block(**ins)

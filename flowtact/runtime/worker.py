@@ -394,15 +394,7 @@ class Worker:
     def _tick(self, k: int, now: float, sources_on: bool) -> None:
         for n in self.order:
             block = self.blocks[n]
-            if isinstance(block, Source):
-                if not sources_on:
-                    continue
-                origins = {self.src_idx[n]: time.monotonic_ns()}
-                try:
-                    out = block(now)
-                except Exception as e:
-                    raise _NodeFailure(n, block, now, e) from e
-                self._deliver(n, out, k, origins)
+            if isinstance(block, Source) and not sources_on:
                 continue
             for ib, delayed in self.remote_inputs[n]:
                 self._fetch(ib, k - 1 if delayed else k)
@@ -413,9 +405,15 @@ class Worker:
                 self._send_out(ob, k, Chunk.empty(spec), {})
 
     def _step(self, n: str, k: int, now: float, avail: float) -> None:
+        """Step node ``n`` on what reached it up to tick ``avail`` (a source: every tick)."""
         block = self.blocks[n]
-        ins, origins = {}, {}
-        empty = True
+        source = isinstance(block, Source)
+        ins: dict[str, Chunk] = {}
+        own = {self.src_idx[n]: time.monotonic_ns()} if source else None
+        origins = (
+            dict(own) if own else {}
+        )  # a source's own data starts here; its inputs still count for deadlines
+        empty = not source
         for p in self.needed[n]:
             q = self.queues[(n, p)]
             parts = []
@@ -432,7 +430,7 @@ class Worker:
         if empty:
             return
         try:
-            out = block(**ins)
+            out = block(now, **ins) if source else block(**ins)
         except Exception as e:
             raise _NodeFailure(n, block, now, e) from e
         if n in self.deadlines:
@@ -444,7 +442,7 @@ class Worker:
                     if lat > d.budget_ns:
                         d.violations += 1
                         d.worst_ns = max(d.worst_ns, lat)
-        self._deliver(n, out, k, origins)
+        self._deliver(n, out, k, own if own is not None else origins)
 
     def _deliver(self, n: str, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
         demanded = self.demanded[n]
