@@ -104,7 +104,36 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "args", nargs=argparse.REMAINDER, help="arguments for the benchmark (e.g. --quick --json out.json)"
     )
+    for name, ep in plugin_commands().items():  # commands that installed packages add (flowtact.commands)
+        sp = sub.add_parser(name, help=_plugin_help(ep), add_help=False)
+        sp.add_argument("args", nargs=argparse.REMAINDER)
     return p
+
+
+PLUGIN_GROUP = "flowtact.commands"
+
+
+def plugin_commands() -> dict[str, Any]:
+    """Commands declared in the ``flowtact.commands`` entry-point group: name -> ``main(argv) -> int``."""
+    from importlib.metadata import entry_points
+
+    return {ep.name: ep for ep in entry_points(group=PLUGIN_GROUP)}
+
+
+def _plugin_help(ep: Any) -> str:
+    """A plugin command's help line: the first line of its module's docstring (cheap: no heavy import)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec(ep.value.partition(":")[0])
+    if spec is None or spec.origin is None:
+        return "(not importable)"
+    import ast
+
+    try:
+        doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text()))
+    except (OSError, SyntaxError):
+        doc = None
+    return (doc or ep.value).splitlines()[0]
 
 
 def _version() -> str:
@@ -334,6 +363,10 @@ COMMANDS = {
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``flowtact`` command."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    plugins = plugin_commands()
+    if argv and argv[0] in plugins and argv[0] not in COMMANDS:  # a plugin parses its own arguments
+        return int(plugins[argv[0]].load()(argv[1:]) or 0)
     args = _parser().parse_args(argv)
     try:
         return COMMANDS[args.command](args)

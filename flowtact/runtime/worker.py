@@ -420,6 +420,8 @@ class Worker:
             while q and q[0][0] <= avail:
                 _, c, o = q.popleft()
                 parts.append(c)
+                if not len(c):  # a watermark alone carries no data whose latency counts
+                    continue
                 for s, ns in o.items():
                     if ns < origins.get(s, ns + 1):
                         origins[s] = ns
@@ -525,9 +527,13 @@ class Worker:
 
         As in the in-process executor: each node steps once more on everything that reached it,
         then flushes; consumers later in the order receive both. A remote consumer receives them
-        as ordinary messages, then an ``END`` marker.
+        as ordinary messages, then an ``END`` marker, sent as soon as the node has flushed: a loop
+        that leaves this process and comes back would otherwise wait for its own END.
         """
         k = self.k + 1
+        ends: dict[str, list[_Outbound]] = {}
+        for ob in self.outbound:
+            ends.setdefault(ob.node, []).append(ob)
         for n in self.order:
             block = self.blocks[n]
             if not isinstance(block, Source):
@@ -539,8 +545,8 @@ class Worker:
             except Exception as e:
                 raise _NodeFailure(n, block, self.now, e) from e
             self._deliver(n, out, k, {})
-        for ob in self.outbound:
-            send_message(ob.sock, ob.id, ob.seq, k, Chunk.empty(self.out_specs[ob.node][ob.port]), flags=END)  # type: ignore[arg-type]
+            for ob in ends.get(n, ()):
+                send_message(ob.sock, ob.id, ob.seq, k, Chunk.empty(self.out_specs[n][ob.port]), flags=END)  # type: ignore[arg-type]
         if self.rec is not None:
             send_message(self.rec, -1, 0, k, Chunk(np.empty(0), np.empty(0)), flags=END)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
