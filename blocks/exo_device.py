@@ -329,9 +329,9 @@ class ExoParams:
     rate_hz: float = 100.0
     user: tuple[UserMode, UserMode, UserMode] = ("grasp", "grasp", "grasp")
     period_s: float = 5.0
-    close_s: float = 1.8
+    close_s: float = 1.0
     squeeze_s: float = 1.5
-    open_s: float = 0.8
+    open_s: float = 1.0
     stagger_s: float = 0.05
     max_push_n: float = 3.0
     user_stiffness_n: float = 10.0  # N per unit of closure the user's intent is ahead of the finger
