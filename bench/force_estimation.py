@@ -330,7 +330,7 @@ def main() -> None:
     ap.add_argument("--epochs", type=int, default=None, help="max epochs (default 60; quick: 3)")
     ap.add_argument("--patience", type=int, default=20, help="early-stopping patience (default 20)")
     ap.add_argument(
-        "--downsample", type=int, default=2, help="average-pool factor after the crop (default 2)"
+        "--downsample", type=int, default=4, help="average-pool factor after the crop (default 4)"
     )
     ap.add_argument(
         "--time-limit", type=float, default=None, metavar="S", help="training time limit per width"
