@@ -392,8 +392,23 @@ def train_on_arrays(
     seeded too).
     """
     torch = import_torch()
+    threads = torch.get_num_threads()
     if config.threads is not None:
         torch.set_num_threads(int(config.threads))
+    try:
+        return _train(torch, data, config, seed, progress, log)
+    finally:
+        torch.set_num_threads(threads)  # the setting is process-wide: give it back
+
+
+def _train(
+    torch: Any,
+    data: Dataset,
+    config: TrainConfig,
+    seed: int,
+    progress: bool,
+    log: Callable[[str], None] | None,
+) -> tuple[Any, dict[str, Any]]:
     n = len(data)
     train, val, test = split_indices(n, seed, config.split)
     pre = Preprocess(data.input_hw, data.crop, config.downsample)

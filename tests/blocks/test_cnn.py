@@ -240,7 +240,7 @@ def test_split_is_90_5_5_disjoint_and_seeded():
 def test_training_learns_a_simple_image_feature():
     frames, force = _synthetic(600)
     data = Dataset.from_frames(frames, force)
-    cfg = TrainConfig(arch=TINY, crop=None, downsample=1, max_epochs=40, patience=8, l2=1e-4, threads=1)
+    cfg = TrainConfig(arch=TINY, crop=None, downsample=1, max_epochs=20, patience=8, l2=1e-4, threads=1)
     _, rep = train_on_arrays(data, cfg, seed=0, progress=False)
     assert (rep["n_train"], rep["n_val"], rep["n_test"]) == (1620, 90, 90)
     std = float(np.std(force))
