@@ -27,18 +27,6 @@ GAIN_US_PER_N = (80.0, 100.0, 100.0)
 _CMD = (N_FINGERS, 2)
 
 
-class _Merger(LatestMerger):
-    """:class:`LatestMerger` plus a forced release, for a controller that must not wait on a dead stream."""
-
-    def held_times(self) -> np.ndarray:
-        """Times of the driving samples held back (waiting for the other streams)."""
-        return self._t
-
-    def release_through(self, t: float) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        """Release the held driving samples with time ≤ ``t`` now, with the values known so far."""
-        return self._release(int(np.searchsorted(self._t, t, side="right")))
-
-
 def _fill(
     t: np.ndarray, x: np.ndarray, val: np.ndarray, when: np.ndarray, max_abs: float
 ) -> tuple[np.ndarray, int, int]:
@@ -209,7 +197,9 @@ class ForceFeedback(Block):
     def reset(self) -> None:
         cfg = self.config
         self._k = np.asarray(cfg.gain_us_per_n, np.float64)
-        self._merger = _Merger("finger", {"target": np.array([[0.0, -np.inf]] * N_FINGERS)}, (N_FINGERS, 2))
+        self._merger = LatestMerger(
+            "finger", {"target": np.array([[0.0, -np.inf]] * N_FINGERS)}, (N_FINGERS, 2)
+        )
         self._t_val, self._t_when = np.zeros(N_FINGERS), np.full(N_FINGERS, -np.inf)
         self._f_val, self._f_when = np.zeros(N_FINGERS), np.full(N_FINGERS, -np.inf)
         self._wm_target = -np.inf

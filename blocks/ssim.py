@@ -128,6 +128,43 @@ def _reference_terms(ref, a_out, vx_out):
 # They differ only in the float type of the final formula.
 
 
+@njit(cache=True, inline="always")
+def _start_columns(y, x, cy, cyy, cxy):
+    """Column sums of y, y² and x·y over the first 7 rows (exact int32)."""
+    cy[:] = 0
+    cyy[:] = 0
+    cxy[:] = 0
+    for r in range(WIN):
+        for j in range(y.shape[1]):
+            yv = np.int32(y[r, j])
+            cy[j] += yv
+            cyy[j] += yv * yv
+            cxy[j] += np.int32(x[r, j]) * yv
+
+
+@njit(cache=True, inline="always")
+def _row_prefix(y, x, i, cy, cyy, cxy, py, pyy, pxy):
+    """Slide the column sums to window row ``i`` (one row in, one out), then prefix-sum them."""
+    ww = y.shape[1]
+    if i > 0:
+        for j in range(ww):
+            y_in = np.int32(y[i + WIN - 1, j])
+            y_out = np.int32(y[i - 1, j])
+            cy[j] += y_in - y_out
+            cyy[j] += y_in * y_in - y_out * y_out
+            cxy[j] += np.int32(x[i + WIN - 1, j]) * y_in - np.int32(x[i - 1, j]) * y_out
+    sy = 0
+    syy = 0
+    sxy = 0
+    for j in range(ww):
+        sy += cy[j]
+        syy += cyy[j]
+        sxy += cxy[j]
+        py[j + 1] = sy
+        pyy[j + 1] = syy
+        pxy[j + 1] = sxy
+
+
 @njit(cache=True)
 def _ssim_f64(frames, ref, a_ref, p_ref, q_ref, out):
     """Mean SSIM of ``frames`` (k, n, H, W) uint8 against ``ref`` (n, H, W): float64 formula."""
@@ -144,39 +181,12 @@ def _ssim_f64(frames, ref, a_ref, p_ref, q_ref, out):
     c2w = C2W
     for f in range(k):
         for s in range(n):
-            y = frames[f, s]
-            x = ref[s]
-            a_s = a_ref[s]
-            p_s = p_ref[s]
-            q_s = q_ref[s]
-            cy[:] = 0
-            cyy[:] = 0
-            cxy[:] = 0
+            y, x = frames[f, s], ref[s]
+            a_s, p_s, q_s = a_ref[s], p_ref[s], q_ref[s]
             acc[:] = 0.0
-            for r in range(WIN):
-                for j in range(ww):
-                    yv = np.int32(y[r, j])
-                    cy[j] += yv
-                    cyy[j] += yv * yv
-                    cxy[j] += np.int32(x[r, j]) * yv
+            _start_columns(y, x, cy, cyy, cxy)
             for i in range(h):
-                if i > 0:
-                    for j in range(ww):
-                        y_in = np.int32(y[i + WIN - 1, j])
-                        y_out = np.int32(y[i - 1, j])
-                        cy[j] += y_in - y_out
-                        cyy[j] += y_in * y_in - y_out * y_out
-                        cxy[j] += np.int32(x[i + WIN - 1, j]) * y_in - np.int32(x[i - 1, j]) * y_out
-                sy = 0
-                syy = 0
-                sxy = 0
-                for j in range(ww):
-                    sy += cy[j]
-                    syy += cyy[j]
-                    sxy += cxy[j]
-                    py[j + 1] = sy
-                    pyy[j + 1] = syy
-                    pxy[j + 1] = sxy
+                _row_prefix(y, x, i, cy, cyy, cxy, py, pyy, pxy)
                 for j in range(w):
                     sb = py[j + WIN] - py[j]
                     sbb = pyy[j + WIN] - pyy[j]
@@ -208,39 +218,12 @@ def _ssim_f32(frames, ref, a_ref, p_ref, q_ref, out):
     c2w = np.float32(C2W)
     for f in range(k):
         for s in range(n):
-            y = frames[f, s]
-            x = ref[s]
-            a_s = a_ref[s]
-            p_s = p_ref[s]
-            q_s = q_ref[s]
-            cy[:] = 0
-            cyy[:] = 0
-            cxy[:] = 0
+            y, x = frames[f, s], ref[s]
+            a_s, p_s, q_s = a_ref[s], p_ref[s], q_ref[s]
             acc[:] = 0.0
-            for r in range(WIN):
-                for j in range(ww):
-                    yv = np.int32(y[r, j])
-                    cy[j] += yv
-                    cyy[j] += yv * yv
-                    cxy[j] += np.int32(x[r, j]) * yv
+            _start_columns(y, x, cy, cyy, cxy)
             for i in range(h):
-                if i > 0:
-                    for j in range(ww):
-                        y_in = np.int32(y[i + WIN - 1, j])
-                        y_out = np.int32(y[i - 1, j])
-                        cy[j] += y_in - y_out
-                        cyy[j] += y_in * y_in - y_out * y_out
-                        cxy[j] += np.int32(x[i + WIN - 1, j]) * y_in - np.int32(x[i - 1, j]) * y_out
-                sy = 0
-                syy = 0
-                sxy = 0
-                for j in range(ww):
-                    sy += cy[j]
-                    syy += cyy[j]
-                    sxy += cxy[j]
-                    py[j + 1] = sy
-                    pyy[j + 1] = syy
-                    pxy[j + 1] = sxy
+                _row_prefix(y, x, i, cy, cyy, cxy, py, pyy, pxy)
                 for j in range(w):
                     sb = py[j + WIN] - py[j]
                     sbb = pyy[j + WIN] - pyy[j]

@@ -90,6 +90,15 @@ class LatestMerger:
         n = int(np.argmin(ok)) if not ok.all() else len(ok)  # release the complete prefix only
         return self._release(n)
 
+    def held_times(self) -> np.ndarray:
+        """Times of the driving samples held back, waiting for the other streams."""
+        return self._t
+
+    def release_through(self, t: float) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Release the held driving samples with time ≤ ``t`` now, with the values known so far
+        (for a consumer that must not wait on a dead stream)."""
+        return self._release(int(np.searchsorted(self._t, t, side="right")))
+
     def flush(self) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """End of stream: release every held driving sample with the latest values known."""
         return self._release(len(self._t))

@@ -107,3 +107,14 @@ def test_vector_streams_keep_their_shape():
     )
     assert d.shape == (1, 3, 2)
     np.testing.assert_array_equal(o["g"], [[2.0, 2.0, 2.0]])
+
+
+def test_release_through_forces_out_what_waits_on_a_silent_stream():
+    m = LatestMerger("f", {"g": 0.0})
+    m.push({"f": Chunk(np.array([0.1, 0.2, 0.3]), np.array([1.0, 2.0, 3.0]))})
+    np.testing.assert_array_equal(m.held_times(), [0.1, 0.2, 0.3])
+    t, d, o = m.release_through(0.2)
+    np.testing.assert_array_equal(d, [1.0, 2.0])
+    np.testing.assert_array_equal(t, [0.1, 0.2])
+    np.testing.assert_array_equal(o["g"], [0.0, 0.0])
+    np.testing.assert_array_equal(m.held_times(), [0.3])
