@@ -13,7 +13,18 @@ from typing import Literal
 
 import numpy as np
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param, screen_nonfinite
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
 from flowtact.align import Aligner, screen_aligned
 
 from .aunp import SENSITIVITY_PER_N, reduced_matrix
@@ -133,6 +144,16 @@ class GaugeForce(Block):
         ),
     }
     outputs = {"f": Port(dtype="float64", shape=(3,), units="N", doc="force [Fx, Fy, Fz] in N")}
+    counter_docs = {
+        "nonfinite_drop": "instants where 'r' or 'ref' had NaN/inf, removed (on_bad_data: drop): "
+        "upstream sent bad data",
+        "nonfinite_hold": "gauge samples (per input, 'r' and 'ref') with NaN/inf, held at the last finite "
+        "value (on_bad_data: hold): upstream sent bad data",
+        "unpaired_at_end": "samples of 'r' or 'ref' with no partner on the other input when the stream "
+        "ended: not used (the inputs delivered different numbers of samples)",
+        "tare_short": "the stream ended before tare_samples samples arrived: the tare offset is the mean "
+        "of fewer samples",
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "r" not in inputs:
@@ -274,6 +295,7 @@ class ShearAngle(Block):
     config_cls = ShearAngleConfig
     inputs = {"r": Port(dtype="float64", shape=(4,), units="1", doc="ΔR/R of gauges 1..4")}
     outputs = {"theta": Port(dtype="float64", shape=(), units="rad", doc="shear angle in radians")}
+    counter_docs = nonfinite_counter_docs("gauge samples")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "r" not in inputs:

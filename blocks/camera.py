@@ -191,6 +191,10 @@ class Camera(Source):
         "frames": Port(dtype="uint8", units="DN", doc="gray frames, one per device, (n, H, W)"),
         "device_t": Port(units="s", doc="each frame's own time stamp (video position, driver stamp)"),
     }
+    counter_docs = {
+        "ended": "a video file or image folder ran out of frames (loop: false): no frames after that; "
+        "expected when playing a finite recording",
+    }
 
     def __init__(self, config: Config | None = None, /, **kw: Any) -> None:
         super().__init__(config, **kw)

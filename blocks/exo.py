@@ -42,7 +42,18 @@ from typing import Literal
 
 import numpy as np
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param, screen_nonfinite
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
 from flowtact.align import Aligner, screen_aligned
 
 from .hand import FINGERS, N_FINGERS
@@ -375,6 +386,16 @@ class FsrForce(Block):
     config_cls = FsrForceConfig
     inputs = {"x": Port(dtype="float64", shape=(3,), units="ADC", doc="raw FSR readings (ADC counts)")}
     outputs = {"y": Port(dtype="float64", shape=(3,), units="N", doc="signed FSR force per finger")}
+    counter_docs = {
+        "out_of_range": "samples with a reading outside [0, adc_max] (a garbled serial line): treated as "
+        "NaN, so on_bad_data applies (and counts them too)",
+        "rest_short": "the stream ended before rest_readings readings arrived: the rest offset is the mean "
+        "of fewer readings",
+        "nonfinite_drop": "samples with a NaN/inf or out-of-range reading, removed (on_bad_data: drop): "
+        "bad data came from the device",
+        "nonfinite_hold": "samples with a NaN/inf or out-of-range reading, held at the last good reading "
+        "(0 before any; on_bad_data: hold): bad data came from the device",
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "x" not in inputs:
@@ -538,6 +559,11 @@ class ExoKinematics(Block):
             dtype="float64", shape=(3, 3), units="rad", doc="finger joint angles θ per finger (IK)"
         ),
     }
+    counter_docs = {
+        "ik_out_of_reach": "samples with a finger pose the finger model cannot reach, clipped to the "
+        "nearest reachable one (θ approximate): noise, or a wrong geometry if frequent",
+        **nonfinite_counter_docs("angle samples on 'phi'"),
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "phi" not in inputs:
@@ -661,6 +687,14 @@ class FingertipForce(Block):
     outputs = {
         "f": Port(dtype="float64", shape=(3,), units="N", doc="signed fingertip force per finger"),
         "f_vec": Port(dtype="float64", shape=(3, 2), units="N", doc="fingertip force vector per finger"),
+    }
+    counter_docs = {
+        "nonfinite_drop": "instants where 'fsr' or 'phi' had NaN/inf, removed from both (on_bad_data: "
+        "drop): upstream sent bad data",
+        "nonfinite_hold": "samples (per input, 'fsr' and 'phi') with NaN/inf, held at the last finite "
+        "value (on_bad_data: hold): upstream sent bad data",
+        "unpaired_at_end": "samples of 'fsr' or 'phi' with no partner on the other input when the stream "
+        "ended: not used (the inputs delivered different numbers of samples)",
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
@@ -791,6 +825,7 @@ class GripperCommand(Block):
     outputs = {
         "y": Port(dtype="float64", shape=(3,), units="1", doc="gripper command per finger, 0 open, 1 closed")
     }
+    counter_docs = nonfinite_counter_docs("pose samples on 'x'")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "x" not in inputs:

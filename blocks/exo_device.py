@@ -60,7 +60,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, TextIO
 
 import numpy as np
 
@@ -534,12 +534,18 @@ def _smooth(x: float) -> float:
 
 
 class _ExoLine:
-    """Adapter from :class:`ExoDevice` to :class:`flowtact.ptydevice.LineDevice` (host-clock times)."""
+    """Adapter from :class:`ExoDevice` to :class:`flowtact.ptydevice.LineDevice` (host-clock times).
 
-    def __init__(self, dev: ExoDevice, truth: bool, reset_on_replug: bool) -> None:
+    With a ``log`` file it writes one line per host command the device applied and per watchdog
+    trip, stamped with the host's monotonic clock: ``<t> cmd <seq> engage=<e,e,e> dev=<d,d,d>``
+    and ``<t> watchdog`` (what a bench logger on the device's side would see).
+    """
+
+    def __init__(self, dev: ExoDevice, truth: bool, reset_on_replug: bool, log: TextIO | None = None) -> None:
         self.dev = dev
         self.truth = truth
         self.reset_on_replug = reset_on_replug
+        self.log = log
         self.t0 = time.monotonic()
 
     def next_due(self) -> float:
@@ -548,10 +554,21 @@ class _ExoLine:
     def tick(self, now: float) -> list[bytes]:
         # the sample belongs to its scheduled tick; waking late is a send delay, as on a real board
         host_ns = round((self.t0 + self.dev.next_time()) * 1e9) if self.truth else None
-        return [self.dev.sample(host_ns).format()]
+        tripped = self.dev.watchdog
+        out = [self.dev.sample(host_ns).format()]
+        if self.log is not None and self.dev.watchdog and not tripped:
+            self.log.write(f"{now:.6f} watchdog\n")
+        return out
 
     def receive(self, line: bytes, now: float) -> list[bytes]:
-        return self.dev.receive(line)
+        applied = self.dev.commands
+        out = self.dev.receive(line)
+        if self.log is not None and self.dev.commands > applied:
+            d = self.dev
+            engage = ",".join(str(int(e)) for e in d.engaged)
+            dev = ",".join(f"{x:g}" for x in d.dev_us)
+            self.log.write(f"{now:.6f} cmd {d.ack} engage={engage} dev={dev}\n")
+        return out
 
     def plugged(self, now: float, first: bool) -> list[bytes]:
         if not first and self.reset_on_replug:  # a USB unplug power-cycles the board
@@ -596,6 +613,11 @@ def _parser() -> argparse.ArgumentParser:
         "--truth", action="store_true", help="add the true sampling time (host monotonic ns) as field h="
     )
     ap.add_argument("--exit-with-parent", action="store_true", help="stop when the parent process exits")
+    ap.add_argument(
+        "--log",
+        metavar="FILE",
+        help="append each applied command and watchdog trip (host monotonic s) to FILE",
+    )
     return ap
 
 
@@ -626,8 +648,9 @@ def main(argv: list[str] | None = None) -> int:
     if link is None:
         tmp = tempfile.mkdtemp(prefix="flowtact-exo-")
         link = os.path.join(tmp, "tty")
+    log = open(args.log, "a", buffering=1) if args.log else None  # noqa: SIM115 (closed below)
     server = PtyServer(
-        _ExoLine(dev, args.truth, not args.no_reset_on_replug),
+        _ExoLine(dev, args.truth, not args.no_reset_on_replug, log),
         link,
         latency_s=args.latency_ms * 1e-3,
         jitter_s=args.jitter_ms * 1e-3,
@@ -643,6 +666,8 @@ def main(argv: list[str] | None = None) -> int:
         server.serve(parent_pid=os.getppid() if args.exit_with_parent else None)
     finally:
         server.close()
+        if log is not None:
+            log.close()
         if tmp is not None:
             with contextlib.suppress(OSError):
                 os.rmdir(tmp)

@@ -178,6 +178,25 @@ class ForceFeedback(Block):
     outputs = {
         "cmd": Port(dtype="float64", shape=(3, 2), units="us", doc="[engage 0/1, deviation µs] per finger")
     }
+    counter_docs = {
+        "stalled": "times live fingers were disengaged because an input had no valid data for stall_s "
+        "(re-engaging needs a fresh contact): an input stalled or died",
+        "stalled_target": "stalls caused by the TacTip force 'target' going stale (camera or vision chain)",
+        "stalled_finger": "stalls caused by the fingertip force 'finger' going stale or stopping "
+        "(exoskeleton link)",
+        "late": "finger samples dropped: stamped at or before an earlier one, or behind a stall "
+        "(disengage) row already sent; a timing fault upstream",
+        "target_late": "finger samples that waited max_wait_s for the 'target' watermark, then were "
+        "computed with the latest target known: the target stream lags",
+        "nonfinite_target": "target samples with NaN/inf on a finger: ignored, the finger keeps its last "
+        "valid value (aging towards a stall)",
+        "out_of_range_target": "target samples with |F| > max_force_n on a finger (implausible): ignored "
+        "like NaN",
+        "nonfinite_finger": "finger samples with NaN/inf on a finger: ignored, the finger keeps its last "
+        "valid value (aging towards a stall)",
+        "out_of_range_finger": "finger samples with |F| > max_force_n on a finger (implausible): ignored "
+        "like NaN",
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         for p in ("target", "finger"):

@@ -20,7 +20,18 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param, screen_nonfinite
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
 from flowtact.align import Aligner, MisalignedError, screen_aligned
 
 from .afferents import table_i_weights
@@ -289,6 +300,7 @@ class SavGol(Block):
     config_cls = SavGolConfig
     inputs = {"x": Port(dtype="float64", doc="signal, shape () or (channels,)")}
     outputs = {"y": Port(dtype="float64", doc="smoothed signal or its derivative, per second")}
+    counter_docs = nonfinite_counter_docs("samples on 'x'")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         x = inputs["x"]
@@ -463,6 +475,14 @@ class WeightedSum(Block):
         "x4": Port(dtype="float64", optional=True, doc="fourth input (no preset weights)"),
     }
     outputs = {"y": Port(dtype="float64", shape=(), doc="weighted sum, one value per sample")}
+    counter_docs = {
+        "nonfinite_drop": "instants where an input had NaN/inf, removed from every input (on_bad_data: "
+        "drop): upstream sent bad data",
+        "nonfinite_hold": "input samples (per input) with NaN/inf, held at the last finite value "
+        "(on_bad_data: hold): upstream sent bad data",
+        "unpaired_at_end": "input samples with no partners on the other inputs when the stream ended: not "
+        "summed (the inputs delivered different numbers of samples)",
+    }
 
     def needs(self, connected: frozenset[str]) -> frozenset[str]:
         w = self.config.weights()
@@ -775,6 +795,11 @@ class Lowpass(Block):
     config_cls = LowpassConfig
     inputs = {"x": Port(dtype="float64", doc="signal, any shape")}
     outputs = {"y": Port(dtype="float64", doc="low-passed signal, same shape and units")}
+    counter_docs = {
+        "nonincreasing_t": "samples stamped at or before the previous one: they did not move the filter "
+        "(the output repeats); timestamps went wrong upstream",
+        **nonfinite_counter_docs("samples on 'x'"),
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "x" not in inputs:

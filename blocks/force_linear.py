@@ -18,7 +18,18 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param, screen_nonfinite
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
 
 from .hand import FINGERS
 
@@ -201,6 +212,7 @@ class LinearForce(Block):
     config_cls = LinearForceConfig
     inputs = {"x": Port(dtype="float64", units="1", doc="SSIM per sensor")}
     outputs = {"y": Port(dtype="float64", units="N", doc="estimated contact force per sensor")}
+    counter_docs = nonfinite_counter_docs("SSIM samples on 'x'")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "x" not in inputs:

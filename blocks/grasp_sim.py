@@ -13,7 +13,18 @@ from typing import Literal
 
 import numpy as np
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param, screen_nonfinite
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
 
 from .hand import FINGERS, N_FINGERS
 
@@ -167,6 +178,10 @@ class GraspSim(Block):
     outputs = {
         "force": Port(dtype="float64", shape=(3,), units="N", doc="true contact force per finger, N"),
         "object": Port(dtype="float64", shape=(), units="1", doc="index of the object in hand"),
+    }
+    counter_docs = {
+        "clipped": "command samples with a finger outside [0, 1] (beyond open or closed): clipped into range",
+        **nonfinite_counter_docs("command samples on 'grip'"),
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:

@@ -515,6 +515,10 @@ class BlobDetect(Block):
         ),
         "count": Port(dtype="float64", units="1", doc="number of blobs detected per sensor"),
     }
+    counter_docs = {
+        "pins_dropped": "blobs beyond max_pins in an image: the smallest left out of 'pins' ('count' "
+        "includes them); if frequent, raise max_pins or tighten the detector",
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "x" not in inputs:
@@ -696,6 +700,10 @@ class BlobMask(Block):
         ),
     }
     outputs = {"y": Port(dtype="uint8", units="DN", doc="frames masked to the pins")}
+    counter_docs = {
+        "unpaired_at_end": "frames or pin rows with no partner on the other input when the stream ended: "
+        "not masked ('x' and 'pins' delivered different numbers of samples)",
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         for p in ("x", "pins"):

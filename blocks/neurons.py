@@ -11,7 +11,7 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from flowtact.block import Block, Example, Port, SpecError, screen_nonfinite
+from flowtact.block import Block, Example, Port, SpecError, nonfinite_counter_docs, screen_nonfinite
 from flowtact.blocks.afferents import NEURON_PRESETS
 from flowtact.blocks.lif_kernels import (
     NOISE_INTERNAL,
@@ -247,6 +247,7 @@ class Nlif(Block):
         "spikes": Port(dtype="int64", shape=(), units="1", events=True, doc="spike times and neuron indices"),
         "v": Port(dtype="float64", units="1", doc="membrane at each input sample time, shape (n,)"),
     }
+    counter_docs = nonfinite_counter_docs("drive samples on 'x'")
 
     # -- specs -------------------------------------------------------------------------------
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
@@ -485,6 +486,10 @@ class Rate(Block):
     config_cls = RateConfig
     inputs = {"spikes": Port(dtype="int64", shape=(), events=True, doc="spike times and unit indices")}
     outputs = {"y": Port(dtype="float64", units="spikes/s", doc="rate per bin, stamped at the bin start")}
+    counter_docs = {
+        "late_events": "spikes older than a bin already emitted (the producer broke its watermark): "
+        "ignored, so those rates are too low; a fault upstream",
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         s = inputs.get("spikes")

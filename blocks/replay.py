@@ -132,6 +132,10 @@ class Replay(Source):
             doc="the played-back stream: recorded dtype, shape, units, rate (events if recorded as events)",
         )
     }
+    counter_docs = {
+        "skipped_before_zero": "recorded samples whose time (plus time_offset_s) fell before graph time 0: "
+        "not played; expected with a negative time_offset_s",
+    }
 
     def __init__(self, *args: Any, **kw: Any) -> None:
         super().__init__(*args, **kw)

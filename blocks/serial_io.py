@@ -217,6 +217,32 @@ class SerialIo(Source):
         ),
         "send_t": Port(dtype="float64", shape=(), units="s", doc="true sampling time if the device sends it"),
     }
+    counter_docs = {
+        "packets": "data packets received from the device (before any were dropped as late or out of order)",
+        "connects": "times the serial port was opened: 1 normally, more after the device was unplugged",
+        "disconnects": "times the port failed (device unplugged or gone); the block kept retrying: a problem",
+        "resyncs": "times the device clock estimate restarted: after a reconnect, or the device's ticks "
+        "jumped (a reset, or over 1 s off the estimate); stamps are coarser for ~0.5 s",
+        "hellos": "hello messages from the device (at connect, or answering a version query): harmless",
+        "device_errors": "error reports from the device (e.g. a command rejected for its checksum or "
+        "format); see the log",
+        "bad_lines": "device lines that could not be parsed (framing, checksum, unknown message, 4 KiB "
+        "without a newline): ignored; a noisy link or a protocol mismatch",
+        "out_of_order": "packets whose device tick repeated or stepped slightly back (duplicated or "
+        "reordered); dropped",
+        "lost": "packets missing between consecutive ones, from gaps in the device's ticks: lost on the "
+        "link (or never sent)",
+        "stamp_nudged": "packets stamped at or up to 5 ms before the previous one, moved 1 µs after it: "
+        "harmless jitter of the clock estimate",
+        "late": "packets stamped at or before the watermark (a sample already emitted, or now − "
+        "max_latency_s): they came too late; dropped",
+        "cmds_sent": "commands sent to the device (one per step that brought a new cmd)",
+        "cmd_dropped": "commands not delivered (port down, or the device stopped reading and old queued "
+        "ones were discarded): the device's watchdog disengages the servos if commands stop",
+        "cmd_clamped": "finger deviations outside [min_us, max_us], clipped before sending (per finger and "
+        "command): the controller asked for more than allowed",
+        "cmd_nonfinite": "fingers whose command had a NaN/inf engage or deviation: sent disengaged",
+    }
 
     def __init__(self, *args: Any, **kw: Any) -> None:
         super().__init__(*args, **kw)

@@ -23,7 +23,18 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param, screen_nonfinite
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
 
 from .hand import FINGERS
 
@@ -395,6 +406,13 @@ class Ssim(Block):
         ),
     }
     outputs = {"y": Port(dtype="float64", units="1", doc="mean SSIM of each sensor's frame vs its reference")}
+    counter_docs = {
+        "recaptures": "frames that started a new reference after a recapture request: expected when "
+        "recapture pulses are sent",
+        "reference_short": "the stream ended while a reference was still being collected: it is the "
+        "mean of fewer than reference_frames frames",
+        **nonfinite_counter_docs("recapture samples"),
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         if "x" not in inputs:

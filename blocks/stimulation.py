@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from flowtact.block import Block, Example, Port, SpecError, screen_nonfinite
+from flowtact.block import Block, Example, Port, SpecError, nonfinite_counter_docs, screen_nonfinite
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
 
@@ -235,6 +235,22 @@ class Pulses(Block):
         "y": Port(
             dtype="float64", shape=(3,), events=True, doc="delivered pulses: [unit, amplitude_ua, width_us]"
         ),
+    }
+    counter_docs = {
+        "bad_time": "spikes with a NaN/inf time: dropped, no pulse (bad data upstream)",
+        "bad_unit": "spikes whose unit index is outside [0, n_units): dropped, no pulse (bad data upstream)",
+        "nonfinite": "spikes whose requested amplitude was NaN/inf: dropped, no pulse (a safety net "
+        "behind on_bad_data, which screens the amplitude input)",
+        "dropped_amplitude": "spikes whose requested amplitude was below min_amplitude_ua (a request for "
+        "no stimulus): no pulse, as asked",
+        "dropped_rate": "spikes less than 1/max_rate_hz after the unit's previous delivered pulse (or "
+        "before it): no pulse, the rate limit acted",
+        "clipped_amplitude": "pulses requested above max_amplitude_ua: delivered at max_amplitude_ua",
+        "clipped_charge": "pulses whose amplitude × width_us exceeded max_charge_nc: delivered at the "
+        "charge ceiling",
+        "ramp_limited": "pulses whose amplitude changed faster than max_ramp_ua_per_s since the unit's "
+        "previous pulse: delivered at the ramp-limited amplitude",
+        **nonfinite_counter_docs("amplitude samples"),
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:

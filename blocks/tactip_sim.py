@@ -18,7 +18,7 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from flowtact.block import Example, Port, Source, SpecError, screen_nonfinite
+from flowtact.block import Example, Port, Source, SpecError, nonfinite_counter_docs, screen_nonfinite
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
 
@@ -640,6 +640,7 @@ class TactipSim(Source):
         "force": Port(shape=(N_FINGERS,), units="N", doc="true contact force shown by each frame"),
         "contact": Port(shape=(N_FINGERS, 2), units="mm", doc="contact centre (x, y) of each frame"),
     }
+    counter_docs = nonfinite_counter_docs("force samples on 'force'")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # type: ignore[override]
         spec = inputs.get("force")

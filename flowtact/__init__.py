@@ -1,6 +1,15 @@
 """flowtact: YAML graphs of reusable streaming blocks for tactile sensing and haptics."""
 
-from flowtact.block import BadDataError, Block, Example, Port, Source, SpecError, screen_nonfinite
+from flowtact.block import (
+    BadDataError,
+    Block,
+    Example,
+    Port,
+    Source,
+    SpecError,
+    nonfinite_counter_docs,
+    screen_nonfinite,
+)
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.params import Config, ConfigError, param
 
@@ -19,6 +28,7 @@ __all__ = [
     "StreamSpec",
     "__version__",
     "concat",
+    "nonfinite_counter_docs",
     "param",
     "screen_nonfinite",
 ]

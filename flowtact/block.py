@@ -24,6 +24,7 @@ __all__ = [
     "Port",
     "Source",
     "SpecError",
+    "nonfinite_counter_docs",
     "screen_nonfinite",
 ]
 
@@ -81,7 +82,8 @@ class Block:
     Subclasses set ``config_cls`` (a frozen :class:`~flowtact.params.Config` dataclass),
     ``inputs`` / ``outputs`` (port name -> :class:`Port`), implement ``reset`` and ``step``, and
     may override ``specs`` (output specs from input specs), ``needs`` (inputs the config makes
-    relevant), ``flush`` (emit what is held back at end of stream) and ``open``/``close``.
+    relevant), ``flush`` (emit what is held back at end of stream) and ``open``/``close``. A block
+    that counts things (``count``) explains each counter name in ``counter_docs``.
     """
 
     config_cls: ClassVar[type[Config]] = Config
@@ -93,6 +95,10 @@ class Block:
     name: ClassVar[str] = ""
     #: A sink acts on the world (a stimulator, a serial device): it runs even if nothing consumes it.
     sink: ClassVar[bool] = False
+    #: What each counter the block keeps (``count``) means, in plain words: name -> one line saying
+    #: what happened and whether it is harmless or a problem. The run summary and ``flowtact blocks
+    #: NAME`` print it; every name counted must be here or in a base class's (a test reads the code).
+    counter_docs: ClassVar[Mapping[str, str]] = {}
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)
@@ -192,6 +198,14 @@ class Block:
             self.counters[what] = self.counters.get(what, 0) + int(n)
 
     @classmethod
+    def documented_counters(cls) -> dict[str, str]:
+        """Every counter this class documents, its own ``counter_docs`` over its bases'."""
+        docs: dict[str, str] = {}
+        for klass in reversed(cls.__mro__):
+            docs.update(klass.__dict__.get("counter_docs", {}))
+        return docs
+
+    @classmethod
     def example(cls) -> Example:
         """Small valid inputs; every registered block provides one."""
         raise NotImplementedError(f"{cls.__name__} has no example()")
@@ -226,13 +240,23 @@ class Source(Block):
         return max(n, 0)
 
 
+def nonfinite_counter_docs(what: str) -> dict[str, str]:
+    """``counter_docs`` entries for what :func:`screen_nonfinite` counts; ``what`` names the samples."""
+    return {
+        "nonfinite_drop": f"{what} with NaN/inf, removed (on_bad_data: drop): upstream sent bad data",
+        "nonfinite_hold": f"{what} with NaN/inf, held at the last finite value (on_bad_data: hold): "
+        "upstream sent bad data",
+    }
+
+
 def screen_nonfinite(
     block: Block, chunk: Chunk, policy: BadDataPolicy, port: str, last: np.ndarray | None
 ) -> tuple[Chunk, np.ndarray | None]:
     """Apply a block's bad-data policy to non-finite samples of a float chunk.
 
     ``raise``: stop with a message naming node and port; ``drop``: remove those samples;
-    ``hold``: repeat the last finite value (zeros before any). Counts ``nonfinite_<policy>``.
+    ``hold``: repeat the last finite value (zeros before any). Counts ``nonfinite_drop`` or
+    ``nonfinite_hold`` (:func:`nonfinite_counter_docs` words them for the block's ``counter_docs``).
     Returns the cleaned chunk and the updated last good sample.
     """
     d = chunk.data
@@ -249,7 +273,7 @@ def screen_nonfinite(
             f"{block.node} ({block.name}): {n_bad} non-finite sample(s) on input '{port}', first at "
             f"t={first_bad:.6f} s (set on_bad_data: drop or hold to tolerate them)"
         )
-    block.count(f"nonfinite_{policy}", n_bad)
+    block.count("nonfinite_drop" if policy == "drop" else "nonfinite_hold", n_bad)
     if policy == "drop":
         keep = ~bad
         cleaned = Chunk(chunk.t[keep], d[keep], chunk.end)

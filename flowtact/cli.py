@@ -238,11 +238,14 @@ def _cmd_keys(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
+    from flowtact.runtime.placement import place
+
     plan = _plan(args)
+    groups = place(plan, fast=False).groups  # refuses placements the runtime cannot start
     n_streams = sum(len(plan.demanded[n]) for n in plan.order)
     print(
         f"{plan.graph.path}: ok — {len(plan.graph.nodes)} nodes, {len(plan.order)} active, "
-        f"{n_streams} computed streams"
+        f"{n_streams} computed streams, {len(groups)} process{'es' if len(groups) != 1 else ''}"
     )
     for note in plan.notes:
         print(f"  {note}")
@@ -269,7 +272,7 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
 
 
 def describe_block(cls: Any) -> str:
-    """The block's docstring, ports and parameters, as ``flowtact blocks NAME`` prints them."""
+    """The block's docstring, ports, parameters and counters, as ``flowtact blocks NAME`` prints them."""
     lines = [f"{cls.name}  ({cls.__module__}.{cls.__name__})", ""]
     lines.append(textwrap.dedent(cls.__doc__ or "").strip())
     lines += ["", "Inputs:"]
@@ -285,6 +288,12 @@ def describe_block(cls: Any) -> str:
         rules = f"  [{f.rules}]" if f.rules else ""
         lines.append(f"  {f.name:<16} {f.type:<22} default {f.default!r}{rules}")
         lines.append(f"      {f.doc}")
+    counters = cls.documented_counters()
+    if counters:
+        lines += ["", "Counters:"]
+        for name, doc in counters.items():
+            lines.append(f"  {name}")
+            lines.append(f"      {doc}")
     return "\n".join(lines)
 
 

@@ -7,8 +7,8 @@ reports; :mod:`flowtact.graph` calls :func:`parse_deployment` and reports proble
 .. code-block:: yaml
 
     processes:
-      neurons: {restart: on-failure, max_restarts: 3}
-      vision:  {host: 10.0.0.2}          # started there by `flowtact worker`
+      neurons: {restart: on-failure, max_restarts: 3, stall_s: 0.5}
+      vision:  {host: 10.0.0.2, startup_s: 300}   # started there by `flowtact worker`
     network: {listen: 10.0.0.1, port: 5550, keys: ~/.flowtact/keys}
     deadlines:
       - {from: sensor, to: sa1_stim, budget: 4ms}
@@ -16,6 +16,7 @@ reports; :mod:`flowtact.graph` calls :func:`parse_deployment` and reports proble
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Deadline", "Deployment", "Network", "ProcessDef", "parse_deployment", "parse_duration"]
 
-PROCESS_KEYS = ("restart", "max_restarts", "host")
+PROCESS_KEYS = ("restart", "max_restarts", "host", "stall_s", "startup_s", "stop_grace_s")
 NETWORK_KEYS = ("listen", "port", "keys")
 DEADLINE_KEYS = ("from", "to", "budget")
 RESTARTS = ("never", "on-failure")
@@ -36,14 +37,47 @@ DEFAULT_QUEUE = 64
 _UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 
 
+STALL_REALTIME_S = 1.0
+"""Default ``stall_s`` in real time: a worker that shows no progress this long has stalled."""
+STALL_FAST_S = 30.0
+"""Default ``stall_s`` on the virtual clock, where one tick may carry seconds of data."""
+STARTUP_LOCAL_S = 60.0
+"""Default ``startup_s`` of a group on this host: start the interpreter, import, build the blocks."""
+STARTUP_REMOTE_S = 120.0
+"""Default ``startup_s`` of a group with ``host:``: someone has to start it there by hand."""
+STOP_GRACE_S = 10.0
+"""Default ``stop_grace_s``: how long a stopped run may drain before it is aborted."""
+
+
 @dataclass(frozen=True)
 class ProcessDef:
-    """A process group: its restart policy and the host it runs on (None: this machine)."""
+    """A process group: restart policy, host (None: this machine) and supervision windows.
+
+    ``stall_s`` (None: :data:`STALL_REALTIME_S` in real time, :data:`STALL_FAST_S` with
+    ``--fast``) bounds how long a worker may show no progress; ``startup_s`` how long it may take
+    to join (also a node's first step, where kernels compile); ``stop_grace_s`` how long it may
+    drain after a stop.
+    """
 
     name: str
     restart: str = "never"
     max_restarts: int = 3
     host: str | None = None
+    stall_s: float | None = None
+    startup_s: float | None = None
+    stop_grace_s: float = STOP_GRACE_S
+
+    def stall_window(self, fast: bool) -> float:
+        """Seconds without progress after which this group's worker counts as stalled."""
+        if self.stall_s is not None:
+            return self.stall_s
+        return STALL_FAST_S if fast else STALL_REALTIME_S
+
+    def startup_window(self) -> float:
+        """Seconds this group's worker may take to join the run."""
+        if self.startup_s is not None:
+            return self.startup_s
+        return STARTUP_REMOTE_S if self.host else STARTUP_LOCAL_S
 
 
 @dataclass(frozen=True)
@@ -158,7 +192,21 @@ def parse_deployment(doc: dict[str, Any], y: _Located, node_docs: dict[str, Any]
         if host is not None and not (isinstance(host, str) and host):
             errors.append(GraphError(y.loc("processes", name, "host"), f"{where}: host must be an address"))
             host = None
-        dep.processes[str(name)] = ProcessDef(str(name), restart, max_restarts, host)
+        windows: dict[str, float | None] = {}
+        for key in ("stall_s", "startup_s", "stop_grace_s"):
+            if key not in pdoc:
+                continue
+            seconds = parse_duration(pdoc[key])
+            if seconds is None or not math.isfinite(seconds):
+                errors.append(
+                    GraphError(
+                        y.loc("processes", name, key),
+                        f"{where}: {key} must be a positive duration such as 1 or 500ms; got {pdoc[key]!r}",
+                    )
+                )
+                continue
+            windows[key] = seconds
+        dep.processes[str(name)] = ProcessDef(str(name), restart, max_restarts, host, **windows)  # type: ignore[arg-type]
 
     net = doc.get("network") or {}
     if not isinstance(net, dict):

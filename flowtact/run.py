@@ -20,7 +20,7 @@ import yaml
 
 import flowtact
 from flowtact.compile import Plan, compile_graph
-from flowtact.deployment import DEFAULT_QUEUE
+from flowtact.deployment import DEFAULT_QUEUE, STOP_GRACE_S
 from flowtact.graph import load_graph, resolve_graph_path
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
@@ -88,6 +88,8 @@ def resolved_graph(plan: Plan) -> dict[str, Any]:
                 "restart": p.restart,
                 "max_restarts": p.max_restarts,
                 **({"host": p.host} if p.host else {}),
+                **{k: getattr(p, k) for k in ("stall_s", "startup_s") if getattr(p, k) is not None},
+                **({"stop_grace_s": p.stop_grace_s} if p.stop_grace_s != STOP_GRACE_S else {}),
             }
             for name, p in dep.processes.items()
         }

@@ -1,8 +1,10 @@
 """The flowtact command end to end: run, record, re-run from a recording, replay, blocks, graph, plot."""
 
 import json
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import h5py
@@ -133,26 +135,50 @@ def test_a_realtime_run_is_paced_by_the_wall_clock():
     assert summary["wall_s"] >= 0.6 and summary["realtime_factor"] <= 1.0
 
 
-def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path):
-    import signal
-    import time
+def wait_recorded(proc, path: Path, stream: str, n: int, timeout_s: float = 60.0) -> int:
+    """Wait until the run ``proc``'s committed recording holds ``n`` samples of ``stream``; how many it holds.
 
+    The recorder commits about once a second; start-up alone can take seconds on a busy machine, so
+    this polls for the data instead of sleeping a fixed time.
+    """
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, f"the run ended early: {proc.communicate()[1]}"
+        try:
+            got = len(read_recording(path).streams[stream].t)
+        except (OSError, KeyError):  # not created yet
+            got = 0
+        if got >= n:
+            return got
+        time.sleep(0.2)
+    raise AssertionError(f"{path} held fewer than {n} samples of {stream} after {timeout_s:g} s")
+
+
+def test_ctrl_c_stops_cleanly_and_keeps_the_recording(tmp_path):
     out = tmp_path / "interrupted.h5"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "flowtact.cli", "run", TOUCH, "--duration", "60", "--record", str(out)],
+        [sys.executable, "-m", "flowtact.cli", "run", TOUCH, "--duration", "600", "--record", str(out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(3.0)
-    proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=30)
+    try:
+        seen = wait_recorded(
+            proc, out, "force.f", 500
+        )  # running, with over half a second of 1 kHz samples kept
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 0, stderr
     assert "interrupted" in stdout
     rec = read_recording(out)
     n = len(rec.streams["force.f"].t)
-    assert n >= 500  # well over half a second of 1 kHz samples survived
+    assert n >= seen >= 500  # nothing that was kept before the interrupt is lost
     assert rec.summary is not None and rec.summary["stopped_by"] == "interrupted"
+    assert rec.summary["samples"]["force.f"] == n  # and the stop flushed every sample the run made
 
 
 def test_bad_samples_stop_the_run_naming_the_node_and_keep_what_came_before(tmp_path):

@@ -5,14 +5,13 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import toyblocks
+from runs import ROOT, alive, flowtact, wait_children, wait_recorded, worker_of
 
 from flowtact.graph import GraphErrors
 from flowtact.record import read_recording
@@ -20,35 +19,7 @@ from flowtact.run import load_plan, run_plan
 from flowtact.runtime.placement import place
 from flowtact.testing import CHECKS
 
-ROOT = Path(__file__).resolve().parent.parent
-TESTS = Path(__file__).resolve().parent
 pytestmark = pytest.mark.slow
-
-
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(TESTS), env.get("PYTHONPATH", "")])
-    return env
-
-
-def _children(pid: int) -> list[int]:
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            out.append(int(stat.parent.name))
-    return out
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 @pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
@@ -161,39 +132,12 @@ def test_latest_policy_is_declared_per_edge_and_checked():
     assert "edge queue must be an integer >= 1" in str(e.value)
 
 
-def _flowtact(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "flowtact.cli", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=_env(),
-        **kw,
-    )
-
-
-def _wait_children(pid: int, n: int, timeout: float = 30.0) -> list[int]:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        kids = [
-            k for k in _children(pid) if "flowtact.runtime.worker" in Path(f"/proc/{k}/cmdline").read_text()
-        ]
-        if len(kids) >= n:
-            return kids
-        time.sleep(0.05)
-    raise AssertionError(f"expected {n} workers")
-
-
-def _worker_of(kids: list[int], process: str) -> int:
-    return next(k for k in kids if process in Path(f"/proc/{k}/cmdline").read_bytes().decode().split("\0"))
-
-
 def test_kill_9_of_a_worker_ends_the_run_naming_it_and_keeps_the_recording(tmp_path):
     out = tmp_path / "killed.h5"
-    proc = _flowtact("run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--record", str(out))
-    kids = _wait_children(proc.pid, 3)
-    time.sleep(2.0)  # running
-    victim = _worker_of(kids, "afferents")
+    proc = flowtact("run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--record", str(out))
+    kids = wait_children(proc.pid, 3)
+    wait_recorded(out, "force.f", 500)  # running
+    victim = worker_of(kids, "afferents")
     t_kill = time.monotonic()
     os.kill(victim, signal.SIGKILL)
     _, stderr = proc.communicate(timeout=30)
@@ -201,7 +145,7 @@ def test_kill_9_of_a_worker_ends_the_run_naming_it_and_keeps_the_recording(tmp_p
     assert proc.returncode == 1, stderr
     assert elapsed < 2.0, elapsed
     assert "process 'afferents' (nodes sa1, fa1, sa1_stim) killed by SIGKILL" in stderr
-    assert not [k for k in kids if _alive(k)]  # no orphans
+    assert not [k for k in kids if alive(k)]  # no orphans
     rec = read_recording(out)
     assert len(rec.streams["force.f"].t) >= 500  # what came before the kill is there
     assert "afferents" in rec.summary["error"]
@@ -209,14 +153,14 @@ def test_kill_9_of_a_worker_ends_the_run_naming_it_and_keeps_the_recording(tmp_p
 
 def test_ctrl_c_stops_every_worker_cleanly(tmp_path):
     out = tmp_path / "stopped.h5"
-    proc = _flowtact("run", str(ROOT / "graphs" / "slip.yaml"), "--duration", "60", "--record", str(out))
-    kids = _wait_children(proc.pid, 3)
-    time.sleep(2.0)
+    proc = flowtact("run", str(ROOT / "graphs" / "slip.yaml"), "--duration", "60", "--record", str(out))
+    kids = wait_children(proc.pid, 3)
+    wait_recorded(out, "force.f", 1000)
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=30)
     assert proc.returncode == 0, stderr
     assert "interrupted" in stdout
-    assert not [k for k in kids if _alive(k)]
+    assert not [k for k in kids if alive(k)]
     rec = read_recording(out)
     n = len(rec.streams["force.f"].t)
     assert n >= 1000
@@ -225,15 +169,15 @@ def test_ctrl_c_stops_every_worker_cleanly(tmp_path):
 
 
 def test_workers_die_with_a_killed_supervisor():
-    proc = _flowtact("run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--quiet")
-    kids = _wait_children(proc.pid, 3)
+    proc = flowtact("run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--quiet")
+    kids = wait_children(proc.pid, 3)
     time.sleep(1.0)
     proc.kill()
     proc.communicate(timeout=10)
     deadline = time.monotonic() + 5.0
-    while [k for k in kids if _alive(k)] and time.monotonic() < deadline:
+    while [k for k in kids if alive(k)] and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not [k for k in kids if _alive(k)]
+    assert not [k for k in kids if alive(k)]
 
 
 RESTART = """
@@ -251,10 +195,10 @@ record: [gain.y]
 def test_restart_on_failure_brings_a_killed_worker_back(tmp_path):
     path = tmp_path / "restart.yaml"
     path.write_text(RESTART)
-    proc = _flowtact("run", str(path), "--duration", "4", "--json", "--record", str(tmp_path / "r.h5"))
-    kids = _wait_children(proc.pid, 2)
+    proc = flowtact("run", str(path), "--duration", "4", "--json", "--record", str(tmp_path / "r.h5"))
+    kids = wait_children(proc.pid, 2)
     time.sleep(1.5)
-    os.kill(_worker_of(kids, "filter"), signal.SIGKILL)
+    os.kill(worker_of(kids, "filter"), signal.SIGKILL)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
     assert "restarting it (1/2)" in stderr
@@ -271,6 +215,8 @@ nodes:
   sink: {block: "toyblocks:SlowSink", process: sink, params: {delay_s: 0.01}}
 edges:
   - {from: src.y, to: sink.x, policy: POLICY, queue: 8}
+processes:
+  sink: {stall_s: 30}  # the test sink sleeps, as a hung call would: not what these tests are about
 """
 
 
@@ -285,12 +231,12 @@ def test_a_slow_consumer_under_latest_drops_with_flat_memory(tmp_path):
     """The sink takes 10 ms per sample of a 1 kHz stream (10x too slow), for 60 s."""
     path = tmp_path / "slow.yaml"
     path.write_text(SLOW.replace("POLICY", "latest"))
-    proc = _flowtact("run", str(path), "--duration", "60", "--json")
-    kids = _wait_children(proc.pid, 2)
+    proc = flowtact("run", str(path), "--duration", "60", "--json")
+    kids = wait_children(proc.pid, 2)
     time.sleep(8.0)
     rss = {k: _rss_kib(k) for k in kids}
     time.sleep(50.0)
-    grown = {k: _rss_kib(k) - rss[k] for k in kids if _alive(k)}
+    grown = {k: _rss_kib(k) - rss[k] for k in kids if alive(k)}
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
     assert max(grown.values()) < 8 * 1024, grown  # KiB: flat, not growing with the backlog
@@ -304,7 +250,7 @@ def test_a_slow_consumer_under_latest_drops_with_flat_memory(tmp_path):
 def test_a_slow_consumer_under_block_loses_nothing(tmp_path):
     path = tmp_path / "slow.yaml"
     path.write_text(SLOW.replace("POLICY", "block").replace("0.01", "0.002"))
-    proc = _flowtact("run", str(path), "--duration", "2", "--json")
+    proc = flowtact("run", str(path), "--duration", "2", "--json")
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 0, stderr
     summary = json.loads(stdout)
@@ -328,7 +274,7 @@ record: [gain.y]
 def test_deadlines_report_p50_p99_and_warn_on_violations(tmp_path, budget, missed):
     path = tmp_path / "deadline.yaml"
     path.write_text(DEADLINE.replace("BUDGET", budget))
-    proc = _flowtact("run", str(path), "--duration", "2.5", "--json")
+    proc = flowtact("run", str(path), "--duration", "2.5", "--json")
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
     path_stats = json.loads(stdout)["paths"]["src -> gain"]

@@ -84,6 +84,24 @@ def test_a_remote_group_runs_over_curve_tcp_and_matches_in_process(tmp_path):
     assert len(a.streams["sa1.spikes"].t) > 0  # made by the remote group
 
 
+def test_a_remote_worker_started_30_s_late_joins_and_the_run_completes(tmp_path):
+    """Workers already started wait for the late one (the run says for whom) instead of giving up."""
+    keys = generate_keys(tmp_path / "keys")
+    port = _free_port()
+    graph = _graph(tmp_path, port, keys)
+    sup = _cli("run", str(graph), "--fast", "--duration", "2", "--record", str(tmp_path / "late.h5"))
+    line = _wait_for(sup, "flowtact worker tcp://")
+    assert "waiting for process 'afferents' on 127.0.0.1 (up to 120 s" in line
+    time.sleep(30.0)  # the user walks to the other machine
+    worker = _cli("worker", f"tcp://127.0.0.1:{port}", "--process", "afferents", "--keys", str(keys))
+    _, err = sup.communicate(timeout=120)
+    worker.communicate(timeout=30)
+    assert sup.returncode == 0, err
+    assert worker.returncode == 0
+    assert "still waiting for process 'afferents' on 127.0.0.1" in err  # told while it waited
+    assert len(read_recording(tmp_path / "late.h5").streams["sa1.spikes"].t) > 0
+
+
 def test_a_worker_with_another_key_is_refused_with_a_clear_message(tmp_path):
     keys = generate_keys(tmp_path / "keys")
     wrong = generate_keys(tmp_path / "other")

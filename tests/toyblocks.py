@@ -207,6 +207,7 @@ class FrameMean(Block):
 @dataclass(frozen=True)
 class SlowSinkConfig(Config):
     delay_s: float = param(0.01, doc="wall time spent per sample (a deliberately slow consumer)", ge=0)
+    step_delay_s: float = param(0.0, doc="wall time spent per step that brings data", ge=0)
 
 
 class SlowSink(Block):
@@ -228,7 +229,7 @@ class SlowSink(Block):
 
         if len(x):
             self.count("received", len(x))
-            time.sleep(self.config.delay_s * len(x))
+            time.sleep(self.config.delay_s * len(x) + self.config.step_delay_s)
         return {}
 
     @classmethod
@@ -270,3 +271,35 @@ class Plant(Source):
     @classmethod
     def example(cls):
         return Example(params={}, inputs={"u": np.linspace(0, 1, 50)}, rate_hz=100.0, duration_s=0.5)
+
+
+@dataclass(frozen=True)
+class HangConfig(Config):
+    at_s: float = param(float("inf"), doc="graph time at which the step hangs (inf: never)")
+    hang_s: float = param(3600.0, doc="wall time the step hangs for", ge=0)
+
+
+class Hang(Block):
+    """Passes its input through; the step that reaches graph time ``at_s`` hangs (a test stand-in for a
+    block stuck in a driver call or an endless loop). A worker resumed past ``at_s`` does not hang again."""
+
+    config_cls = HangConfig
+    inputs = {"x": Port(doc="anything")}
+    outputs = {"y": Port(doc="the input, unchanged")}
+
+    def reset(self):
+        self.started = None
+
+    def step(self, x):
+        import time
+
+        if len(x):
+            if self.started is None:
+                self.started = float(x.t[0])
+            if self.started < self.config.at_s <= float(x.t[-1]):
+                time.sleep(self.config.hang_s)
+        return {"y": x}
+
+    @classmethod
+    def example(cls):
+        return Example(inputs={"x": np.arange(5.0)})

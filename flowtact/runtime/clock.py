@@ -12,6 +12,7 @@ import time
 __all__ = [
     "DEFAULT_TICK_FAST_S",
     "DEFAULT_TICK_REALTIME_S",
+    "LAG_WARN_S",
     "Clock",
     "FastClock",
     "RealtimeClock",
@@ -20,6 +21,8 @@ __all__ = [
 
 DEFAULT_TICK_FAST_S = 1.0
 DEFAULT_TICK_REALTIME_S = 0.005
+LAG_WARN_S = 0.1
+"""A real-time run whose ticks ran this late (or later) was not real time: warned, and said so."""
 
 
 def tick_for(fast: bool, tick_s: float | None) -> float:
@@ -40,7 +43,8 @@ class Clock:
         """Graph time 0 is now."""
         self._t0 = time.perf_counter()
 
-    def wait_until(self, now: float) -> None:
+    def wait_until(self, now: float) -> float:
+        """Wait for graph time ``now``; how late it came (s, 0 when on time)."""
         raise NotImplementedError
 
     def elapsed(self) -> float:
@@ -51,14 +55,16 @@ class Clock:
 class FastClock(Clock):
     """As fast as possible: a tick is processed as soon as the previous one is done."""
 
-    def wait_until(self, now: float) -> None:
-        return None
+    def wait_until(self, now: float) -> float:
+        return 0.0
 
 
 class RealtimeClock(Clock):
     """Ticks follow the wall clock (a tick that runs late is processed at once, never skipped)."""
 
-    def wait_until(self, now: float) -> None:
+    def wait_until(self, now: float) -> float:
         delay = now - self.elapsed()
         if delay > 0:
             time.sleep(delay)
+            return 0.0
+        return -delay

@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -20,9 +20,9 @@ import numpy as np
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
-from flowtact.runtime.clock import Clock, FastClock, RealtimeClock, tick_for
+from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
 
-__all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk"]
+__all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk", "explain_counters"]
 
 
 class Sink(Protocol):
@@ -61,6 +61,14 @@ class RunSummary:
     """Multi-process runs: per cross-process stream, messages, samples, drops, latency (µs)."""
     paths: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Declared deadlines: latency p50/p99/max (µs), budget and violations per path."""
+    counter_docs: dict[str, dict[str, str]] = field(default_factory=dict)
+    """What each reported counter means, per node (its block's ``counter_docs``; see explain_counters)."""
+    realtime: bool | None = None
+    """Real-time runs: did every tick run within :data:`LAG_WARN_S` of the wall clock? None: --fast."""
+    max_lag_s: float = 0.0
+    """Real-time runs: the furthest any tick ran behind the wall clock (s)."""
+    late_nodes: list[str] = field(default_factory=list)
+    """Real-time runs that fell behind: the nodes that took most of the wall time then."""
 
     @property
     def realtime_factor(self) -> float:
@@ -75,11 +83,15 @@ class RunSummary:
             "wall_s": self.wall_s,
             "realtime_factor": self.realtime_factor,
             "stopped_by": self.stopped_by,
+            "realtime": self.realtime,
+            "max_lag_s": self.max_lag_s,
+            "late_nodes": self.late_nodes,
             "ticks": self.ticks,
             "samples": self.samples,
             "events": self.events,
             "event_rate_hz_per_unit": {k: self.rate(k) for k in self.events},
             "counters": self.counters,
+            "counter_docs": self.counter_docs,
             "pruned": self.pruned,
             "processes": self.processes,
             "streams": self.streams,
@@ -97,15 +109,25 @@ class RunSummary:
             f"{self.graph}: {self.duration_s:.3f} s of graph time in {self.wall_s:.3f} s wall "
             f"({self.realtime_factor:,.0f}x real time, {self.stopped_by})"
         ]
+        if self.realtime is False:
+            busiest = f"; busiest nodes: {', '.join(self.late_nodes)}" if self.late_nodes else ""
+            lines.append(
+                f"  NOT real time: ticks ran up to {self.max_lag_s:.2f} s behind the wall clock{busiest} "
+                "(late ticks were merged: same outputs, later)"
+            )
         for k, n in self.samples.items():
             lines.append(f"  {k:<28} {n:>10,} samples")
         for k, n in self.events.items():
             lines.append(
                 f"  {k:<28} {n:>10,} events  ({self.rate(k):.1f}/s per unit, {self.event_units.get(k, 1)} units)"
             )
-        for node, cs in self.counters.items():
-            if cs:
-                lines.append(f"  {node}: " + ", ".join(f"{k}={v}" for k, v in sorted(cs.items())))
+        counted = [
+            (f"{node}: {k}={v}", self.counter_docs.get(node, {}).get(k))
+            for node, cs in self.counters.items()
+            for k, v in sorted(cs.items())
+        ]
+        width = max((len(c) for c, _ in counted), default=0)
+        lines += [f"  {c:<{width}}  {doc}" if doc else f"  {c}" for c, doc in counted]
         for name, p in self.processes.items():
             cpu = f"{p['cpu_pct']:.1f}% CPU" if p.get("cpu_pct") is not None else "CPU n/a"
             restarts = f", {p['restarts']} restart(s)" if p.get("restarts") else ""
@@ -213,7 +235,7 @@ class InprocExecutor:
         pending: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
         opened: list[Block] = []
         stopped_by = "duration"
-        now, k = 0.0, 0
+        now, k, lag = 0.0, 0, 0.0
         try:
             for block in self.blocks.values():
                 block.open()
@@ -224,7 +246,7 @@ class InprocExecutor:
                 while n_ticks is None or k < n_ticks:
                     k += 1
                     now = k * self.tick_s if n_ticks is None or k < n_ticks else float(duration_s)  # type: ignore[arg-type]
-                    clock.wait_until(now)
+                    lag = max(lag, clock.wait_until(now))
                     later: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
                     for node in self.plan.order:
                         self._step(node, now, pending, later)
@@ -240,6 +262,7 @@ class InprocExecutor:
         finally:
             for block in reversed(opened):
                 block.close()
+        counters = {n: dict(b.counters) for n, b in self.blocks.items() if b.counters}
         return RunSummary(
             graph=self.plan.graph.name,
             duration_s=now,
@@ -253,9 +276,12 @@ class InprocExecutor:
                 for p in self.plan.demanded[n]
                 if self.plan.specs[(n, p)].events
             },
-            counters={n: dict(b.counters) for n, b in self.blocks.items() if b.counters},
+            counters=counters,
             pruned=list(self.plan.pruned),
             ticks=k,
+            counter_docs=explain_counters(self.plan, counters),
+            realtime=None if self.fast else lag < LAG_WARN_S,
+            max_lag_s=lag,
         )
 
     def _flush_all(self, now: float, pending: dict[tuple[str, str], list[Chunk]]) -> None:
@@ -269,6 +295,17 @@ class InprocExecutor:
             except Exception as e:
                 raise NodeError(node, block.name, now, e) from e
             self._deliver(node, out, now, pending, pending)
+
+
+def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:
+    """What each counter in ``counters`` (node -> name -> count) means, from its node's block class."""
+    out: dict[str, dict[str, str]] = {}
+    for node, cs in counters.items():
+        nd = plan.graph.nodes.get(node)
+        docs = nd.cls.documented_counters() if nd is not None else {}
+        if known := {k: docs[k] for k in cs if k in docs}:
+            out[node] = known
+    return out
 
 
 @functools.cache

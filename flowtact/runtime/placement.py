@@ -18,9 +18,12 @@ from flowtact.compile import Plan
 from flowtact.deployment import ProcessDef
 from flowtact.graph import GraphError, GraphErrors
 
-__all__ = ["DEFAULT_GROUP", "Placement", "place", "spec_from_wire", "spec_to_wire"]
+__all__ = ["DEFAULT_GROUP", "MAX_LOCAL_PROCESSES", "Placement", "place", "spec_from_wire", "spec_to_wire"]
 
 DEFAULT_GROUP = "main"
+MAX_LOCAL_PROCESSES = 64
+"""Process groups one host runs at most: each is a Python interpreter with numpy, numba and ZeroMQ
+(≈ 60–100 MB and ≈ 1 s of CPU to start), and one supervisor serves them all."""
 
 
 def spec_to_wire(spec: StreamSpec) -> dict[str, Any]:
@@ -182,6 +185,19 @@ def place(plan: Plan, *, fast: bool) -> Placement:
     for n in plan.order:
         groups.setdefault(group_of[n], []).append(n)
     processes = {g: graph.deployment.process(g) for g in groups}
+    local = [g for g in groups if processes[g].host is None]
+    if len(local) > MAX_LOCAL_PROCESSES:
+        first = graph.nodes[groups[local[MAX_LOCAL_PROCESSES]][0]]
+        raise GraphErrors(
+            [
+                GraphError(
+                    first.loc,
+                    f"the graph places {len(local)} process groups on this host; flowtact runs at most "
+                    f"{MAX_LOCAL_PROCESSES} (each is a Python process of its own)",
+                    "put several nodes in one group with `process: NAME`, or give groups a `host:`",
+                )
+            ]
+        )
     stream_ids = {
         (n, p): i for i, (n, p) in enumerate((n, p) for n in plan.order for p in sorted(plan.demanded[n]))
     }

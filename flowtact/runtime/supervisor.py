@@ -4,21 +4,33 @@ It places the nodes (:mod:`flowtact.runtime.placement`), starts one worker per l
 group (a group with a ``host:`` is started there by ``flowtact worker``), hands each its part of
 the plan, wires the streams (ipc:// on this host, tcp:// with CurveZMQ to other hosts), starts
 them on a common clock, and then, until every worker is done: writes recorded streams to the
-recorder, collects heartbeats (rates, latencies, drops, CPU), pings the workers, watches their
-processes, and stops everything cleanly on Ctrl-C. A worker that raises or dies is named with its
-nodes and cause; the run then ends (recording flushed up to the failure) or, when its group says
-``restart: on-failure``, the worker is started again and rejoins the running graph.
+recorder, collects heartbeats and statistics, pings the workers, and watches their processes.
+
+Every phase runs the same pump (:meth:`ProcessExecutor._pump`), so pings, records, exits and
+liveness are handled alike while starting, running and stopping. Failures are told truly:
+
+* a worker that raises or dies is named with its nodes and cause;
+* a worker that shows no progress for its group's ``stall_s`` (no heartbeat, or one node's step
+  that does not return) is named with the node and tick, and killed;
+* either ends the run (recording flushed up to the failure) or, under ``restart: on-failure``,
+  restarts the group, which rejoins the running graph;
+* Ctrl-C or SIGTERM picks one tick on which every worker stops (a loop through several processes
+  drains like the end of a timed run); a group still draining after ``stop_grace_s`` is aborted,
+  named, and the run exits non-zero; a second Ctrl-C aborts at once;
+* a real-time run that falls behind its clock is warned about once, naming the busiest nodes.
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import shutil
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,8 +41,8 @@ import msgpack
 import zmq
 
 from flowtact.compile import Plan
-from flowtact.runtime.clock import tick_for
-from flowtact.runtime.inproc import RunSummary, Sink
+from flowtact.runtime.clock import LAG_WARN_S, tick_for
+from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.wire import recv_message
@@ -38,14 +50,24 @@ from flowtact.runtime.wire import recv_message
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
 
 PING_S = 0.25
-STARTUP_S = 60.0
-STOP_GRACE_S = 10.0
 WARMUP_S = 1.0
 """CPU is reported over the running phase after this warm-up (JIT compilation, first allocations)."""
+STOP_MARGIN_S = 0.25
+"""A stop ends on the tick this far (in wall time) ahead of the furthest worker: it reaches them first."""
+DEADLINE_WARN_EVERY_S = 5.0
+"""Deadline misses are told at the first one, then at most this often (with their count)."""
+WAITING_EVERY_S = 15.0
+"""How often the run repeats that it is waiting for a worker on another host."""
+LAST_WORDS_S = 0.2
+SILENT_PROBE_S = 0.3
+"""How long a worker without progress has its CPU time watched, to tell a hung process from a busy one."""
+IDLE_CPU = 0.05
+"""A worker without progress that uses less than this share of a core is not working: it has stalled."""
+"""After a worker exits, how long its last control messages (an error report) may take to arrive."""
 
 
 class WorkerFailed(RuntimeError):
-    """A worker raised or died: names the process group, its nodes and the cause."""
+    """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause."""
 
 
 @dataclass
@@ -55,6 +77,9 @@ class _Proc:
     host: str | None
     restart: str
     max_restarts: int
+    stall_s: float
+    startup_s: float
+    stop_grace_s: float
     popen: subprocess.Popen[bytes] | None = None
     ident: bytes | None = None
     sock: zmq.Socket | None = None
@@ -71,6 +96,17 @@ class _Proc:
     wired: bool = False
     last_k: int = 0
     violations: dict[str, int] = field(default_factory=dict)
+    since: float = 0.0  # when it was (re)started or started running: the clock of its windows
+    beat_at: float = 0.0  # when its last heartbeat arrived
+    beat: dict[str, Any] = field(default_factory=dict)
+    busy_since: float = 0.0  # since when its current step (same node, same step count) runs
+    next_waiting: float = math.inf  # when to repeat that the run waits for it (another host)
+    tick_rate: float = 0.0  # ticks per second lately (from heartbeats)
+    silent_mark: tuple[float, float] | None = None  # (when, CPU seconds) as its heartbeats fell silent
+
+    def describe(self) -> str:
+        where = f" on {self.host}" if self.host else ""
+        return f"process '{self.name}'{where} (nodes {', '.join(self.nodes)})"
 
 
 class ProcessExecutor:
@@ -115,8 +151,16 @@ class ProcessExecutor:
         self.samples: dict[str, int] = {}
         self.rec_ends = 0
         self.stopped = False
+        self.stop_at = 0.0
+        self.stop_k = 0
+        self.deadline_quiet: dict[str, float] = {}  # deadline path -> no warning before then
+        self.interrupts = 0
         self.refused_seen = 0
+        self.max_lag_s = 0.0
+        self.late: list[str] = []  # the busiest nodes when the run fell behind real time
         self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
+        self.t_run = self.next_ping = time.monotonic()
+        self.t0_ns = 0
         self.wplans = {
             g: self.placement.worker_plan(g, fast=self.fast, tick_s=self.tick_s, duration_s=duration_s)
             for g in self.placement.groups
@@ -124,28 +168,32 @@ class ProcessExecutor:
         self.t_start = time.monotonic()
         stopped_by = "duration"
         failure: str | None = None
+        restore = self._catch_signals()
         try:
             self._open_sockets()
             for g, nodes in self.placement.groups.items():
                 pdef = self.placement.processes[g]
-                self.procs[g] = _Proc(g, nodes, pdef.host, pdef.restart, pdef.max_restarts)
+                self.procs[g] = _Proc(
+                    g,
+                    nodes,
+                    pdef.host,
+                    pdef.restart,
+                    pdef.max_restarts,
+                    stall_s=pdef.stall_window(self.fast),
+                    startup_s=pdef.startup_window(),
+                    stop_grace_s=pdef.stop_grace_s,
+                    since=self.t_start,
+                )
             for proc in self.procs.values():
                 if proc.host is None:
                     self._spawn(proc)
                 else:
-                    self.warn(
-                        f"waiting for process '{proc.name}' on {proc.host}: start it there with "
-                        f"`flowtact worker {self.tcp_ctl} --process {proc.name}`"
-                    )
-            try:
-                self._start_all()
-                stopped_by = self._supervise()
-            except KeyboardInterrupt:
-                stopped_by = "interrupted"
-                self._stop_all()
+                    self._say_waiting(proc)
+            stopped_by = self._supervise() if self._start_all() else "interrupted"
         except WorkerFailed as e:
             failure = str(e)
         finally:
+            restore()
             self._shutdown(failure is not None)
         summary = self._summary(stopped_by)
         if failure is not None:
@@ -153,6 +201,22 @@ class ProcessExecutor:
             err.summary = summary  # type: ignore[attr-defined]
             raise err
         return summary
+
+    def _catch_signals(self) -> Callable[[], None]:
+        """Ctrl-C and SIGTERM become a flag the pump reads: no exception lands mid-write."""
+        if threading.current_thread() is not threading.main_thread():
+            return lambda: None
+
+        def on_signal(signum: int, frame: Any) -> None:
+            self.interrupts += 1
+
+        old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+        def restore() -> None:
+            for sig, handler in old.items():
+                signal.signal(sig, handler)
+
+        return restore
 
     # -- set-up -----------------------------------------------------------------------------
     def _open_sockets(self) -> None:
@@ -215,7 +279,22 @@ class ProcessExecutor:
         proc.pid = proc.popen.pid
         proc.state = "starting"
         proc.ident = None
+        proc.beat = {}
+        proc.since = time.monotonic()
         proc.done = proc.rec_done = proc.wired = False
+
+    def _say_waiting(self, proc: _Proc) -> None:
+        waited = time.monotonic() - proc.since
+        if waited < 1.0:
+            self.warn(
+                f"waiting for process '{proc.name}' on {proc.host} (up to {proc.startup_s:g} s, its "
+                f"startup_s): start it there with `flowtact worker {self.tcp_ctl} --process {proc.name}`"
+            )
+        else:
+            self.warn(
+                f"still waiting for process '{proc.name}' on {proc.host} ({waited:.0f} of {proc.startup_s:g} s)"
+            )
+        proc.next_waiting = time.monotonic() + WAITING_EVERY_S
 
     def _bind_addresses(self, proc: _Proc) -> dict[int, str]:
         """Where each of the group's incoming streams is bound."""
@@ -236,18 +315,26 @@ class ProcessExecutor:
         with contextlib.suppress(zmq.ZMQError):  # the worker is gone; its process watch reports it
             proc.sock.send_multipart([proc.ident, msgpack.packb(kw)])  # type: ignore[union-attr]
 
-    def _start_all(self) -> None:
-        """Handshake: hello -> plan -> ready -> wire -> wired -> start, for every worker."""
-        deadline = time.monotonic() + STARTUP_S
+    def _start_all(self) -> bool:
+        """Handshake: hello -> plan -> ready -> wire -> wired -> start; False if interrupted first."""
         while not all(p.wired for p in self.procs.values()):
+            if self.interrupts:
+                return False
             if self.auth is not None:
                 self._report_refusals()
-            if time.monotonic() > deadline:
-                missing = [p.name for p in self.procs.values() if not p.wired]
-                raise WorkerFailed(f"processes {', '.join(missing)} did not start within {STARTUP_S:.0f} s")
+            now = time.monotonic()
+            for p in self.procs.values():
+                if p.wired:
+                    continue
+                if now - p.since > p.startup_s:
+                    how = "start it with `flowtact worker`; " if p.host and p.ident is None else ""
+                    raise WorkerFailed(
+                        f"{p.describe()} did not join within {p.startup_s:g} s ({how}its startup_s sets the window)"
+                    )
+                if p.host and p.ident is None and now >= p.next_waiting:
+                    self._say_waiting(p)
             try:
-                self._poll(50)
-                self._watch()
+                self._pump(50)
             except _Failure as f:
                 raise WorkerFailed(describe_failure(f.proc, f.report)) from None
             if all(p.endpoints or not self.wplans[p.name]["inbound"] for p in self.procs.values()) and all(
@@ -258,11 +345,15 @@ class ProcessExecutor:
                         self._wire(p)
         t0 = time.monotonic_ns() + 20_000_000
         self.t0_ns = t0
+        self.t_run = time.monotonic()
         for p in self.procs.values():
             self._send(p, "start", t0_ns=t0, k0=0, resume=False)
-            p.state = "running"
-        self.t_run = time.monotonic()
-        self.next_ping = time.monotonic()
+            self._running(p)
+        return True
+
+    def _running(self, proc: _Proc) -> None:
+        proc.state = "running"
+        proc.since = proc.beat_at = proc.busy_since = time.monotonic()
 
     def _report_refusals(self) -> None:
         """Say so when a host tries to join with another key (ZAP refusal or a failed handshake)."""
@@ -288,7 +379,27 @@ class ProcessExecutor:
         self._send(proc, "wire", connect=connect, record=record)
         proc.state = "wiring"
 
-    # -- messages ---------------------------------------------------------------------------
+    # -- the pump: every phase runs it ------------------------------------------------------
+    def _pump(self, timeout_ms: int) -> None:
+        """Receive control messages and records, notice exits and stalls, ping, show progress."""
+        self._poll(timeout_ms)
+        self._watch()
+        self._check_liveness()
+        now = time.monotonic()
+        if now >= self.next_ping:
+            self.next_ping = now + PING_S
+            for p in self.procs.values():
+                if p.ident is not None:
+                    self._send(p, "ping")
+            if self.t0_ns:
+                self._check_overload()
+                if self.live is not None:
+                    self.live.update(self.snapshot())
+                if self.progress is not None:
+                    self.progress(self._graph_now(), self.duration_s)
+        if self.recorder is not None:
+            self.recorder.maybe_flush()
+
     def _poll(self, timeout_ms: int) -> None:
         for sock, _ in self.poller.poll(timeout_ms):
             if sock is self.ctl or sock is self.ctl_tcp:
@@ -301,8 +412,9 @@ class ProcessExecutor:
             else:
                 self._drain_records(sock)
 
-    def _drain_records(self, sock: zmq.Socket) -> None:
-        while True:
+    def _drain_records(self, sock: zmq.Socket, budget: int = 10_000) -> None:
+        """Write what arrived (at most ``budget`` messages: control keeps its turn)."""
+        for _ in range(budget):
             try:
                 m = recv_message(sock, zmq.NOBLOCK)
             except zmq.Again:
@@ -317,6 +429,11 @@ class ProcessExecutor:
 
     def _on_control(self, sock: zmq.Socket, ident: bytes, msg: dict[str, Any]) -> None:
         op = msg["op"]
+        if op == "beat":  # from the worker's heartbeat thread (a socket of its own)
+            proc = self.procs.get(msg["process"])
+            if proc is not None and msg["pid"] == proc.pid:
+                self._on_beat(proc, msg)
+            return
         if op == "hello":
             proc = self.procs.get(msg["process"])
             if proc is None:
@@ -340,7 +457,9 @@ class ProcessExecutor:
             proc.wired = True
             if proc.restarts:
                 self._send(proc, "start", t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
-                proc.state = "running"
+                self._running(proc)
+                if self.stopped:
+                    self._send(proc, "stop", k=self.stop_k)
             else:
                 proc.state = "wired"
         elif op == "stats":
@@ -353,39 +472,192 @@ class ProcessExecutor:
         elif op == "error":
             raise _Failure(proc, msg)
 
+    def _on_beat(self, proc: _Proc, beat: dict[str, Any]) -> None:
+        now = time.monotonic()
+        old = proc.beat
+        if beat["node"] is None or beat["node"] != old.get("node") or beat["steps"] != old.get("steps"):
+            proc.busy_since = now  # waiting, or a new step: progress
+            proc.silent_mark = None
+        if old and now > proc.beat_at:  # ticks per second, for where a stop can reach it
+            rate = max(beat["k"] - old["k"], 0) / (now - proc.beat_at)
+            proc.tick_rate = max(rate, 0.5 * proc.tick_rate)  # slow to forget a fast spell
+        proc.beat, proc.beat_at = beat, now
+        proc.last_k = max(proc.last_k, beat["k"])
+
     def _on_stats(self, proc: _Proc, msg: dict[str, Any]) -> None:
         proc.stats = msg
-        proc.last_k = msg["k"]
+        proc.last_k = max(proc.last_k, msg["k"])
         wall = msg["wall_ns"]
         if proc.warm is None and time.monotonic() - self.t_run >= WARMUP_S:
             proc.warm = (msg["cpu_s"], wall)
         if proc.warm is not None and wall > proc.warm[1]:
             proc.cpu_pct = 100.0 * (msg["cpu_s"] - proc.warm[0]) / ((wall - proc.warm[1]) / 1e9)
+        self.max_lag_s = max(self.max_lag_s, msg.get("max_lag_s", 0.0))
+        if self.fast:  # deadlines are wall-clock budgets: a virtual clock cannot miss them
+            return
+        now = time.monotonic()
         for name, p in msg["paths"].items():
             seen = proc.violations.get(name, 0)
-            if p["violations"] > seen:
+            if p["violations"] > seen and now >= self.deadline_quiet.get(name, 0.0):
                 budget = next(d.budget_s for d in self.plan.graph.deployment.deadlines if d.name == name)
                 self.warn(
                     f"deadline {name} ({budget * 1e3:g} ms) missed {p['violations'] - seen}x "
                     f"(worst {p['worst_ns'] / 1e6:.2f} ms so far)"
                 )
                 proc.violations[name] = p["violations"]
+                self.deadline_quiet[name] = now + DEADLINE_WARN_EVERY_S
+
+    # -- liveness -----------------------------------------------------------------------------
+    def _watch(self) -> None:
+        """Notice a worker process that exited without saying done (after its last words)."""
+        for p in self.procs.values():
+            if p.popen is None or p.done:
+                continue
+            code = p.popen.poll()
+            if code is None:
+                continue
+            deadline = time.monotonic() + LAST_WORDS_S  # an error report may still be in flight
+            while not p.done and time.monotonic() < deadline:
+                self._poll(20)
+            if p.done:
+                continue
+            cause = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exited with status {code}"
+            raise _Failure(p, {"node": None, "message": cause})
+
+    def _check_liveness(self) -> None:
+        """A running worker that shows no progress for ``stall_s`` has stalled.
+
+        No progress: its heartbeats stopped, or the node it steps has not returned. A worker on
+        this host is then asked of the kernel: stopped (``kill -STOP``) or idle (blocked in a call)
+        is a stall; burning CPU (a long computation, or kernels loading while they hold the
+        interpreter so the heartbeat thread cannot run) is given the start-up window first. A worker
+        on another host is judged by its heartbeats alone.
+        """
+        now = time.monotonic()
+        for p in self.procs.values():
+            if p.state != "running" or p.done:
+                continue
+            window = p.startup_s if p.beat.get("first", True) else p.stall_s
+            node = p.beat.get("node")
+            quiet = now - p.beat_at
+            stuck = now - p.busy_since if node else 0.0
+            if max(quiet, stuck) <= window:
+                continue
+            why = self._why_stalled(p, now, max(quiet, stuck))
+            if why is None:
+                continue
+            what = (
+                f"no heartbeat for {quiet:.1f} s" + (f" inside node '{node}'" if node else "")
+                if quiet > window
+                else f"node '{node}' has not returned from its step for {stuck:.1f} s"
+            )
+            raise _Failure(
+                p,
+                {
+                    "node": None,
+                    "message": f"stalled at tick {p.last_k} (t={p.last_k * self.tick_s:.3f} s): {what}, {why} "
+                    f"(stall_s {window:g} s)",
+                    "stalled": True,
+                },
+            )
+
+    def _why_stalled(self, p: _Proc, now: float, idle_for: float) -> str | None:
+        """Why a worker without progress counts as stalled now, or None while it may be working."""
+        seen = _proc_stat(p.pid) if p.host is None and p.pid is not None else None
+        if seen is None:  # another host, or no /proc
+            return "stopped, hung or starved"
+        state, cpu_s = seen
+        if state == "T":
+            return "its process is stopped (SIGSTOP)"
+        if p.silent_mark is None:
+            p.silent_mark = (now, cpu_s)
+            return None
+        t_mark, cpu_mark = p.silent_mark
+        if now - t_mark < SILENT_PROBE_S:
+            return None
+        if (cpu_s - cpu_mark) / (now - t_mark) < IDLE_CPU:
+            return "and its process is idle (blocked in a call, or waiting on something that never comes)"
+        if idle_for > p.startup_s:
+            return f"while computing (longer than startup_s, {p.startup_s:g} s)"
+        return None
+
+    def _check_overload(self) -> None:
+        """Warn once when a real-time run falls behind its clock, naming the busiest nodes."""
+        if self.fast or self.late:
+            return
+        lagging = [p for p in self.procs.values() if p.stats.get("max_lag_s", 0.0) > LAG_WARN_S]
+        if not lagging:
+            return
+        worst = max(lagging, key=lambda p: p.stats["max_lag_s"])
+        wall = max((worst.stats["wall_ns"] - self.t0_ns) / 1e9, 1e-9)
+        share = {
+            n: ns / 1e9 / wall for p in self.procs.values() for n, ns in p.stats.get("node_ns", {}).items()
+        }
+        self.late = sorted(share, key=share.get, reverse=True)[:3]  # type: ignore[arg-type]
+        busiest = ", ".join(f"{n} {100 * share[n]:.0f} %" for n in self.late)
+        self.warn(
+            f"falling behind real time: {worst.describe()} ran {worst.stats['max_lag_s']:.2f} s late by "
+            f"t={worst.stats['now']:.2f} s (real-time factor {worst.stats['now'] / wall:.2f}); "
+            f"busiest nodes (share of wall time in their steps): {busiest}"
+        )
 
     # -- running ----------------------------------------------------------------------------
     def _supervise(self) -> str:
         while not all(p.done for p in self.procs.values()):
+            if self.interrupts and not self.stopped:
+                self._stop_all()
+            elif self.interrupts > 1:
+                raise WorkerFailed(f"interrupted again while stopping: aborted {self._draining()}")
+            if self.stopped:
+                self._check_grace()
             try:
-                self._poll(20)
-                self._watch()
+                self._pump(20)
             except _Failure as f:
                 self._failed(f)
-            self._tick_housekeeping()
         self._drain_until_records_end()
         return "interrupted" if self.stopped else "duration"
+
+    def _stop_all(self) -> None:
+        """Ctrl-C: every worker ends on one tick ahead, then drains and flushes."""
+        self.stopped = True
+        now = self.stop_at = time.monotonic()
+        # No worker may have started a tick past the stop tick when the stop reaches it: in a loop
+        # through several processes one would wait inside that tick for a peer that stopped.
+        # Real time: no worker runs ahead of the wall clock. --fast: extrapolate from heartbeats.
+        reach = max(
+            (p.last_k + p.tick_rate * (now - p.beat_at + STOP_MARGIN_S) for p in self.procs.values()),
+            default=0.0,
+        )
+        if not self.fast:
+            wall = (time.monotonic_ns() - self.t0_ns) / 1e9 + STOP_MARGIN_S
+            reach = max(reach, wall / self.tick_s)
+        k = math.ceil(reach) + 1
+        self.stop_k = k
+        for p in self.procs.values():
+            if p.ident is not None:
+                self._send(p, "stop", k=k)
+
+    def _draining(self) -> str:
+        left = [p for p in self.procs.values() if not p.done]
+        return "; ".join(f"{p.describe()} still at tick {p.last_k} of {self.stop_k}" for p in left)
+
+    def _check_grace(self) -> None:
+        """A group still draining after its ``stop_grace_s`` is aborted and named."""
+        waited = time.monotonic() - self.stop_at
+        late = [p for p in self.procs.values() if not p.done and waited > p.stop_grace_s]
+        if late:
+            grace = max(p.stop_grace_s for p in late)
+            raise WorkerFailed(
+                f"the stop did not finish within stop_grace_s ({grace:g} s): aborted {self._draining()}; "
+                "the recording holds what arrived until then"
+            )
 
     def _failed(self, f: _Failure) -> None:
         """Restart the worker when its group asks for it and may; otherwise end the run."""
         proc, text = f.proc, describe_failure(f.proc, f.report)
+        if f.report.get("stalled") and proc.popen is not None and proc.popen.poll() is None:
+            proc.popen.kill()  # stopped or hung: it cannot take part in an orderly end
+            proc.popen.wait()
         if (
             proc.restart != "on-failure"
             or proc.restarts >= proc.max_restarts
@@ -403,50 +675,8 @@ class ProcessExecutor:
         self._spawn(proc)
         proc.state = "restarting"
 
-    def _tick_housekeeping(self) -> None:
-        now = time.monotonic()
-        if now >= self.next_ping:
-            self.next_ping = now + PING_S
-            for p in self.procs.values():
-                if p.ident is not None and not p.done:
-                    self._send(p, "ping")
-            if self.live is not None:
-                self.live.update(self.snapshot())
-            if self.progress is not None:
-                self.progress(self._graph_now(), self.duration_s)
-        if self.recorder is not None:
-            self.recorder.maybe_flush()
-
     def _graph_now(self) -> float:
         return min((p.stats.get("now", 0.0) for p in self.procs.values()), default=0.0)
-
-    def _watch(self) -> None:
-        """Notice a worker process that exited without saying done."""
-        for p in self.procs.values():
-            if p.popen is None or p.done:
-                continue
-            code = p.popen.poll()
-            if code is None:
-                continue
-            cause = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exited with status {code}"
-            raise _Failure(p, {"node": None, "message": cause})
-
-    def _stop_all(self) -> None:
-        """Ctrl-C: sources stop, everything downstream drains and flushes."""
-        self.stopped = True
-        for p in self.procs.values():
-            if p.ident is not None:
-                self._send(p, "stop")
-        deadline = time.monotonic() + STOP_GRACE_S
-        while not all(p.done for p in self.procs.values()) and time.monotonic() < deadline:
-            try:
-                self._poll(20)
-                self._watch()
-            except _Failure as f:
-                raise WorkerFailed(describe_failure(f.proc, f.report)) from None
-            except KeyboardInterrupt:
-                break
-        self._drain_until_records_end()
 
     def _drain_until_records_end(self) -> None:
         """Write what is still in flight: every recording worker ends its records with a marker."""
@@ -585,6 +815,7 @@ class ProcessExecutor:
                 if plan.specs[(n, p)].events and name not in events:
                     events[name] = count
         now = max((p.stats.get("now", 0.0) for p in self.procs.values()), default=0.0)
+        counters = {n: c for p in self.procs.values() for n, c in p.counters.items()}
         return RunSummary(
             graph=plan.graph.name,
             duration_s=now,
@@ -593,13 +824,26 @@ class ProcessExecutor:
             samples=samples,
             events=events,
             event_units={k: plan.specs[tuple(k.split(".", 1))].n_units or 1 for k in events},  # type: ignore[index]
-            counters={n: c for p in self.procs.values() for n, c in p.counters.items()},
+            counters=counters,
             pruned=list(plan.pruned),
             ticks=max((p.last_k for p in self.procs.values()), default=0),
             processes=self._process_table(),
             streams=self._stream_stats(),
             paths=self._path_stats(),
+            counter_docs=explain_counters(plan, counters),
+            realtime=None if self.fast else self.max_lag_s < LAG_WARN_S,
+            max_lag_s=self.max_lag_s,
+            late_nodes=list(self.late),
         )
+
+
+def _proc_stat(pid: int) -> tuple[str, float] | None:
+    """Linux: a process' state letter and CPU seconds (user + system), or None where unknown."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return fields[0], (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 class _Failure(Exception):

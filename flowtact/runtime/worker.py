@@ -10,9 +10,15 @@ node's end-of-stream output (its flush). Nodes wait for remote input just before
 chains that leave a process and come back within a tick do not deadlock.
 
 Lifecycle, driven by the supervisor over the control socket (msgpack dicts): hello -> plan ->
-ready (bound endpoints) -> wire (connect) -> wired -> start -> stats heartbeats -> done -> exit.
-A worker that stops hearing the supervisor for :data:`ORPHAN_S` exits on its own; on Linux it
-also dies with its parent (``PR_SET_PDEATHSIG``), so no process outlives a run.
+ready (bound endpoints) -> wire (connect) -> wired -> start -> stats -> done -> exit. A stop
+names the tick every worker ends on (``stop`` with ``k``), so a loop through several processes
+ends on the same tick everywhere and drains like the end of a timed run.
+
+Liveness: a heartbeat thread reports the tick, the node being stepped and the steps done every
+:data:`BEAT_S`, so the supervisor tells a worker stuck inside a block (or stopped) from one that
+waits for its clock or its inputs. A worker the supervisor started dies with it (it checks its
+parent, and on Linux ``PR_SET_PDEATHSIG``); one started by hand on another host exits after
+:data:`ORPHAN_S` without a ping. So no process outlives a run.
 
 Run as ``python -m flowtact.runtime.worker --connect ENDPOINT --process NAME`` (the supervisor
 does this) or ``flowtact worker ENDPOINT --process NAME`` on another host.
@@ -21,12 +27,14 @@ does this) or ``flowtact worker ENDPOINT --process NAME`` on another host.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import math
 import os
 import signal
 import socket
 import sys
+import threading
 import time
 import traceback
 from collections import deque
@@ -44,15 +52,23 @@ from flowtact.runtime.placement import spec_from_wire
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.wire import END, recv_message, send_message
 
-__all__ = ["ORPHAN_S", "Worker", "main"]
+__all__ = ["BEAT_S", "ORPHAN_S", "Worker", "main"]
 
-ORPHAN_S = 3.0
-"""A worker that has not heard the supervisor for this long exits (no orphans)."""
+ORPHAN_S = 10.0
+"""A worker started by hand (another host) that has not heard its supervisor this long exits."""
+BEAT_S = 0.1
+"""How often the heartbeat thread reports progress (tick, node being stepped, steps done)."""
 HEARTBEAT_S = 0.25
+"""How often the main thread sends its statistics (rates, latencies, drops, CPU)."""
 LATENCY_WARMUP_S = 1.0
 """Latencies count for data that left its source this long after the start: loading JIT-compiled
 kernels and first allocations are start-up, not transport."""
 POLL_MS = 100
+LATEST_DRAIN_MS = 1
+"""A ``latest`` input whose receive queue was full is drained again after waiting this long for
+what ZeroMQ still moves in from the kernel: what reaches the consumer is the newest, not the oldest."""
+MERGE_MAX_S = 0.1
+"""A worker behind the wall clock merges at most this much graph time into one tick."""
 INF = math.inf
 FOREVER = 2**62
 
@@ -111,7 +127,9 @@ class _Deadline:
 class Worker:
     """One process group of a running graph."""
 
-    def __init__(self, control: str, process: str, *, keys_dir: str | None = None) -> None:
+    def __init__(
+        self, control: str, process: str, *, keys_dir: str | None = None, child: bool = False
+    ) -> None:
         self.process = process
         self.ctx = zmq.Context()
         self.keys = None
@@ -136,8 +154,16 @@ class Worker:
         else:
             self.ctl.connect(control)
         self.last_ping = time.monotonic()
-        self.stopping = False
+        self.parent = os.getppid() if child else None
+        self.stop_k = FOREVER
         self.rec: zmq.Socket | None = None
+        # progress, read by the heartbeat thread (plain attribute writes: cheap on the hot path)
+        self.k = 0
+        self.steps = 0
+        self.busy: str | None = None  # the node being built, opened or stepped
+        self.busy_first = True  # ... for the first time: kernels may be compiling
+        self.lag_s = 0.0
+        self.heart = _Heartbeat(self, control)
 
     # -- control ----------------------------------------------------------------------------
     def _send(self, op: str, **kw: Any) -> None:
@@ -151,9 +177,9 @@ class Worker:
         self.last_ping = time.monotonic()
         return msg
 
-    def _expect(self, op: str, timeout_s: float = 120.0) -> dict[str, Any]:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+    def _expect(self, op: str) -> dict[str, Any]:
+        """Wait for control message ``op`` for as long as the supervisor lives (it keeps time)."""
+        while True:
             msg = self._recv_ctl(POLL_MS)
             if msg is None:
                 self._check_orphan()
@@ -162,10 +188,14 @@ class Worker:
                 return msg
             if msg["op"] in ("abort", "exit"):
                 raise Stop
-        raise TimeoutError(f"no '{op}' from the supervisor within {timeout_s:.0f} s")
+            if msg["op"] == "stop":
+                self.stop_k = min(self.stop_k, int(msg["k"]))
 
     def _check_orphan(self) -> None:
-        if time.monotonic() - self.last_ping > ORPHAN_S:
+        if self.parent is not None:
+            if os.getppid() != self.parent:
+                raise Stop("the supervisor is gone")
+        elif time.monotonic() - self.last_ping > ORPHAN_S:
             raise Stop("the supervisor is gone")
 
     def _service(self) -> None:
@@ -183,27 +213,29 @@ class Worker:
     def serve(self) -> int:
         """Run the whole lifecycle; returns the process exit status."""
         self._send("hello", process=self.process, pid=os.getpid(), host=socket.gethostname())
+        self.heart.start()
         try:
             msg = self._expect("plan")
             self._build(msg["plan"])
+            self._warm_up()
             self._bind(msg["bind"])
             self._send(
                 "ready", endpoints={i.id: i.sock.last_endpoint.decode() for i in self.inbound.values()}
             )
             wire = self._expect("wire")
             self._connect(wire["connect"], wire["record"])
-            self._send("wired")
-            start = self._expect("start")
-            self.t0_ns = start["t0_ns"] or time.monotonic_ns()
-            self.warm_ns = self.t0_ns + int(LATENCY_WARMUP_S * 1e9)
-            self.k = int(start.get("k0", 0))
-            self._open()
             try:
+                self._open()  # devices, cameras, weights: before the clock starts, not on its time
+                self._send("wired")
+                start = self._expect("start")
+                self.t0_ns = start["t0_ns"] or time.monotonic_ns()
+                self.warm_ns = self.t0_ns + int(LATENCY_WARMUP_S * 1e9)
+                self.k = int(start.get("k0", 0))
                 self._run(resume=bool(start.get("resume")))
             finally:
                 self._close_blocks()
             self._finish()
-            self._expect("exit", timeout_s=3600)
+            self._expect("exit")
             return 0
         except Stop:
             return 0
@@ -221,6 +253,7 @@ class Worker:
             )
             return 1
         finally:
+            self.heart.halt()
             if self.auth is not None:
                 self.auth.stop()
             self.ctx.destroy()  # each socket's own linger: the control socket's last words get out
@@ -239,6 +272,7 @@ class Worker:
         self.demanded: dict[str, frozenset[str]] = {}
         self.out_specs: dict[str, dict[str, StreamSpec]] = {}
         for nd in plan["nodes"]:
+            self.busy = nd["name"]
             cls = load_block(nd["block"])
             block = cls(cls.config_cls.build(nd["params"], owner=nd["name"]), node=nd["name"])
             specs = block.bind(
@@ -254,6 +288,11 @@ class Worker:
             self.out_specs[name] = specs
             if nd["src_idx"] is not None:
                 self.src_idx[name] = nd["src_idx"]
+        self.busy = None
+        self.warmed: set[str] = set()  # nodes past their first data-carrying step
+        self.node_ns = dict.fromkeys(self.order, 0)  # wall time spent in each node's steps
+        self.max_lag_s = 0.0
+        self.merged_ticks = 0  # real-time ticks taken together to catch up with the clock
         self.sources = [n for n in self.order if isinstance(self.blocks[n], Source)]
         # queues[(node, port)] -> deque of (available from tick, chunk, origins)
         self.queues: dict[tuple[str, str], deque[tuple[float, Chunk, dict[int, int]]]] = {
@@ -283,6 +322,27 @@ class Worker:
         self.now = 0.0
         self.next_beat = 0.0
         self.warm_ns = 0  # data that left its source before this is start-up, not transport
+
+    def _warm_up(self) -> None:
+        """Step a throwaway copy of every block once on synthetic input, before the clock starts.
+
+        A block's first step loads or compiles its kernels (0.7 s for ``tactip_sim`` even from
+        numba's cache); on the real-time clock that is a lag a loop through several processes
+        never catches up. The copies share nothing with the real blocks but the process' caches;
+        a block that cannot step without ``open()`` (a serial port, a camera) is simply skipped.
+        """
+        for n in self.order:
+            real = self.blocks[n]
+            self.busy, self.busy_first = n, True
+            with contextlib.suppress(Exception):
+                copy = type(real)(real.config, node=n)
+                copy.bind(real.input_specs, seed=real.seed, demanded=real.demanded)
+                ins = {p: _synthetic(spec) for p, spec in real.input_specs.items()}
+                if isinstance(copy, Source):
+                    copy(self.tick_s, **ins)
+                else:
+                    copy(**ins)
+        self.busy = None
 
     def _socket(self, kind: int, endpoint: str, hwm: int) -> zmq.Socket:
         s = self.ctx.socket(kind)
@@ -320,11 +380,13 @@ class Worker:
     def _open(self) -> None:
         self.opened: list[Block] = []
         for n in self.order:
+            self.busy, self.busy_first = n, True
             try:
                 self.blocks[n].open()
             except Exception as e:
                 raise _NodeFailure(n, self.blocks[n], 0.0, e) from e
             self.opened.append(self.blocks[n])
+        self.busy = None
 
     def _close_blocks(self) -> None:
         for block in reversed(getattr(self, "opened", [])):
@@ -340,7 +402,8 @@ class Worker:
         return k * self.tick_s
 
     def _run(self, *, resume: bool) -> None:
-        sources_on = bool(self.sources)
+        sources = bool(self.sources)
+        clocked = sources or bool(self.block_inputs)  # k follows the graph clock (else: arrivals)
         if resume and self.sources and not self.fast:  # skip what the clock already passed
             self.k = max(self.k, int((time.monotonic_ns() - self.t0_ns) / 1e9 / self.tick_s))
             for n in self.sources:
@@ -349,26 +412,52 @@ class Worker:
         while True:
             if self.n_ticks is not None and self.k >= self.n_ticks:
                 break
-            if self.stopping:
-                sources_on = False
-            if not sources_on and not self.block_inputs and not self.latest_inputs:
+            if clocked and self.k >= self.stop_k:  # stopped: every worker ends on this tick
                 break
-            if not sources_on and self.block_inputs and all(ib.ended for ib in self.block_inputs):
+            if not sources and not self.block_inputs and not self.latest_inputs:
                 break
-            if not sources_on and not self.block_inputs and not self._wait_latest():
+            if not sources and self.block_inputs and all(ib.ended for ib in self.block_inputs):
+                break
+            if not sources and not self.block_inputs and not self._wait_latest():
                 break
             self.k += 1
+            if sources and not self.fast:
+                self._catch_up()
             self.now = self._tick_time(self.k)
-            if sources_on and not self.fast:
+            if sources and not self.fast:
                 self._wait_clock(self.now)
             self._service()
-            self._tick(self.k, self.now, sources_on)
+            self._tick(self.k, self.now)
+
+    def _catch_up(self) -> None:
+        """Behind the wall clock by more than a tick: take every due tick in this one.
+
+        Blocks are chunking-invariant, so one late tick covering several gives the same outputs
+        as several; ticking through them one by one would never catch up with a loop whose
+        round trip through the processes is as long as its tick. The skipped ticks are closed on
+        every lossless stream first (an empty message), as if they had carried nothing: consumers,
+        and loops back into this worker, move on to the merged tick.
+        """
+        behind = int((time.monotonic_ns() - self.t0_ns) / 1e9 / self.tick_s) - self.k
+        if behind <= 1:
+            return
+        self.lag_s = behind * self.tick_s
+        self.max_lag_s = max(self.max_lag_s, self.lag_s)
+        step = max(1, int(MERGE_MAX_S / self.tick_s))  # bounded chunks: a slow consumer stays bounded
+        k = min(self.k + min(behind, step), self.stop_k, self.n_ticks or FOREVER)
+        self.merged_ticks += k - self.k
+        self.k = k
+        for ob in self.outbound:
+            if ob.policy == "block" and ob.sent_tick < k - 1:
+                self._send_out(ob, k - 1, Chunk.empty(self.out_specs[ob.node][ob.port]), {})
 
     def _wait_clock(self, now: float) -> None:
         target = self.t0_ns + int(now * 1e9)
         while True:
             remaining = (target - time.monotonic_ns()) / 1e9
             if remaining <= 0:
+                self.lag_s = -remaining  # how far this tick runs behind real time
+                self.max_lag_s = max(self.max_lag_s, self.lag_s)
                 return
             if remaining > 0.06:
                 self.ctl.poll(50)
@@ -378,7 +467,7 @@ class Worker:
 
     def _control(self, msg: dict[str, Any]) -> None:
         if msg["op"] == "stop":
-            self.stopping = True
+            self.stop_k = min(self.stop_k, int(msg["k"]))
         elif msg["op"] in ("abort", "exit"):
             raise Stop
 
@@ -391,11 +480,8 @@ class Worker:
             self._service()
         return False
 
-    def _tick(self, k: int, now: float, sources_on: bool) -> None:
+    def _tick(self, k: int, now: float) -> None:
         for n in self.order:
-            block = self.blocks[n]
-            if isinstance(block, Source) and not sources_on:
-                continue
             for ib, delayed in self.remote_inputs[n]:
                 self._fetch(ib, k - 1 if delayed else k)
             self._step(n, k, now, k)
@@ -431,10 +517,18 @@ class Worker:
             ins[p] = c
         if empty:
             return
+        first = n not in self.warmed
+        self.busy, self.busy_first = n, first
+        t0 = time.perf_counter_ns()
         try:
             out = block(now, **ins) if source else block(**ins)
         except Exception as e:
             raise _NodeFailure(n, block, now, e) from e
+        self.node_ns[n] += time.perf_counter_ns() - t0
+        self.busy = None
+        self.steps += 1
+        if first and (source or any(len(c) for c in ins.values())):
+            self.warmed.add(n)
         if n in self.deadlines:
             t = time.monotonic_ns()
             for d in self.deadlines[n]:
@@ -462,13 +556,22 @@ class Worker:
                 self._send_out(ob, k, chunk, origins)
             sid = self.recorded.get(key)
             if sid is not None and (len(chunk) or chunk.end is not None):
-                send_message(self.rec, sid, 0, k, chunk)  # type: ignore[arg-type]
+                self._send_lossless(self.rec, sid, 0, k, chunk)  # type: ignore[arg-type]
+
+    def _send_lossless(self, sock: zmq.Socket, *args: Any, **kw: Any) -> None:
+        """Send, waiting while the consumer's queue is full, and still hear the supervisor meanwhile."""
+        while not send_message(sock, *args, nowait=True, **kw):
+            sock.poll(POLL_MS, zmq.POLLOUT)
+            self._service()
 
     def _send_out(self, ob: _Outbound, k: int, chunk: Chunk, origins: dict[int, int]) -> None:
         """Send a chunk; ``latest`` streams skip empty chunks and drop what the queue cannot hold."""
         if not len(chunk) and chunk.end is None and (ob.policy == "latest" or ob.sent_tick == k):
             return
-        if send_message(ob.sock, ob.id, ob.seq, k, chunk, origins, nowait=ob.policy == "latest"):  # type: ignore[arg-type]
+        if ob.policy == "block":
+            self._send_lossless(ob.sock, ob.id, ob.seq, k, chunk, origins)  # type: ignore[arg-type]
+            ob.seq += 1
+        elif send_message(ob.sock, ob.id, ob.seq, k, chunk, origins, nowait=True):  # type: ignore[arg-type]
             ob.seq += 1
         else:
             ob.dropped += 1
@@ -479,17 +582,7 @@ class Worker:
         if ib.ended:
             return
         if ib.policy == "latest":
-            got = []
-            while True:
-                try:
-                    got.append(recv_message(ib.sock, zmq.NOBLOCK))  # type: ignore[arg-type]
-                except zmq.Again:
-                    break
-            if len(got) > ib.queue:
-                ib.dropped += len(got) - ib.queue
-                got = got[-ib.queue :]
-            for m in got:
-                self._accept(ib, m, -INF)
+            self._fetch_latest(ib)
             return
         while ib.upto < tick and not ib.ended:
             try:
@@ -499,6 +592,31 @@ class Worker:
                     self._service()
                 continue
             self._accept(ib, m, m.tick)
+
+    def _fetch_latest(self, ib: _Inbound) -> None:
+        """Take the newest ``queue`` messages of a ``latest`` stream; count the older ones as dropped.
+
+        ZeroMQ moves messages from the kernel into the receive queue only as the queue empties, so
+        a full queue holds the *oldest* backlog. While a drain fills the queue, wait
+        :data:`LATEST_DRAIN_MS` and drain again: the backlog is read through to its newest end.
+        """
+        got: deque[Any] = deque(maxlen=ib.queue)
+        received = 0
+        while True:
+            batch = 0
+            while True:
+                try:
+                    m = recv_message(ib.sock, zmq.NOBLOCK)  # type: ignore[arg-type]
+                except zmq.Again:
+                    break
+                got.append(m)
+                batch += 1
+            received += batch
+            if batch < ib.queue or not ib.sock.poll(LATEST_DRAIN_MS):  # type: ignore[union-attr]
+                break
+        ib.dropped += received - len(got)
+        for m in got:
+            self._accept(ib, m, -INF)
 
     def _accept(self, ib: _Inbound, m: Any, tick: float) -> None:
         if m.seq != ib.next_seq and not m.is_end:
@@ -546,9 +664,10 @@ class Worker:
                 raise _NodeFailure(n, block, self.now, e) from e
             self._deliver(n, out, k, {})
             for ob in ends.get(n, ()):
-                send_message(ob.sock, ob.id, ob.seq, k, Chunk.empty(self.out_specs[n][ob.port]), flags=END)  # type: ignore[arg-type]
+                end = Chunk.empty(self.out_specs[n][ob.port])
+                self._send_lossless(ob.sock, ob.id, ob.seq, k, end, flags=END)  # type: ignore[arg-type]
         if self.rec is not None:
-            send_message(self.rec, -1, 0, k, Chunk(np.empty(0), np.empty(0)), flags=END)
+            self._send_lossless(self.rec, -1, 0, k, Chunk(np.empty(0), np.empty(0)), flags=END)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
         self._send("done", **self._stats(), counters=counters)
 
@@ -559,6 +678,10 @@ class Worker:
             "now": self.now,
             "cpu_s": time.process_time(),
             "wall_ns": time.monotonic_ns(),
+            "lag_s": self.lag_s,
+            "max_lag_s": self.max_lag_s,
+            "merged_ticks": self.merged_ticks,
+            "node_ns": self.node_ns,
             "counts": self.counts,
             "inbound": {
                 ib.id: {
@@ -579,6 +702,56 @@ class Worker:
         }
 
 
+class _Heartbeat:
+    """Sends the worker's progress every :data:`BEAT_S` from a thread and a socket of its own.
+
+    The main thread only writes plain attributes (``k``, ``busy``, ``steps``, ``lag_s``); a worker
+    stuck inside a block keeps beating with the same step count, a stopped one falls silent.
+    """
+
+    def __init__(self, worker: Worker, control: str) -> None:
+        self.worker, self.control = worker, control
+        self.stopped = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="flowtact-heartbeat", daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def halt(self) -> None:
+        """Stop beating and close the socket (before the context is destroyed)."""
+        self.stopped.set()
+        if self.thread.is_alive():
+            self.thread.join(timeout=5.0)
+
+    def _run(self) -> None:
+        w = self.worker
+        sock = w.ctx.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.SNDHWM, 8)
+        if self.control.startswith("tcp://"):
+            from flowtact.runtime.security import secure_client
+
+            secure_client(sock, w.keys)
+        sock.connect(self.control)
+        pid = os.getpid()
+        try:
+            while not self.stopped.wait(BEAT_S):
+                beat = {
+                    "op": "beat",
+                    "process": w.process,
+                    "pid": pid,
+                    "k": w.k,
+                    "steps": w.steps,
+                    "node": w.busy,
+                    "first": w.busy_first,
+                    "lag_s": w.lag_s,
+                }
+                with contextlib.suppress(zmq.Again):
+                    sock.send(msgpack.packb(beat), zmq.NOBLOCK)
+        finally:
+            sock.close(linger=0)
+
+
 class _NodeFailure(Exception):
     def __init__(self, node: str, block: Block, now: float, cause: BaseException) -> None:
         super().__init__(str(cause))
@@ -589,6 +762,14 @@ class _NodeFailure(Exception):
             "message": f"{type(cause).__name__}: {cause}",
             "traceback": traceback.format_exc(),
         }
+
+
+def _synthetic(spec: StreamSpec, n: int = 8) -> Chunk:
+    """A few zero samples (or one event of unit 0) shaped like ``spec``: input for a warm-up step."""
+    if spec.events:
+        return Chunk(np.array([1e-3]), np.zeros(1, np.int64))
+    dt = 1.0 / spec.rate_hz if spec.rate_hz else 1e-3
+    return Chunk(np.arange(1, n + 1) * dt, np.zeros((n, *spec.shape), spec.dtype or "float64"))
 
 
 def _plain(obj: Any) -> Any:
@@ -622,7 +803,7 @@ def main(argv: list[str] | None = None) -> int:
     from flowtact.runtime.security import SecurityError
 
     try:
-        worker = Worker(args.connect, args.process, keys_dir=args.keys)
+        worker = Worker(args.connect, args.process, keys_dir=args.keys, child=args.child)
     except SecurityError as e:
         print(f"flowtact worker: {e}", file=sys.stderr)
         return 1
