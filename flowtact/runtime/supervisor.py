@@ -59,11 +59,11 @@ DEADLINE_WARN_EVERY_S = 5.0
 WAITING_EVERY_S = 15.0
 """How often the run repeats that it is waiting for a worker on another host."""
 LAST_WORDS_S = 0.2
+"""After a worker exits, how long its last control messages (an error report) may take to arrive."""
 SILENT_PROBE_S = 0.3
 """How long a worker without progress has its CPU time watched, to tell a hung process from a busy one."""
 IDLE_CPU = 0.05
 """A worker without progress that uses less than this share of a core is not working: it has stalled."""
-"""After a worker exits, how long its last control messages (an error report) may take to arrive."""
 
 
 class WorkerFailed(RuntimeError):
