@@ -18,9 +18,9 @@ physical sensors). Frames are cropped to the thesis's 90×240 window as they are
     median over frames, one torch thread. Widths in ``--time-widths`` (default w64 and paper: days
     of CPU training) are timed untrained, and the thesis's network is also timed at full crop
     resolution (``paper@1``, 90×240 input), its input size in the thesis.
-(b) SSIM (7×7, the thesis's metric, ``flowtact.blocks.ssim``) of each 90×240 crop against the
+(b) SSIM (7×7, the thesis's metric, ``flowtact.blocks.teleop.ssim``) of each 90×240 crop against the
     run's first frame (no contact: the start-up reference), a per-sensor least-squares line
-    (``flowtact.blocks.force_linear.fit_linear_force``) fitted on the training recording; MAE on the
+    (``flowtact.blocks.teleop.fit_force.fit_linear_force``) fitted on the training recording; MAE on the
     training recording (the thesis's Table 4.2 protocol: fit and score on the same data) and on the
     held-out recording.
 
@@ -49,9 +49,9 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
-from flowtact.blocks.cnn import ARCHS, CnnForce, Preprocess, build_model, save_checkpoint  # noqa: E402
-from flowtact.blocks.cnn_train import DEFAULT_CROP, Dataset, TrainConfig, evaluate, train_on_arrays  # noqa: E402
-from flowtact.blocks.hand import FINGERS  # noqa: E402
+from flowtact.blocks.teleop.cnn import ARCHS, CnnForce, Preprocess, build_model, save_checkpoint  # noqa: E402
+from flowtact.blocks.teleop.hand import FINGERS  # noqa: E402
+from flowtact.blocks.teleop.train_force import DEFAULT_CROP, Dataset, TrainConfig, evaluate, train_on_arrays  # noqa: E402
 from flowtact.compile import node_seed  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -81,7 +81,7 @@ def simulate(duration_s: float, graph_seed: int, params: dict) -> dict:
     The block is seeded as node ``sim`` of a graph with seed ``graph_seed``, so the training set is
     the very recording ``flowtact run graphs/tactip_dataset.yaml --record`` writes.
     """
-    from flowtact.blocks.tactip_sim import TactipSim
+    from flowtact.blocks.teleop.tactip_sim import TactipSim
 
     block = TactipSim(**params)
     block.bind({}, seed=node_seed(graph_seed, "sim"))
@@ -172,7 +172,7 @@ def ladder(
         downsample = int(ds) if ds else args.downsample
         ckpt = untrained_checkpoint(arch, downsample, tmp)
         model_hw = Preprocess((240, 320), DEFAULT_CROP, downsample).model_hw
-        from flowtact.blocks.cnn import load_checkpoint, n_parameters
+        from flowtact.blocks.teleop.cnn import load_checkpoint, n_parameters
 
         rows.append(
             {
@@ -198,8 +198,8 @@ def _subset(data: Dataset, keep: np.ndarray) -> Dataset:
 
 def ssim_linear(train: dict, heldout: dict) -> dict | None:
     try:
-        from flowtact.blocks.force_linear import fit_linear_force
-        from flowtact.blocks.ssim import ssim_frames
+        from flowtact.blocks.teleop.fit_force import fit_linear_force
+        from flowtact.blocks.teleop.ssim import ssim_frames
     except ImportError as e:  # pragma: no cover - the SSIM helpers ship with flowtact
         print(f"(b) skipped: {e}")
         return None

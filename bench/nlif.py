@@ -29,8 +29,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
 
-from flowtact.blocks.lif_kernels import NOISE_INTERNAL, NOISE_OFF, lif_grid, lif_interp
-from flowtact.blocks.neurons import TILE, Nlif
+from flowtact.blocks.spiking._lif_kernels import NOISE_INTERNAL, NOISE_OFF, lif_grid, lif_interp
+from flowtact.blocks.spiking.nlif import TILE, Nlif
 from flowtact.chunk import Chunk, StreamSpec
 
 INTEGRATORS = ("exp", "euler", "exp_interp")

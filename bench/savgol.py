@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 from scipy import signal  # noqa: E402  (bench-only baseline)
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
-from flowtact.blocks.filters import SavGol, savgol_coeffs  # noqa: E402
+from flowtact.blocks.signal.savgol import SavGol, savgol_coeffs  # noqa: E402
 
 RATE = 1000.0
 CHUNKS = (1, 10, 100, 1000, 10_000)

@@ -32,8 +32,8 @@ import numpy as np  # noqa: E402
 from skimage.metrics import structural_similarity  # noqa: E402  (bench-only baseline)
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
-from flowtact.blocks.image import synthetic_tactip  # noqa: E402
-from flowtact.blocks.ssim import Ssim, SsimReference  # noqa: E402
+from flowtact.blocks.teleop.image import synthetic_tactip  # noqa: E402
+from flowtact.blocks.teleop.ssim import Ssim, SsimReference  # noqa: E402
 
 RATE = 40.0
 LEVELS = (0.0, 1.5, 3.0, 4.5, 6.0, 8.0, 10.0, 13.0)

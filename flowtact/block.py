@@ -16,6 +16,7 @@ import numpy as np
 
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config
+from flowtact.presets import apply_preset
 
 __all__ = [
     "BadDataError",
@@ -110,7 +111,7 @@ class Block:
         owner = f"{self.node} ({self.name})" if node else self.name
         if config is not None and params:
             raise TypeError("give either a config object or keyword parameters, not both")
-        self.config: Any = config if config is not None else self.config_cls.build(params, owner=owner)
+        self.config: Any = config if config is not None else self.configure(params, owner=owner)
         self.seed: int = 0
         self.demanded: frozenset[str] = frozenset(self.outputs)
         self.input_specs: dict[str, StreamSpec] = {}
@@ -118,6 +119,12 @@ class Block:
         self.counters: dict[str, int] = {}
         self.rng: np.random.Generator = np.random.default_rng(0)
         self._bound = False
+
+    @classmethod
+    def configure(cls, params: Mapping[str, Any], owner: str | None = None) -> Config:
+        """A validated config from plain values; a ``preset: DOMAIN.NAME`` entry is expanded first."""
+        owner = owner or cls.name
+        return cls.config_cls.build(apply_preset(cls.name, params, owner), owner=owner)
 
     # -- compile-time contract ---------------------------------------------------------------
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:

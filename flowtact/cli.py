@@ -153,7 +153,7 @@ def _replays(items: Sequence[str]) -> dict[str, str]:
 
 
 def _plan(args: argparse.Namespace) -> Any:
-    from flowtact.run import load_plan
+    from flowtact.launch import load_plan
 
     return load_plan(args.graph, overrides=args.overrides, replays=_replays(args.replays))
 
@@ -183,7 +183,7 @@ class _Progress:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from flowtact.run import run_plan
+    from flowtact.launch import run_plan
     from flowtact.runtime.live import LiveView
 
     plan = _plan(args)
@@ -308,7 +308,7 @@ def _port_text(port: Any) -> str:
 
 
 def _cmd_graph(args: argparse.Namespace) -> int:
-    from flowtact.draw import draw_plan
+    from flowtact.draw_graph import draw_plan
 
     out = draw_plan(_plan(args), args.output)
     print(f"wrote {out}")
@@ -316,7 +316,7 @@ def _cmd_graph(args: argparse.Namespace) -> int:
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from flowtact.plot import plot_recording
+    from flowtact.plot_recording import plot_recording
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     out = plot_recording(args.recording, args.output, streams=args.streams, t_range=t_range)

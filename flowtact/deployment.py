@@ -19,12 +19,10 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from flowtact.located import GraphError, Loc, Located
 from flowtact.params import did_you_mean
-
-if TYPE_CHECKING:
-    from flowtact.graph import GraphError, Loc, _Located
 
 __all__ = ["Deadline", "Deployment", "Network", "ProcessDef", "parse_deployment", "parse_duration"]
 
@@ -134,9 +132,7 @@ def parse_duration(value: Any) -> float | None:
     return seconds if seconds > 0 else None
 
 
-def _unknown(keys: Any, allowed: tuple[str, ...], where: str, y: _Located, path: tuple[Any, ...]) -> list:
-    from flowtact.graph import GraphError
-
+def _unknown(keys: Any, allowed: tuple[str, ...], where: str, y: Located, path: tuple[Any, ...]) -> list:
     return [
         GraphError(y.key_loc(*path, k), f"{where}: unknown key '{k}'{did_you_mean(str(k), allowed)}")
         for k in keys
@@ -144,10 +140,8 @@ def _unknown(keys: Any, allowed: tuple[str, ...], where: str, y: _Located, path:
     ]
 
 
-def parse_deployment(doc: dict[str, Any], y: _Located, node_docs: dict[str, Any]) -> Deployment:
+def parse_deployment(doc: dict[str, Any], y: Located, node_docs: dict[str, Any]) -> Deployment:
     """Read ``processes:``, ``network:`` and ``deadlines:``; append problems to ``y.errors``."""
-    from flowtact.graph import GraphError
-
     errors: list[GraphError] = y.errors
     dep = Deployment()
     used = {n.get("process") for n in node_docs.values() if isinstance(n, dict)}

@@ -19,6 +19,7 @@ import yaml
 
 from flowtact.block import Block
 from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, parse_deployment
+from flowtact.located import GraphError, GraphErrors, Loc, Located
 from flowtact.params import ConfigError, did_you_mean
 from flowtact.registry import UnknownBlockError, load_block
 
@@ -51,39 +52,6 @@ NODE_KEYS = ("block", "params", "process", "seed", "doc")
 EDGE_KEYS = ("from", "to", "policy", "queue")
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 EDGE_RE = re.compile(r"^\s*([^\s.]+)\.([^\s.]+)\s*->\s*([^\s.]+)\.([^\s.]+)\s*$")
-
-
-@dataclass(frozen=True)
-class Loc:
-    """A place in a graph file (1-based line and column)."""
-
-    path: str
-    line: int = 1
-    col: int = 1
-
-    def __str__(self) -> str:
-        return f"{self.path}:{self.line}:{self.col}"
-
-
-@dataclass(frozen=True)
-class GraphError:
-    """One problem with a graph, at a place, with an optional hint on what would be right."""
-
-    loc: Loc
-    message: str
-    hint: str = ""
-
-    def __str__(self) -> str:
-        text = f"{self.loc}: {self.message}"
-        return f"{text}\n    hint: {self.hint}" if self.hint else text
-
-
-class GraphErrors(Exception):
-    """Raised with every :class:`GraphError` found; ``str()`` lists them one per line."""
-
-    def __init__(self, errors: Iterable[GraphError]) -> None:
-        self.errors = list(errors)
-        super().__init__("\n".join(map(str, self.errors)))
 
 
 @dataclass
@@ -141,58 +109,6 @@ class Graph:
     deployment: Deployment = field(default_factory=Deployment)
 
 
-# -- YAML with locations ---------------------------------------------------------------------
-
-
-class _Located:
-    """Plain values plus a location for each YAML node, keyed by the value's path."""
-
-    def __init__(self, path: str) -> None:
-        self.path = path
-        self.locs: dict[tuple[Any, ...], Loc] = {}
-        self.key_locs: dict[tuple[Any, ...], Loc] = {}
-        self.errors: list[GraphError] = []
-
-    def loc(self, *keys: Any) -> Loc:
-        """Location of the value at ``keys`` (or of its closest parent)."""
-        while keys not in self.locs and keys:
-            keys = keys[:-1]
-        return self.locs.get(keys, Loc(self.path))
-
-    def key_loc(self, *keys: Any) -> Loc:
-        """Location of the mapping key that introduces ``keys``."""
-        return self.key_locs.get(keys, self.loc(*keys))
-
-    def convert(self, node: yaml.Node, keys: tuple[Any, ...] = ()) -> Any:
-        mark = node.start_mark
-        self.locs[keys] = Loc(self.path, mark.line + 1, mark.column + 1)
-        if isinstance(node, yaml.MappingNode):
-            out: dict[Any, Any] = {}
-            for k_node, v_node in node.value:
-                key = yaml.SafeLoader.construct_object(_LOADER, k_node, deep=True)  # type: ignore[arg-type]
-                kmark = k_node.start_mark
-                kloc = Loc(self.path, kmark.line + 1, kmark.column + 1)
-                if key in out:
-                    what = "node" if keys == ("nodes",) else "key"
-                    self.errors.append(
-                        GraphError(
-                            kloc,
-                            f"duplicate {what} '{key}'",
-                            f"first defined at {self.key_locs[(*keys, key)]}",
-                        )
-                    )
-                    continue
-                self.key_locs[(*keys, key)] = kloc
-                out[key] = self.convert(v_node, (*keys, key))
-            return out
-        if isinstance(node, yaml.SequenceNode):
-            return [self.convert(v, (*keys, i)) for i, v in enumerate(node.value)]
-        return yaml.SafeLoader.construct_object(_LOADER, node, deep=True)  # type: ignore[arg-type]
-
-
-_LOADER = yaml.SafeLoader("")
-
-
 def resolve_graph_path(name: str | Path) -> Path:
     """A graph file path; a bare name such as ``touch`` also finds the graphs shipped with flowtact."""
     p = Path(name)
@@ -237,7 +153,7 @@ def load_graph(
             text = Path(source).read_text()
         except OSError as e:
             raise GraphErrors([GraphError(Loc(path), f"cannot read graph file: {e.strerror or e}")]) from None
-    located = _Located(path)
+    located = Located(path)
     try:
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.MarkedYAMLError as e:
@@ -311,7 +227,7 @@ def _apply_replays(doc: dict[str, Any], replays: Mapping[str, str], errors: list
 
 
 def _build(
-    doc: Any, y: _Located, path: str, text: str, overrides: list[str], replays: dict[str, str]
+    doc: Any, y: Located, path: str, text: str, overrides: list[str], replays: dict[str, str]
 ) -> Graph:
     errors = y.errors
     if not isinstance(doc, dict):
@@ -413,7 +329,7 @@ def _overrides(
 def _node(
     name: str,
     ndoc: Any,
-    y: _Located,
+    y: Located,
     sets: Mapping[str, tuple[Any, Loc]],
     errors: list[GraphError],
     classes: dict[str, type[Block]],
@@ -488,7 +404,7 @@ def _node(
         )
         seed = None
     try:
-        config = cls.config_cls.build(params, owner=f"{name} ({cls.name})")
+        config = cls.configure(params, owner=f"{name} ({cls.name})")
     except ConfigError as e:
         if e.field in param_locs:
             ploc = param_locs[e.field]
@@ -540,7 +456,7 @@ def _endpoint_errors(
 
 def _edges(
     raw: Any,
-    y: _Located,
+    y: Located,
     node_docs: Mapping[str, Any],
     classes: Mapping[str, type[Block]],
     errors: list[GraphError],
@@ -602,7 +518,7 @@ def _edges(
     return edges
 
 
-def _edge_flow(item: dict[str, Any], y: _Located, i: int, errors: list[GraphError]) -> tuple[str, int]:
+def _edge_flow(item: dict[str, Any], y: Located, i: int, errors: list[GraphError]) -> tuple[str, int]:
     """An edge mapping's ``policy`` and ``queue``, checked."""
     policy = item.get("policy", "block")
     if policy not in POLICIES:
@@ -625,7 +541,7 @@ def _edge_flow(item: dict[str, Any], y: _Located, i: int, errors: list[GraphErro
 
 def _record(
     raw: Any,
-    y: _Located,
+    y: Located,
     node_docs: Mapping[str, Any],
     classes: Mapping[str, type[Block]],
     errors: list[GraphError],

@@ -14,8 +14,8 @@ import toyblocks
 from runs import ROOT, alive, flowtact, wait_children, wait_recorded, worker_of
 
 from flowtact.graph import GraphErrors
+from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
-from flowtact.run import load_plan, run_plan
 from flowtact.runtime.placement import place
 from flowtact.testing import CHECKS
 

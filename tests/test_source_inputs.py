@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import toyblocks
 
+from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
-from flowtact.run import load_plan, run_plan
 from flowtact.testing import CHECKS, run_source
 
 LOOP = """

@@ -1,0 +1,453 @@
+"""Play back a recorded stream: a flowtact HDF5 recording, or a plain .npz / .csv file.
+
+``replay`` is the "swap live for recorded" source: ``flowtact run graph.yaml --replay sensor=run.h5``
+puts one in place of a live sensor, and everything downstream runs unchanged.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import math
+import os
+import tempfile
+import warnings
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flowtact.block import Example, Port, Source, SpecError
+from flowtact.chunk import Chunk, StreamSpec
+from flowtact.params import Config, param
+
+__all__ = ["Replay", "ReplayConfig"]
+
+H5_SUFFIXES = (".h5", ".hdf5")
+SUFFIXES = (*H5_SUFFIXES, ".npz", ".csv")
+#: Relative mismatch allowed between a configured rate_hz and the median step of a file's t.
+RATE_TOLERANCE = 0.01
+
+
+@dataclass(frozen=True)
+class ReplayConfig(Config):
+    path: str = param(doc="file to play back: a flowtact recording (.h5) or a .npz / .csv file")
+    stream: str | tuple[str, ...] | None = param(
+        None,
+        doc=".h5: '<node>.<port>' (optional if the file holds one stream); .npz: data array (default "
+        "'data'); .csv: column name or list of columns (default all but 't')",
+    )
+    units: str | None = param(
+        None, doc="units of the data for .npz/.csv (default '1'); for .h5, if given, must match the recording"
+    )
+    rate_hz: float | None = param(
+        None, doc="nominal sample rate; default the recorded rate (.h5) or 1 / median step of t", gt=0
+    )
+    time_offset_s: float = param(0.0, doc="added to every time stamp; samples landing before 0 are skipped")
+    loop: bool = param(False, doc="start again after the end, times continuing (period = recorded length)")
+
+    def check(self) -> None:
+        suffix = Path(self.path).suffix.lower()
+        if suffix not in SUFFIXES:
+            raise self.error("path", f"must name a {', '.join(SUFFIXES)} file; got {self.path!r}")
+        if isinstance(self.stream, tuple):
+            if suffix != ".csv":
+                raise self.error(
+                    "stream", f"a list of columns is only for .csv files; got {list(self.stream)}"
+                )
+            if not self.stream:
+                raise self.error("stream", "must list at least one column (or be left out for all but 't')")
+
+
+@dataclass
+class _Source:
+    """What the file holds, as far as playback needs: spec, times, data (or an HDF5 dataset)."""
+
+    spec: StreamSpec
+    t: np.ndarray | None = None  # file times, before the offset; None until loaded (h5)
+    data: Any = None  # ndarray, or an h5py Dataset read slice by slice
+    end_s: float | None = None  # events: the recorded end watermark
+    h5_stream: str | None = None
+    h5_file: Any = None
+
+
+class Replay(Source):
+    """Play back a stream from a .h5 recording, a .npz or a .csv file, in graph time.
+
+    Ports
+    -----
+    y : the file's dtype and sample shape
+        The recorded stream with its recorded units, rate and channel labels (.h5), or the array /
+        columns of a .npz / .csv file. When the recorded stream is an event stream (spike times
+        + unit index) so is ``y``, and each chunk carries the watermark ``end = now``.
+
+    Config
+    ------
+    See the field docs (``flowtact blocks replay``).
+
+    Notes
+    -----
+    Each tick emits every sample with ``t + time_offset_s < now`` not emitted yet, with the
+    file's own time stamps (shifted), so record → replay gives back bit-identical chunks.
+    Samples that land before 0 are skipped (counted as ``skipped_before_zero``). With ``loop``,
+    playback restarts after the end with times continuing: a sample stream's period is
+    ``t_last − t_first + 1/rate_hz``, an event stream's is its recorded duration (the last
+    watermark). Time stamps must be non-decreasing (checked, naming the first bad sample).
+
+    File formats. ``.h5``: a recording written by ``flowtact run --record``; dtype, shape, units,
+    rate and labels come from the file; a configured ``units``/``rate_hz`` that differs is an
+    error. ``.npz``: an array ``stream`` (default ``data``, shape (n, ...)) and optionally ``t``
+    (n,); without ``t`` samples are stamped ``i / rate_hz``. ``.csv``: a header row naming the
+    columns, one of them ``t``, separated by commas (or semicolons or tabs); the output is float64
+    of shape (k,) with the column names as labels, or () when ``stream`` names one column.
+    Without ``rate_hz`` the rate is 1 / the median step of ``t``; a configured rate more than 1 %
+    away from it is an error.
+
+    The output spec is read from the file header when the graph is compiled (a missing file,
+    stream or column is reported then, with what the file does hold). Data is read in ``open`` or
+    at the first ``reset``: .npz / .csv wholly, .h5 times wholly and the data slice by slice
+    from the open file (camera recordings need not fit in memory). Latency: none beyond the tick.
+
+    Example
+    -------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from flowtact.blocks.signal.replay import Replay
+    >>> from flowtact.testing import run_source
+    >>> p = os.path.join(tempfile.mkdtemp(), "force.npz")
+    >>> np.savez(p, t=np.arange(500) / 1000.0, data=np.ones((500, 3)))
+    >>> out = run_source(Replay(path=p, units="N"), 0.25, tick_s=0.01)
+    >>> out["y"].data.shape, float(out["y"].t[-1])
+    ((250, 3), 0.249)
+    """
+
+    config_cls = ReplayConfig
+    outputs = {
+        "y": Port(
+            dtype=None,
+            shape=None,
+            units=None,
+            doc="the played-back stream: recorded dtype, shape, units, rate (events if recorded as events)",
+        )
+    }
+    counter_docs = {
+        "skipped_before_zero": "recorded samples whose time (plus time_offset_s) fell before graph time 0: "
+        "not played; expected with a negative time_offset_s",
+    }
+
+    def __init__(self, *args: Any, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self._src: _Source | None = None
+
+    # -- compile time ------------------------------------------------------------------------
+    def specs(self, inputs: Any) -> dict[str, StreamSpec]:
+        """The output spec, read from the file header."""
+        self.close()
+        self._src = self._inspect()
+        return {"y": self._src.spec}
+
+    def _where(self) -> str:
+        return f"{self.node} ({self.name})"
+
+    def _inspect(self) -> _Source:
+        c = self.config
+        path = Path(c.path)
+        if not path.is_file():
+            raise c.error(
+                "path", f"does not exist: {path}" + ("" if path.parent.is_dir() else " (no such folder)")
+            )
+        suffix = path.suffix.lower()
+        if suffix in H5_SUFFIXES:
+            src = self._inspect_h5(path)
+        else:
+            src = self._inspect_npz(path) if suffix == ".npz" else self._inspect_csv(path)
+            self._check_times(src.t, path)
+            src.spec = src.spec.with_(rate_hz=self._rate(src.t, path))
+        return src
+
+    def _inspect_h5(self, path: Path) -> _Source:
+        from flowtact.record import stream_specs
+
+        c = self.config
+        try:
+            streams = stream_specs(path)
+        except (OSError, ValueError) as e:
+            raise c.error("path", str(e)) from None
+        available = ", ".join(streams) or "none"
+        name = c.stream
+        if name is None:
+            if len(streams) != 1:
+                raise c.error("stream", f"is required: {path} holds {len(streams)} streams ({available})")
+            name = next(iter(streams))
+        if name not in streams:
+            raise c.error("stream", f"must name a stream of {path} (available: {available}); got '{name}'")
+        spec, _ = streams[name]
+        if c.units is not None and c.units != spec.units:
+            raise SpecError(
+                "y", f"{self._where()}: units '{c.units}' given, but {name} in {path} is in '{spec.units}'"
+            )
+        if c.rate_hz is not None:
+            if spec.events:
+                raise SpecError(
+                    "y", f"{self._where()}: rate_hz given, but {name} in {path} is an event stream"
+                )
+            if not math.isclose(c.rate_hz, spec.rate_hz or math.nan, rel_tol=1e-9):
+                raise SpecError(
+                    "y",
+                    f"{self._where()}: rate_hz {c.rate_hz:g} given, but {name} in {path} was recorded at "
+                    f"{spec.rate_hz:g} Hz",
+                )
+        return _Source(spec=spec, h5_stream=name)
+
+    def _inspect_npz(self, path: Path) -> _Source:
+        c = self.config
+        key = c.stream if isinstance(c.stream, str) else "data"
+        try:
+            with zipfile.ZipFile(path) as z:
+                arrays = sorted(n[:-4] for n in z.namelist() if n.endswith(".npy"))
+                if key not in arrays:
+                    raise c.error(
+                        "stream",
+                        f"must name an array of {path} (arrays: {', '.join(arrays) or 'none'}); got '{key}'",
+                    )
+                shape, dtype = _npy_header(z, key)
+                t = None
+                if "t" in arrays and key != "t":
+                    with np.load(path) as npz:
+                        t = np.asarray(npz["t"], np.float64)
+        except zipfile.BadZipFile:
+            raise c.error("path", f"{path} is not a .npz file (not a zip archive)") from None
+        if dtype.hasobject:
+            raise c.error("stream", f"array '{key}' in {path} holds Python objects; numbers only")
+        if len(shape) == 0:
+            raise SpecError(
+                "y", f"{self._where()}: array '{key}' in {path} is a scalar; need (n, ...) samples"
+            )
+        n = shape[0]
+        if t is None:
+            if c.rate_hz is None:
+                raise c.error(
+                    "rate_hz", f"is required: {path} has no 't' array (samples are stamped i / rate_hz)"
+                )
+            t = np.arange(n) / c.rate_hz
+        elif t.shape != (n,):
+            raise SpecError(
+                "y", f"{self._where()}: 't' in {path} has shape {t.shape}; '{key}' has {n} samples"
+            )
+        spec = StreamSpec(dtype=dtype.name, shape=tuple(shape[1:]), units=c.units or "1")
+        return _Source(spec=spec, t=t, data=(path, key))
+
+    def _inspect_csv(self, path: Path) -> _Source:
+        c = self.config
+        with open(path, encoding="utf-8") as fh:
+            header = fh.readline().strip().lstrip("#").strip()
+        delimiter = next((d for d in (",", ";", "\t") if d in header), None)
+        names = [s.strip().strip('"').strip("'") for s in header.split(delimiter)]
+        listed = ", ".join(names)
+        if "t" not in names:
+            raise c.error("path", f"{path} has no 't' column in its header row (columns: {listed})")
+        if c.stream is None:
+            columns = [n for n in names if n != "t"]
+        else:
+            columns = [c.stream] if isinstance(c.stream, str) else list(c.stream)
+        for col in columns:
+            if col not in names:
+                raise c.error("stream", f"must name columns of {path} (columns: {listed}); got '{col}'")
+        if not columns:
+            raise c.error("path", f"{path} has no data columns besides 't'")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # an empty table is fine: zero samples
+            try:
+                table = np.loadtxt(path, delimiter=delimiter, skiprows=1, ndmin=2, dtype=np.float64)
+            except ValueError as e:
+                raise SpecError("y", f"{self._where()}: cannot read {path} as numbers: {e}") from None
+        if table.size and table.shape[1] != len(names):
+            raise SpecError(
+                "y", f"{self._where()}: {path} rows have {table.shape[1]} values for {len(names)} columns"
+            )
+        table = table.reshape(-1, len(names))
+        idx = [names.index(col) for col in columns]
+        single = isinstance(c.stream, str)
+        data = np.ascontiguousarray(table[:, idx[0]] if single else table[:, idx])
+        spec = StreamSpec(
+            dtype="float64",
+            shape=() if single else (len(columns),),
+            units=c.units or "1",
+            labels=None if single else tuple(columns),
+        )
+        return _Source(spec=spec, t=np.ascontiguousarray(table[:, names.index("t")]), data=data)
+
+    def _check_times(self, t: np.ndarray, path: Path) -> None:
+        bad = ~np.isfinite(t)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SpecError("y", f"{self._where()}: t[{i}] = {t[i]} in {path} is not a finite time")
+        step = np.diff(t)
+        if (step < 0).any():
+            i = int(np.argmax(step < 0)) + 1
+            raise SpecError(
+                "y",
+                f"{self._where()}: t decreases at sample {i} in {path} ({t[i]:.9g} s after {t[i - 1]:.9g} s); "
+                "time stamps must be non-decreasing",
+            )
+
+    def _rate(self, t: np.ndarray, path: Path) -> float:
+        c = self.config
+        steps = np.diff(t)
+        inferred = None
+        if len(steps) and np.median(steps) > 0:
+            inferred = 1.0 / float(np.median(steps))
+            if abs(inferred - round(inferred)) <= 1e-6 * inferred:
+                inferred = float(round(inferred))
+        if c.rate_hz is None:
+            if inferred is None:
+                raise c.error(
+                    "rate_hz", f"is required: the time stamps of {path} give no rate (fewer than 2 distinct)"
+                )
+            return inferred
+        if inferred is not None and abs(inferred - c.rate_hz) > RATE_TOLERANCE * c.rate_hz:
+            raise SpecError(
+                "y",
+                f"{self._where()}: rate_hz {c.rate_hz:g} given, but the time stamps of {path} step at "
+                f"{inferred:g} Hz (median)",
+            )
+        return float(c.rate_hz)
+
+    # -- run time ----------------------------------------------------------------------------
+    def open(self) -> None:
+        """Read the file (times wholly; .h5 data stays on disk, read slice by slice)."""
+        self._load()
+
+    def close(self) -> None:
+        """Close the .h5 file if open."""
+        src = getattr(self, "_src", None)
+        if src is not None and src.h5_file is not None:
+            src.h5_file.close()
+            src.h5_file = None
+            src.t = None
+            src.data = None
+
+    def _load(self) -> _Source:
+        src = self._src if self._src is not None else self._inspect()
+        self._src = src
+        path = Path(self.config.path)
+        if src.h5_stream is not None and src.h5_file is None:
+            import h5py
+
+            f = h5py.File(path, "r")
+            g = f["streams"][src.h5_stream]
+            n = int(min(g["t"].shape[0], g["data"].shape[0]))
+            t = np.asarray(g["t"][:n], np.float64)
+            self._check_times(t, path)
+            end = float(g.attrs.get("end_s", math.nan))
+            src.h5_file, src.t, src.data, src.end_s = f, t, g["data"], (end if math.isfinite(end) else None)
+        elif isinstance(src.data, tuple):  # npz, not read yet
+            with np.load(src.data[0]) as npz:
+                src.data = np.asarray(npz[src.data[1]])
+        if isinstance(src.data, np.ndarray):
+            src.data.flags.writeable = False
+        return src
+
+    def reset(self) -> None:
+        src = self._load()
+        assert src.t is not None
+        t = src.t + self.config.time_offset_s
+        t.flags.writeable = False
+        self._t = t
+        self._n = len(t)
+        self._period = self._loop_period(src)
+        self._k = 0
+        self._i = self._first_at_or_after(0.0, 0, 0)
+        self.count("skipped_before_zero", self._i)
+
+    def _loop_period(self, src: _Source) -> float:
+        if not self.config.loop or self._n == 0:
+            return math.inf
+        assert src.t is not None
+        if src.spec.events:
+            period = max(src.end_s or 0.0, float(src.t[-1]))
+        else:
+            period = float(src.t[-1] - src.t[0]) + 1.0 / float(src.spec.rate_hz or math.inf)
+        if not period > 0:
+            raise SpecError(
+                "y", f"{self._where()}: cannot loop {self.config.path}: its length is {period:g} s"
+            )
+        return period
+
+    def _first_at_or_after(self, target: float, k: int, lo: int) -> int:
+        """Smallest j >= lo with t[j] + k·period >= target, exact under rounding."""
+        t, n = self._t, self._n
+        shift = k * self._period if k else 0.0
+        j = lo + int(np.searchsorted(t[lo:], target - shift, side="left"))
+        while j > lo and t[j - 1] + shift >= target:
+            j -= 1
+        while j < n and t[j] + shift < target:
+            j += 1
+        return j
+
+    def step(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+        src = self._src
+        assert src is not None
+        ts: list[np.ndarray] = []
+        ds: list[np.ndarray] = []
+        while self._n:
+            j = self._first_at_or_after(now, self._k, self._i)
+            if j > self._i:
+                t = self._t[self._i : j]
+                ts.append(t + self._k * self._period if self._k else t)
+                ds.append(np.asarray(src.data[self._i : j]))
+                self._i = j
+            if self._i < self._n or not self.config.loop:
+                break
+            self._k += 1
+            self._i = self._first_at_or_after(0.0, self._k, 0)
+            self.count("skipped_before_zero", self._i)
+            if self._i < self._n and self._t[self._i] + self._k * self._period >= now:
+                break
+        spec = src.spec
+        if not ts:
+            empty = Chunk.empty(spec)
+            return {"y": Chunk(empty.t, empty.data, now if spec.events else None)}
+        t = ts[0] if len(ts) == 1 else np.concatenate(ts)
+        d = ds[0] if len(ds) == 1 else np.concatenate(ds)
+        return {"y": Chunk(t, d, now if spec.events else None)}
+
+    @classmethod
+    def example(cls) -> Example:
+        return Example(
+            params={"path": str(_example_file()), "units": "N", "loop": True, "time_offset_s": -0.1},
+            rate_hz=1000.0,
+            duration_s=1.0,
+        )
+
+
+def _npy_header(z: zipfile.ZipFile, key: str) -> tuple[tuple[int, ...], np.dtype]:
+    """Shape and dtype of one array of an open .npz, from its header only."""
+    with z.open(f"{key}.npy") as fp:
+        major, _ = np.lib.format.read_magic(fp)
+        read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read(fp)
+    return tuple(shape), np.dtype(dtype)
+
+
+def _example_file() -> Path:
+    """A small .npz (0.4 s of three force channels at 1 kHz), written once per process."""
+    path = Path(tempfile.gettempdir()) / f"flowtact-replay-example-v1-{os.getpid()}.npz"
+    if not path.exists():
+        i = np.arange(400)
+        t = i / 1000.0
+        data = np.stack(
+            [0.1 * np.sin(2 * np.pi * 5 * t), 0.05 * np.cos(2 * np.pi * 3 * t), 0.12 + 0.0 * t], axis=1
+        )
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")
+        np.savez(tmp, t=t, data=data)
+        os.replace(tmp, path)
+        atexit.register(_remove_quietly, path)
+    return path
+
+
+def _remove_quietly(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        path.unlink()

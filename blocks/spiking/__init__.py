@@ -1,0 +1,13 @@
+"""Generic blocks on spikes: populations of neurons, rates, stimulation.
+
+============ ================ ==========================================================
+block        module           what
+============ ================ ==========================================================
+nlif         nlif             noisy leaky integrate-and-fire population, post-spike current
+rate         rate             spikes → firing rate in bins
+pulses       pulses           spikes → clamped stimulation pulses (amplitude, charge, rate)
+============ ================ ==========================================================
+
+Private kernels: ``_lif_kernels`` (numba LIF integrators and their numpy twins, in-kernel normal
+generator), ``_spike_history`` (raised-cosine post-spike basis).
+"""

@@ -1,0 +1,955 @@
+"""Numba kernels of the noisy leaky integrate-and-fire population, with plain-numpy twins.
+
+Model (normalised, NUMERICS §3, §5): ``dv = (−(v − v_leak) + g·u(t) + I_hist(t))/τ dt + σ dW``,
+threshold 1 (``v > 1``), reset 0. All kernels process a chunk of ``T`` input samples for ``N``
+neurons, mutate the carried state arrays in place and may stop early at a step boundary when the
+spike buffers could overflow (they return the number of steps done; the caller resumes).
+
+Grid kernel (``lif_grid``): one update per input sample, ``v ← v·a + D·b + s·ξ`` with the drive
+``D = v_leak + g·u_i + I_hist[i]`` held over the step, then threshold → reset (Brian2's order).
+The coefficients pick the integrator:
+
+* ``exp``   — ``a = exp(−dt/τ)``, ``b = −expm1(−dt/τ)``, ``s = σ·sqrt(τ/2·(1 − a²))``: exact for input
+  held over the step (Brian2 ``exact``) with the exact Ornstein–Uhlenbeck noise step; stable for
+  any ``dt/τ``. The ``v·a + D·b`` form survives ``u = ±huge`` (``D + (v − D)·a`` gives inf − inf).
+* ``euler`` — ``a = 1 − dt/τ``, ``b = dt/τ``, ``s = σ·sqrt(dt)``: Euler–Maruyama (Brian2 ``euler``).
+
+Interpolating kernel (``lif_interp``): first-order hold of the input over ``[t_i, t_{i+1}]`` solved
+exactly, ``v(dt) = v·a + D₀·b + (D₁ − D₀)·e + s·ξ`` with ``e = 1 − τ·b/dt``; a crossing inside the step
+is located by linear interpolation between the step's end points, and the neuron restarts exactly
+from 0 at that time (second-order spike times).
+
+The drive is clamped to ``±DRIVE_MAX`` (1e100) so that no finite input can overflow the state: a
+drive of 1e100 fires at every allowed step anyway. Non-finite inputs never reach a kernel (the
+block applies its bad-data policy first).
+
+Noise: standard normals from a xoshiro256++ generator with a 256-layer ziggurat (Marsaglia & Tsang
+2000, the layout of NumPy's ``random_standard_normal``; ≈ 2 ns per normal against 10 ns for
+``Generator.standard_normal``), ``N`` draws per step in neuron order, so the stream is the same
+whatever the chunking; or from an external ``(T, N)`` array (tests).
+
+Execution order (results are bit-identical whichever is used; the tests check it against the
+plain-numpy twins, which step one sample at a time):
+
+* ``N ≤ SCALAR_N``: neuron-major — each neuron runs the whole chunk with its state in registers
+  (no per-step loop overhead; a single neuron is a ~4 ns/step dependency chain), spikes are then
+  counting-sorted by step;
+* otherwise step-major over neuron tiles of ``tile`` neurons that stay in cache for a block of
+  ``TIME_BLOCK`` steps, the spikes of each block re-sorted by (step, neuron). The internal noise
+  generator is sequential in (step, neuron) order, so noisy populations run as one tile.
+
+The threshold/reset loop lives in a separate (not inlined) function so that the spike buffers are
+plain arguments there: a buffer that may be reallocated inside the hot loop costs 3× in numba.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from flowtact.blocks.spiking._spike_history import ring_add
+
+__all__ = [
+    "DRIVE_MAX",
+    "NOISE_EXTERNAL",
+    "NOISE_INTERNAL",
+    "NOISE_OFF",
+    "fill_normal",
+    "fill_normal_py",
+    "grid_coefficients",
+    "interp_coefficients",
+    "lif_grid",
+    "lif_grid_py",
+    "lif_interp",
+    "lif_interp_py",
+    "order_within_steps",
+    "seed_state",
+]
+
+DRIVE_MAX = 1e100
+#: Populations up to this size run neuron-major (state in registers, no per-step loop overhead).
+SCALAR_N = 8
+#: Steps per time block when neurons are tiled (a tile's state stays in cache for the block).
+TIME_BLOCK = 64
+NOISE_OFF, NOISE_INTERNAL, NOISE_EXTERNAL = 0, 1, 2
+
+# -- random numbers: xoshiro256++ and a 256-layer ziggurat ------------------------------------
+
+_M64 = (1 << 64) - 1
+_ZIG_R = 3.6541528853610088
+_ZIG_INV_R = 1.0 / _ZIG_R
+_ZIG_V = 0.00492867323399
+
+
+def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``k`` (uint64 acceptance bounds), ``w`` (scales), ``f`` (densities) for 52-bit mantissas."""
+    m1 = float(2**52)
+    k = np.zeros(256, np.uint64)
+    w = np.zeros(256)
+    f = np.zeros(256)
+    dn = tn = _ZIG_R
+    q = _ZIG_V / math.exp(-0.5 * dn * dn)
+    k[0] = np.uint64(int((dn / q) * m1))
+    k[1] = np.uint64(0)
+    w[0] = q / m1
+    w[255] = dn / m1
+    f[0] = 1.0
+    f[255] = math.exp(-0.5 * dn * dn)
+    for i in range(254, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(_ZIG_V / dn + math.exp(-0.5 * dn * dn)))
+        k[i + 1] = np.uint64(int((dn / tn) * m1))
+        tn = dn
+        f[i] = math.exp(-0.5 * dn * dn)
+        w[i] = dn / m1
+    return k, w, f
+
+
+ZIG_K, ZIG_W, ZIG_F = _ziggurat_tables()
+
+
+def seed_state(rng: np.random.Generator) -> np.ndarray:
+    """A xoshiro256++ state (4 × uint64, never all zero) drawn from ``rng``."""
+    s = rng.integers(0, 2**64, size=4, dtype=np.uint64, endpoint=False)
+    if not s.any():
+        s[0] = np.uint64(0x9E3779B97F4A7C15)
+    return s
+
+
+@njit(cache=True, inline="always")
+def _rotl(x, k):  # type: ignore[no-untyped-def]
+    return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
+
+
+@njit(cache=True, inline="always")
+def _next_u64(s: np.ndarray) -> np.uint64:
+    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
+    result = _rotl(s0 + s3, 23) + s0
+    t = s1 << np.uint64(17)
+    s2 ^= s0
+    s3 ^= s1
+    s1 ^= s2
+    s0 ^= s3
+    s2 ^= t
+    s3 = _rotl(s3, 45)
+    s[0], s[1], s[2], s[3] = s0, s1, s2, s3
+    return result
+
+
+@njit(cache=True, inline="always")
+def _next_double(s: np.ndarray) -> float:
+    return float(_next_u64(s) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True)
+def _zig_slow(s: np.ndarray, idx: int, rabs: np.uint64, x: float) -> tuple[bool, float]:
+    """The rare ziggurat branches (base-strip tail, wedges): (accepted, value)."""
+    if idx == 0:
+        while True:
+            xx = -_ZIG_INV_R * math.log1p(-_next_double(s))
+            yy = -math.log1p(-_next_double(s))
+            if yy + yy > xx * xx:
+                if (rabs >> np.uint64(8)) & np.uint64(1):
+                    return True, -(_ZIG_R + xx)
+                return True, _ZIG_R + xx
+    if (ZIG_F[idx - 1] - ZIG_F[idx]) * _next_double(s) + ZIG_F[idx] < math.exp(-0.5 * x * x):
+        return True, x
+    return False, 0.0
+
+
+@njit(cache=True)
+def _normal(state: np.ndarray) -> float:
+    while True:
+        r = _next_u64(state)
+        idx = np.intp(r & np.uint64(0xFF))
+        r >>= np.uint64(8)
+        sign = r & np.uint64(1)
+        rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
+        x = float(rabs) * ZIG_W[idx]
+        if sign:
+            x = -x
+        if rabs < ZIG_K[idx]:
+            return x
+        ok, y = _zig_slow(state, idx, rabs, x)
+        if ok:
+            return y
+
+
+@njit(cache=True)
+def fill_normal(state: np.ndarray, out: np.ndarray) -> None:
+    """Fill ``out`` (1-D float64) with standard normals, advancing the xoshiro256++ ``state``."""
+    for k in range(out.shape[0]):
+        while True:
+            r = _next_u64(state)
+            idx = np.intp(r & np.uint64(0xFF))
+            r >>= np.uint64(8)
+            sign = r & np.uint64(1)
+            rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
+            x = float(rabs) * ZIG_W[idx]
+            if sign:
+                x = -x
+            if rabs < ZIG_K[idx]:
+                out[k] = x
+                break
+            ok, y = _zig_slow(state, idx, rabs, x)
+            if ok:
+                out[k] = y
+                break
+
+
+def _next_u64_py(s: list[int]) -> int:
+    s0, s1, s2, s3 = s
+    result = ((((s0 + s3) & _M64) << 23 | ((s0 + s3) & _M64) >> 41) & _M64) + s0
+    t = (s1 << 17) & _M64
+    s2 ^= s0
+    s3 ^= s1
+    s1 ^= s2
+    s0 ^= s3
+    s2 ^= t
+    s3 = ((s3 << 45) | (s3 >> 19)) & _M64
+    s[:] = [s0, s1, s2, s3]
+    return result & _M64
+
+
+def fill_normal_py(state: np.ndarray, out: np.ndarray) -> None:
+    """Pure-Python twin of :func:`fill_normal` (same bits; slow, for tests)."""
+    s = [int(x) for x in state]
+    k_tab = [int(x) for x in ZIG_K]
+
+    def next_double() -> float:
+        return float(_next_u64_py(s) >> 11) * (1.0 / 9007199254740992.0)
+
+    for i in range(out.shape[0]):
+        while True:
+            r = _next_u64_py(s)
+            idx = r & 0xFF
+            r >>= 8
+            sign = r & 1
+            rabs = (r >> 1) & 0x000FFFFFFFFFFFFF
+            x = float(rabs) * float(ZIG_W[idx])
+            if sign:
+                x = -x
+            if rabs < k_tab[idx]:
+                break
+            if idx == 0:
+                while True:
+                    xx = -_ZIG_INV_R * math.log1p(-next_double())
+                    yy = -math.log1p(-next_double())
+                    if yy + yy > xx * xx:
+                        x = -(_ZIG_R + xx) if (rabs >> 8) & 1 else _ZIG_R + xx
+                        break
+                break
+            if (ZIG_F[idx - 1] - ZIG_F[idx]) * next_double() + ZIG_F[idx] < math.exp(-0.5 * x * x):
+                break
+        out[i] = x
+    state[:] = np.array(s, dtype=np.uint64)
+
+
+# -- coefficients ------------------------------------------------------------------------------
+
+
+def grid_coefficients(method: str, tau_s: np.ndarray, sigma: np.ndarray, dt_s: float) -> np.ndarray:
+    """Rows ``a, b, s`` (3, N) of the grid update ``v ← v·a + D·b + s·ξ`` for ``exp`` or ``euler``."""
+    tau = np.asarray(tau_s, dtype=np.float64)
+    sigma = np.asarray(sigma, dtype=np.float64)
+    if method == "euler":
+        c = dt_s / tau
+        return np.stack([1.0 - c, c, sigma * math.sqrt(dt_s) * np.ones_like(tau)])
+    if method in ("exp", "exp_interp"):
+        x = dt_s / tau
+        a = np.exp(-x)
+        b = -np.expm1(-x)
+        s = sigma * np.sqrt(tau / 2.0 * -np.expm1(-2.0 * x))
+        return np.stack([a, b, s])
+    raise ValueError(f"unknown integrator {method!r}")
+
+
+def interp_coefficients(tau_s: np.ndarray, sigma: np.ndarray, dt_s: float) -> np.ndarray:
+    """Rows ``a, b, e, s, τ, σ`` (6, N) of the first-order-hold exact step (see module doc)."""
+    tau = np.asarray(tau_s, dtype=np.float64)
+    a, b, s = grid_coefficients("exp", tau, sigma, dt_s)
+    e = 1.0 - tau * b / dt_s
+    return np.stack([a, b, e, s, tau, np.asarray(sigma, dtype=np.float64) * np.ones_like(tau)])
+
+
+# -- spike buffers -----------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _grow_i(a: np.ndarray, need: int) -> np.ndarray:
+    out = np.empty(max(2 * a.shape[0], need), a.dtype)
+    out[: a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _grow_f(a: np.ndarray, need: int) -> np.ndarray:
+    out = np.empty(max(2 * a.shape[0], need), a.dtype)
+    out[: a.shape[0]] = a
+    return out
+
+
+@njit(cache=True)
+def _sort_by_step(steps: np.ndarray, idx: np.ndarray, off: np.ndarray, i0: int, n_b: int) -> None:
+    """Stable counting sort by step (steps in ``i0 … i0+n_b−1``) of spike arrays, in place.
+
+    Tiles emit their spikes tile by tile; this restores the (step, neuron) order.
+    """
+    n_spk = steps.shape[0]
+    if n_spk < 2:
+        return
+    start = np.zeros(n_b + 1, np.int64)
+    for j in range(n_spk):
+        start[steps[j] - i0 + 1] += 1
+    for i in range(n_b):
+        start[i + 1] += start[i]
+    s2 = np.empty_like(steps)
+    i2 = np.empty_like(idx)
+    o2 = np.empty_like(off)
+    has_off = off.shape[0] > 0
+    for j in range(n_spk):
+        q = start[steps[j] - i0]
+        start[steps[j] - i0] += 1
+        s2[q] = steps[j]
+        i2[q] = idx[j]
+        if has_off:
+            o2[q] = off[j]
+    steps[:] = s2
+    idx[:] = i2
+    if has_off:
+        off[:] = o2
+
+
+@njit(cache=True)
+def order_within_steps(steps: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """Permutation putting spikes sorted by (step, neuron) into (step, offset, neuron) order.
+
+    Steps are disjoint time intervals, so only the runs of one step need sorting (a stable sort
+    by offset keeps equal offsets in neuron order).
+    """
+    n = steps.shape[0]
+    perm = np.arange(n)
+    j0 = 0
+    while j0 < n:
+        j1 = j0 + 1
+        while j1 < n and steps[j1] == steps[j0]:
+            j1 += 1
+        if j1 - j0 > 1:
+            perm[j0:j1] = j0 + np.argsort(off[j0:j1], kind="mergesort")
+        j0 = j1
+    return perm
+
+
+# -- grid kernel (exp / euler) -----------------------------------------------------------------
+
+
+@njit(cache=True)
+def _grid_threshold(v, refc, n_clamp, k0, i, spk_step, spk_idx, n_spk):  # type: ignore[no-untyped-def]
+    """Threshold → reset → refractory count on one tile (``v``, ``refc`` are its views, ``k0`` its
+    first neuron) at step ``i``; returns the new spike count.
+
+    A separate function so that the spike buffers are fixed arrays inside the hot loop.
+    """
+    for k in range(v.shape[0]):
+        if v[k] > 1.0:
+            v[k] = 0.0
+            refc[k] = n_clamp
+            spk_step[n_spk] = i
+            spk_idx[n_spk] = k0 + k
+            n_spk += 1
+        elif refc[k] > 0:
+            refc[k] -= 1
+    return n_spk
+
+
+@njit(cache=True)
+def _grid_threshold_h(v, refc, n_clamp, k0, i, spk_step, spk_idx, n_spk, ring, p, h_table):  # type: ignore[no-untyped-def]
+    """:func:`_grid_threshold` plus the post-spike current of every spike (ring buffer)."""
+    for k in range(v.shape[0]):
+        if v[k] > 1.0:
+            v[k] = 0.0
+            refc[k] = n_clamp
+            spk_step[n_spk] = i
+            spk_idx[n_spk] = k0 + k
+            n_spk += 1
+            ring_add(ring, p, k0 + k, h_table, 0.0)
+        elif refc[k] > 0:
+            refc[k] -= 1
+    return n_spk
+
+
+@njit(cache=True)
+def _grid_neuron(
+    u, k, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, spk_step, spk_idx, n_spk
+):  # type: ignore[no-untyped-def]
+    """All steps of neuron ``k`` with its state in registers (neuron-major path for small N)."""
+    n_t, n_in = u.shape
+    n_lags = ring.shape[0]
+    want_v = v_out.shape[0] > 0
+    col = 0 if n_in == 1 else k
+    a, b, s, vl, g = coef[0, k], coef[1, k], coef[2, k], coef[3, k], coef[4, k]
+    vk, rk = v[k], refc[k]
+    p = pos
+    for i in range(n_t):
+        drv = vl + g * u[i, col]
+        if n_lags > 0:
+            drv += ring[p, k]
+            ring[p, k] = 0.0
+        if want_v:
+            v_out[i, k] = vk
+        d = min(max(drv, -DRIVE_MAX), DRIVE_MAX)
+        if noise_mode == 0:
+            vn = vk * a + d * b
+        elif noise_mode == 1:
+            vn = vk * a + d * b + s * _normal(rng)
+        else:
+            vn = vk * a + d * b + s * xi_ext[i, k]
+        vk = vn if rk == 0 else 0.0
+        if vk > 1.0:
+            vk = 0.0
+            rk = n_clamp
+            spk_step[n_spk] = i
+            spk_idx[n_spk] = k
+            n_spk += 1
+            if n_lags > 0:
+                ring_add(ring, p, k, h_table, 0.0)
+        elif rk > 0:
+            rk -= 1
+        if n_lags > 0:
+            p += 1
+            if p == n_lags:
+                p = 0
+    v[k], refc[k] = vk, rk
+    return n_spk, p
+
+
+@njit(cache=True)
+def lif_grid(
+    u: np.ndarray,  # (T, M) drive samples, M = 1 (shared) or N
+    coef: np.ndarray,  # (5, N): a, b, s, v_leak, gain
+    v: np.ndarray,  # (N,) membrane, in/out
+    refc: np.ndarray,  # (N,) int64 refractory steps left, in/out
+    n_clamp: int,  # steps held at reset after a spike
+    ring: np.ndarray,  # (L, N) post-spike ring buffer (L = 0: no history current)
+    pos: int,  # ring slot of the first step
+    h_table: np.ndarray,  # (L + 1,) h(j·dt)
+    noise_mode: int,  # 0 off, 1 internal generator, 2 external normals
+    rng: np.ndarray,  # (4,) uint64 xoshiro256++ state, in/out
+    xi_ext: np.ndarray,  # (T, N) external normals (noise_mode 2) else (0, N)
+    work: np.ndarray,  # (2, N) scratch
+    v_out: np.ndarray,  # (T, N) membrane at each step's start, or (0, N)
+    tile: int,  # neurons per tile (0: no tiling)
+    cap_hint: int,  # expected number of spikes (initial size of the spike buffers)
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """All ``T`` steps of a grid integrator; returns (spike steps, spike neurons, ring pos).
+
+    Spikes come sorted by step, then neuron. Neurons are processed in tiles that stay in cache
+    for the whole chunk; the internal noise generator is sequential, so it forces one tile.
+    """
+    n_t, n_in = u.shape
+    n = v.shape[0]
+    n_lags = ring.shape[0]
+    want_v = v_out.shape[0] > 0
+    spk_step = np.empty(max(16, min(n_t * n, cap_hint)), np.int64)
+    spk_idx = np.empty_like(spk_step)
+    n_spk = 0
+    pos_end = pos
+    if n <= SCALAR_N and (noise_mode != 1 or n == 1):
+        # neuron-major: each neuron runs the whole chunk with its state in registers
+        if noise_mode == 1:  # n == 1: the same draws, made in one fast batch
+            xi_flat = np.empty(n_t)
+            fill_normal(rng, xi_flat)
+            xi_ext = xi_flat.reshape((n_t, 1))
+            noise_mode = 2
+        for k in range(n):
+            if n_spk + n_t > spk_step.shape[0]:
+                spk_step = _grow_i(spk_step, n_spk + n_t)
+                spk_idx = _grow_i(spk_idx, n_spk + n_t)
+            n_spk, pos_end = _grid_neuron(
+                u,
+                k,
+                coef,
+                v,
+                refc,
+                n_clamp,
+                ring,
+                pos,
+                h_table,
+                noise_mode,
+                rng,
+                xi_ext,
+                v_out,
+                spk_step,
+                spk_idx,
+                n_spk,
+            )
+        spk_step = spk_step[:n_spk]
+        spk_idx = spk_idx[:n_spk]
+        if n > 1:
+            _sort_by_step(spk_step, spk_idx, np.empty(0), 0, n_t)
+        return spk_step, spk_idx, pos_end
+    if noise_mode == 1 or tile < 1 or tile >= n:
+        tile = n
+    t_block = max(n_t, 1) if tile == n else TIME_BLOCK
+    for ib in range(0, n_t, t_block):
+        ie = min(ib + t_block, n_t)
+        nb0 = n_spk
+        for k0 in range(0, n, tile):
+            k1 = min(k0 + tile, n)
+            m = k1 - k0
+            # views of this tile: every inner loop runs over 0 … m−1
+            vt, rt = v[k0:k1], refc[k0:k1]
+            a, b, s = coef[0, k0:k1], coef[1, k0:k1], coef[2, k0:k1]
+            vl, g = coef[3, k0:k1], coef[4, k0:k1]
+            drv, xr = work[0, k0:k1], work[1, k0:k1]
+            p = (pos + ib) % n_lags if n_lags > 0 else 0
+            for i in range(ib, ie):
+                if n_in == 1:
+                    ui = u[i, 0]
+                    for k in range(m):
+                        drv[k] = vl[k] + g[k] * ui
+                else:
+                    ur = u[i, k0:k1]
+                    for k in range(m):
+                        drv[k] = vl[k] + g[k] * ur[k]
+                if n_lags > 0:
+                    rr = ring[p, k0:k1]
+                    for k in range(m):
+                        drv[k] += rr[k]
+                        rr[k] = 0.0
+                if want_v:
+                    vo = v_out[i, k0:k1]
+                    for k in range(m):
+                        vo[k] = vt[k]
+                if noise_mode == 0:
+                    for k in range(m):
+                        d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
+                        vn = vt[k] * a[k] + d * b[k]
+                        vt[k] = vn if rt[k] == 0 else 0.0
+                else:
+                    if noise_mode == 1:
+                        fill_normal(rng, xr)
+                    else:
+                        xe = xi_ext[i, k0:k1]
+                        for k in range(m):
+                            xr[k] = xe[k]
+                    for k in range(m):
+                        d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
+                        vn = vt[k] * a[k] + d * b[k] + s[k] * xr[k]
+                        vt[k] = vn if rt[k] == 0 else 0.0
+                if n_spk + m > spk_step.shape[0]:
+                    spk_step = _grow_i(spk_step, n_spk + m)
+                    spk_idx = _grow_i(spk_idx, n_spk + m)
+                if n_lags > 0:
+                    n_spk = _grid_threshold_h(
+                        vt, rt, n_clamp, k0, i, spk_step, spk_idx, n_spk, ring, p, h_table
+                    )
+                else:
+                    n_spk = _grid_threshold(vt, rt, n_clamp, k0, i, spk_step, spk_idx, n_spk)
+                if n_lags > 0:
+                    p += 1
+                    if p == n_lags:
+                        p = 0
+            pos_end = p
+        if tile < n:
+            _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], np.empty(0), ib, ie - ib)
+    return spk_step[:n_spk], spk_idx[:n_spk], pos_end
+
+
+def lif_grid_py(
+    u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile=0, cap_hint=0
+):  # type: ignore[no-untyped-def]
+    """Plain-numpy twin of :func:`lif_grid` (same arguments and results; one step at a time)."""
+    n_t = u.shape[0]
+    n_lags = ring.shape[0]
+    a, b, s, vl, g = coef
+    steps, idx = [], []
+    for i in range(n_t):
+        drv = vl + g * u[i]
+        if n_lags > 0:
+            drv = drv + ring[pos]
+            ring[pos] = 0.0
+        if v_out.shape[0]:
+            v_out[i] = v
+        d = np.clip(drv, -DRIVE_MAX, DRIVE_MAX)
+        vn = v * a + d * b
+        if noise_mode:
+            xi = work[1]
+            if noise_mode == 1:
+                fill_normal_py(rng, xi)
+            else:
+                xi = xi_ext[i]
+            vn = vn + s * xi
+        v[:] = np.where(refc == 0, vn, 0.0)
+        fired = np.flatnonzero(v > 1.0)
+        refc[:] = np.where(refc > 0, refc - 1, 0)
+        v[fired] = 0.0
+        refc[fired] = n_clamp
+        steps += [i] * len(fired)
+        idx += fired.tolist()
+        if n_lags > 0:
+            lags = (pos + np.arange(1, n_lags + 1)) % n_lags
+            for k in fired:
+                ring[lags, k] += h_table[1:]
+            pos = (pos + 1) % n_lags
+    return np.array(steps, np.int64), np.array(idx, np.int64), pos
+
+
+# -- interpolating kernel (exp + first-order hold + crossing interpolation) ---------------------
+
+
+@njit(cache=True, inline="always")
+def _segment(
+    v0: float, s0: float, dt: float, d0: float, d1: float, tau: float, sig: float, xi: float
+) -> float:
+    """Exact FOH solution from ``v0`` at ``s0`` to the step end ``dt`` (noise scaled to the length)."""
+    h = dt - s0
+    x = h / tau
+    ah = math.exp(-x)
+    bh = -math.expm1(-x)
+    slope = (d1 - d0) / dt
+    out = v0 * ah + (d0 + slope * s0) * bh + slope * (h - tau * bh)
+    if sig > 0.0:
+        out += sig * math.sqrt(tau / 2.0 * -math.expm1(-2.0 * x)) * xi
+    return out
+
+
+@njit(cache=True)
+def _interp_threshold(
+    v, vn, rl, dt, ref_s, d0, d1, tau, sig, xr, k0, i, spk_step, spk_off, spk_idx, n_spk, ring, p, h_table
+):  # type: ignore[no-untyped-def]
+    """Refractoriness, crossing interpolation and exact restart on one tile (views; ``k0`` its
+    first neuron) at step ``i``; returns the new spike count."""
+    has_h = ring.shape[0] > 0
+    for k in range(v.shape[0]):
+        v0 = v[k]
+        v1 = vn[k]
+        s0 = 0.0
+        r = rl[k]
+        if r > 0.0:
+            if r >= dt:
+                rl[k] = r - dt
+                v[k] = 0.0
+                continue
+            rl[k] = 0.0
+            s0 = r
+            v0 = 0.0
+            v1 = _segment(0.0, r, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
+        if v0 > 1.0:
+            ts = s0
+        elif v1 > 1.0:
+            ts = s0 + (1.0 - v0) / (v1 - v0) * (dt - s0)
+            ts = min(ts, dt)
+        else:
+            v[k] = v1
+            continue
+        spk_step[n_spk] = i
+        spk_off[n_spk] = ts
+        spk_idx[n_spk] = k0 + k
+        n_spk += 1
+        if has_h:
+            ring_add(ring, p, k0 + k, h_table, ts / dt)
+        sr = ts + ref_s
+        if sr < dt:
+            v[k] = _segment(0.0, sr, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
+        else:
+            v[k] = 0.0
+            rl[k] = sr - dt
+    return n_spk
+
+
+@njit(cache=True)
+def _interp_neuron(u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, xi_ext, v_out,
+                   spk_step, spk_off, spk_idx, n_spk):  # fmt: skip  # type: ignore[no-untyped-def]
+    """All steps of neuron ``k`` with its state in registers (neuron-major path for small N)."""
+    n_t, n_in = u.shape
+    n_lags = ring.shape[0]
+    want_v = v_out.shape[0] > 0
+    col = 0 if n_in == 1 else k
+    a, b, e, s, tau, sig, vl, g = (
+        coef[0, k], coef[1, k], coef[2, k], coef[3, k], coef[4, k], coef[5, k], coef[6, k], coef[7, k]
+    )  # fmt: skip
+    vk, r = v[k], rl[k]
+    p = pos
+    d1 = vl + g * u_first[col]
+    for i in range(n_t):
+        d0 = d1 if n_lags == 0 else vl + g * (u_first[col] if i == 0 else u[i - 1, col])
+        d1 = vl + g * u[i, col]
+        if n_lags > 0:
+            ih = ring[p, k]
+            d0 += ih
+            d1 += ih
+            ring[p, k] = 0.0
+        d0 = min(max(d0, -DRIVE_MAX), DRIVE_MAX)
+        d1c = min(max(d1, -DRIVE_MAX), DRIVE_MAX)
+        xr = xi_ext[i, k] if noise_mode != 0 else 0.0
+        v1 = vk * a + d0 * b + (d1c - d0) * e
+        if noise_mode != 0:
+            v1 = v1 + s * xr
+        v0 = vk
+        s0 = 0.0
+        skip = False
+        if r > 0.0:
+            if r >= dt:
+                r = r - dt
+                vk = 0.0
+                skip = True
+            else:
+                s0 = r
+                r = 0.0
+                v0 = 0.0
+                v1 = _segment(0.0, s0, dt, d0, d1c, tau, sig, xr)
+        if not skip:
+            fire = True
+            if v0 > 1.0:
+                ts = s0
+            elif v1 > 1.0:
+                ts = min(s0 + (1.0 - v0) / (v1 - v0) * (dt - s0), dt)
+            else:
+                vk = v1
+                fire = False
+            if fire:
+                spk_step[n_spk] = i
+                spk_off[n_spk] = ts
+                spk_idx[n_spk] = k
+                n_spk += 1
+                if n_lags > 0:
+                    ring_add(ring, p, k, h_table, ts / dt)
+                sr = ts + ref_s
+                if sr < dt:
+                    vk = _segment(0.0, sr, dt, d0, d1c, tau, sig, xr)
+                else:
+                    vk = 0.0
+                    r = sr - dt
+        if want_v:
+            v_out[i, k] = vk
+        if n_lags > 0:
+            p += 1
+            if p == n_lags:
+                p = 0
+    v[k], rl[k] = vk, r
+    return n_spk, p
+
+
+@njit(cache=True)
+def lif_interp(
+    u_first: np.ndarray,  # (M,) input at the start of step 0
+    u: np.ndarray,  # (T, M) input at the end of each step
+    dt: float,
+    coef: np.ndarray,  # (8, N): a, b, e, s, tau, sigma, v_leak, gain
+    v: np.ndarray,  # (N,) in/out
+    rl: np.ndarray,  # (N,) float refractory time left (s), in/out
+    ref_s: float,
+    ring: np.ndarray,
+    pos: int,
+    h_table: np.ndarray,
+    noise_mode: int,
+    rng: np.ndarray,
+    xi_ext: np.ndarray,
+    work: np.ndarray,  # (4, N) scratch
+    v_out: np.ndarray,  # (T, N) membrane at each step's END, or (0, N)
+    tile: int,
+    cap_hint: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """All ``T`` steps of the interpolating integrator.
+
+    Returns (spike steps, offsets of the crossings inside their steps in s, neurons, ring pos),
+    sorted by step then neuron (not by crossing time inside a step).
+    """
+    n_t, n_in = u.shape
+    n = v.shape[0]
+    n_lags = ring.shape[0]
+    want_v = v_out.shape[0] > 0
+    spk_step = np.empty(max(16, min(n_t * n, cap_hint)), np.int64)
+    spk_idx = np.empty_like(spk_step)
+    spk_off = np.empty(spk_step.shape[0])
+    n_spk = 0
+    pos_end = pos
+    if n <= SCALAR_N and (noise_mode != 1 or n == 1):
+        if noise_mode == 1:  # n == 1: the same draws, made in one fast batch
+            xi_flat = np.empty(n_t)
+            fill_normal(rng, xi_flat)
+            xi_ext = xi_flat.reshape((n_t, 1))
+            noise_mode = 2
+        for k in range(n):
+            if n_spk + n_t > spk_step.shape[0]:
+                spk_step = _grow_i(spk_step, n_spk + n_t)
+                spk_idx = _grow_i(spk_idx, n_spk + n_t)
+                spk_off = _grow_f(spk_off, n_spk + n_t)
+            n_spk, pos_end = _interp_neuron(
+                u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, xi_ext, v_out,
+                spk_step, spk_off, spk_idx, n_spk,
+            )  # fmt: skip
+        spk_step, spk_off, spk_idx = spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]
+        if n > 1:
+            _sort_by_step(spk_step, spk_idx, spk_off, 0, n_t)
+        return spk_step, spk_off, spk_idx, pos_end
+    if noise_mode == 1 or tile < 1 or tile >= n:
+        tile = n
+    t_block = max(n_t, 1) if tile == n else TIME_BLOCK
+    for ib in range(0, n_t, t_block):
+        ie = min(ib + t_block, n_t)
+        nb0 = n_spk
+        for k0 in range(0, n, tile):
+            k1 = min(k0 + tile, n)
+            m = k1 - k0
+            vt, rlt = v[k0:k1], rl[k0:k1]
+            a, b, e, s = coef[0, k0:k1], coef[1, k0:k1], coef[2, k0:k1], coef[3, k0:k1]
+            tau, sig, vl, g = coef[4, k0:k1], coef[5, k0:k1], coef[6, k0:k1], coef[7, k0:k1]
+            d0, d1, vn, xr = work[0, k0:k1], work[1, k0:k1], work[2, k0:k1], work[3, k0:k1]
+            p = (pos + ib) % n_lags if n_lags > 0 else 0
+            for i in range(ib, ie):
+                if n_in == 1:
+                    ua = u_first[0] if i == 0 else u[i - 1, 0]
+                    ub = u[i, 0]
+                    for k in range(m):
+                        d0[k] = vl[k] + g[k] * ua
+                        d1[k] = vl[k] + g[k] * ub
+                else:
+                    ura = u_first[k0:k1] if i == 0 else u[i - 1, k0:k1]
+                    urb = u[i, k0:k1]
+                    for k in range(m):
+                        d0[k] = vl[k] + g[k] * ura[k]
+                        d1[k] = vl[k] + g[k] * urb[k]
+                if n_lags > 0:
+                    rr = ring[p, k0:k1]
+                    for k in range(m):
+                        d0[k] += rr[k]
+                        d1[k] += rr[k]
+                        rr[k] = 0.0
+                for k in range(m):
+                    d0[k] = min(max(d0[k], -DRIVE_MAX), DRIVE_MAX)
+                    d1[k] = min(max(d1[k], -DRIVE_MAX), DRIVE_MAX)
+                if noise_mode == 0:
+                    for k in range(m):
+                        xr[k] = 0.0
+                        vn[k] = vt[k] * a[k] + d0[k] * b[k] + (d1[k] - d0[k]) * e[k]
+                else:
+                    if noise_mode == 1:
+                        fill_normal(rng, xr)
+                    else:
+                        xe = xi_ext[i, k0:k1]
+                        for k in range(m):
+                            xr[k] = xe[k]
+                    for k in range(m):
+                        vn[k] = vt[k] * a[k] + d0[k] * b[k] + (d1[k] - d0[k]) * e[k] + s[k] * xr[k]
+                if n_spk + m > spk_step.shape[0]:
+                    spk_step = _grow_i(spk_step, n_spk + m)
+                    spk_idx = _grow_i(spk_idx, n_spk + m)
+                    spk_off = _grow_f(spk_off, n_spk + m)
+                special = False  # any crossing or refractory neuron in the tile at this step?
+                for k in range(m):
+                    special |= (vn[k] > 1.0) | (vt[k] > 1.0) | (rlt[k] > 0.0)
+                if special:
+                    n_spk = _interp_threshold(
+                        vt, vn, rlt, dt, ref_s, d0, d1, tau, sig, xr, k0, i, spk_step, spk_off, spk_idx, n_spk,
+                        ring, p, h_table,
+                    )  # fmt: skip
+                else:
+                    for k in range(m):
+                        vt[k] = vn[k]
+                if want_v:
+                    vo = v_out[i, k0:k1]
+                    for k in range(m):
+                        vo[k] = vt[k]
+                if n_lags > 0:
+                    p += 1
+                    if p == n_lags:
+                        p = 0
+            pos_end = p
+        if tile < n:
+            _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], spk_off[nb0:n_spk], ib, ie - ib)
+    return spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk], pos_end
+
+
+def _segment_py(v0, s0, dt, d0, d1, tau, sig, xi):  # type: ignore[no-untyped-def]
+    h = dt - s0
+    x = h / tau
+    ah = math.exp(-x)
+    bh = -math.expm1(-x)
+    slope = (d1 - d0) / dt
+    out = v0 * ah + (d0 + slope * s0) * bh + slope * (h - tau * bh)
+    if sig > 0.0:
+        out += sig * math.sqrt(tau / 2.0 * -math.expm1(-2.0 * x)) * xi
+    return out
+
+
+def lif_interp_py(
+    u_first,
+    u,
+    dt,
+    coef,
+    v,
+    rl,
+    ref_s,
+    ring,
+    pos,
+    h_table,
+    noise_mode,
+    rng,
+    xi_ext,
+    work,
+    v_out,
+    tile=0,
+    cap_hint=0,
+):  # type: ignore[no-untyped-def]
+    """Plain-numpy twin of :func:`lif_interp` (same arguments and results; one step at a time)."""
+    n_t = u.shape[0]
+    n = v.shape[0]
+    n_lags = ring.shape[0]
+    a, b, e, s, tau, sig, vl, g = coef
+    steps, offs, idx = [], [], []
+    for i in range(n_t):
+        ua = u_first if i == 0 else u[i - 1]
+        d0 = vl + g * ua
+        d1 = vl + g * u[i]
+        if n_lags > 0:
+            d0 = d0 + ring[pos]
+            d1 = d1 + ring[pos]
+            ring[pos] = 0.0
+        d0 = np.clip(d0, -DRIVE_MAX, DRIVE_MAX) * np.ones(n)
+        d1 = np.clip(d1, -DRIVE_MAX, DRIVE_MAX) * np.ones(n)
+        xr = np.zeros(n)
+        if noise_mode == 1:
+            fill_normal_py(rng, xr)
+        elif noise_mode == 2:
+            xr = xi_ext[i].copy()
+        vn = v * a + d0 * b + (d1 - d0) * e
+        if noise_mode:
+            vn = vn + s * xr
+        for k in range(n):
+            v0, v1, s0, r = v[k], vn[k], 0.0, rl[k]
+            if r > 0.0:
+                if r >= dt:
+                    rl[k] = r - dt
+                    v[k] = 0.0
+                    continue
+                rl[k] = 0.0
+                s0, v0 = r, 0.0
+                v1 = _segment_py(0.0, r, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
+            if v0 > 1.0:
+                ts = s0
+            elif v1 > 1.0:
+                ts = min(s0 + (1.0 - v0) / (v1 - v0) * (dt - s0), dt)
+            else:
+                v[k] = v1
+                continue
+            steps.append(i)
+            offs.append(ts)
+            idx.append(k)
+            if n_lags > 0:
+                frac = ts / dt
+                for j in range(1, n_lags + 1):
+                    ring[(pos + j) % n_lags, k] += (1.0 - frac) * h_table[j] + frac * h_table[j - 1]
+            sr = ts + ref_s
+            if sr < dt:
+                v[k] = _segment_py(0.0, sr, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
+            else:
+                v[k] = 0.0
+                rl[k] = sr - dt
+        if v_out.shape[0]:
+            v_out[i] = v
+        if n_lags > 0:
+            pos = (pos + 1) % n_lags
+    return np.array(steps, np.int64), np.array(offs, np.float64), np.array(idx, np.int64), pos

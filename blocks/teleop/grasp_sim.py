@@ -1,0 +1,243 @@
+"""The remote gripper (the tactile Model-O, T-MO) and the object it grasps, for the emulated teleop loop.
+
+White 2023 grasps a soft plush strawberry and a firm water bottle with the T-MO (§4.2.3, Fig. 4.5);
+this block stands in for both: gripper commands in, true contact forces out.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
+
+from .hand import FINGERS, N_FINGERS
+
+__all__ = ["GraspSim", "GraspSimConfig", "grasp_sim_apply", "object_index"]
+
+
+def object_index(t: np.ndarray, n_objects: int, period_s: float, swap_at_s: float) -> np.ndarray:
+    """Index of the object in hand at times ``t``: object 0 until the first swap, then the next in turn.
+
+    Swaps happen at ``swap_at_s``, ``swap_at_s + period_s``, … (with ``swap_at_s = 0`` the first one
+    is at ``period_s``).
+    """
+    k = np.floor((np.asarray(t, np.float64) - swap_at_s) / period_s) + (1.0 if swap_at_s > 0 else 0.0)
+    return np.mod(k, n_objects)
+
+
+def grasp_sim_apply(
+    t: np.ndarray,
+    u: np.ndarray,
+    obj: np.ndarray,
+    state: np.ndarray,
+    prev_t: float,
+    stiffness: np.ndarray,
+    contact: np.ndarray,
+    tau_s: float,
+    damping: float,
+    max_force: float,
+    dt0: float,
+) -> tuple[np.ndarray, float]:
+    """The gripper and object, sample by sample; ``state`` (3,) closures, updated in place.
+
+    closure += (1 − e^(−Δt/τ))·(u − closure), then limited to contact + max_force/k (the motor's
+    torque limit against the object); F = k·max(0, closure − contact) + damping·(penetration
+    rate), clipped to [0, max_force]. Δt from the timestamps (``dt0`` for the first sample);
+    a non-increasing stamp leaves the closure in place. Returns (forces (n, 3), prev_t).
+    """
+    n = len(t)
+    f = np.empty((n, N_FINGERS))
+    for k in range(n):
+        tk = float(t[k])
+        dt = dt0 if not math.isfinite(prev_t) else tk - prev_t
+        a = -math.expm1(-dt / tau_s) if dt > 0.0 else 0.0
+        if dt > 0.0:
+            prev_t = tk
+        stiff = float(stiffness[int(obj[k])])
+        for i in range(N_FINGERS):
+            c_old = float(state[i])
+            c = c_old + a * (float(u[k, i]) - c_old)
+            c = min(c, float(contact[i]) + max_force / stiff)
+            state[i] = c
+            pen = c - float(contact[i])
+            if pen <= 0.0:
+                f[k, i] = 0.0
+                continue
+            force = stiff * pen
+            if damping > 0.0 and dt > 0.0:
+                force += damping * (c - max(c_old, float(contact[i]))) / dt
+            f[k, i] = min(max(force, 0.0), max_force)
+    return f, prev_t
+
+
+@dataclass(frozen=True)
+class GraspSimConfig(Config):
+    """Parameters of :class:`GraspSim`."""
+
+    object_names: tuple[str, ...] = param(
+        ("strawberry", "bottle"), doc="the objects grasped in turn", min_len=1
+    )
+    stiffness_n: tuple[float, ...] = param(
+        (4.0, 40.0), doc="stiffness of each object, N per unit of gripper closure", min_len=1, gt=0
+    )
+    contact: tuple[float, ...] = param(
+        (0.45, 0.45, 0.45),
+        doc="closure at which each finger (thumb, index, middle) touches the object",
+        min_len=3,
+        max_len=3,
+        ge=0,
+        le=1,
+    )
+    tau_s: float = param(0.15, doc="time constant of a gripper finger following its command, s", gt=0)
+    damping_n_s: float = param(0.0, doc="object damping, N·s per unit closure (0: purely elastic)", ge=0)
+    max_force_n: float = param(6.0, doc="contact force at which the gripper's motors stall, N", gt=0)
+    period_s: float = param(5.0, doc="time between object swaps (one grasp per period), s", gt=0)
+    swap_at_s: float = param(
+        0.0, doc="time within each period at which the next object is put in hand, s", ge=0
+    )
+    on_bad_data: Literal["raise", "drop", "hold"] = param(
+        "raise", doc="non-finite commands: raise, drop them, or hold the last good command"
+    )
+
+    def check(self) -> None:
+        if len(self.stiffness_n) != len(self.object_names):
+            raise self.error(
+                "stiffness_n",
+                f"needs one value per object ({len(self.object_names)}: {', '.join(self.object_names)}); "
+                f"got {len(self.stiffness_n)}",
+            )
+        if self.swap_at_s >= self.period_s:
+            raise self.error("swap_at_s", f"must be < period_s ({self.period_s:g}); got {self.swap_at_s:g}")
+
+
+class GraspSim(Block):
+    """Simulated T-MO gripper closing on an object: gripper command in, true contact force per finger out.
+
+    Ports
+    -----
+    grip : float64, shape (3,), units "1" — gripper command per finger, 0 open … 1 closed
+    force : float64, shape (3,), units "N", labels FINGERS — true contact force at each fingertip
+    object : float64, shape (), units "1" — index into ``object_names`` of the object in hand
+
+    Config
+    ------
+    See :class:`GraspSimConfig`. Defaults: a soft "strawberry" (4 N per unit closure) and a firm
+    "bottle" (40 N per unit closure) alternating every 5 s, touched at closure 0.45.
+
+    Notes
+    -----
+    Each gripper finger's closure follows its command with a first-order lag (``tau_s``; exact for
+    a command held over each interval, on the samples' own timestamps). The object touches finger
+    i at closure ``contact[i]`` and pushes back elastically: F = k·max(0, closure − contact)
+    (+ ``damping_n_s`` × penetration rate, off by default), so the same closing command gives a
+    soft object a smaller force and a deeper squeeze — the root of the thesis' Fig. 4.6 effect. The
+    gripper's motors stall at ``max_force_n``: the closure stops at contact + max_force/k (the
+    thesis tightens each grasp "until the motors in the T-MO reach their maximum torque").
+    Objects: ``object_names[j]`` with ``stiffness_n[j]``, in turn; the next one is put in hand at
+    ``swap_at_s`` into each period (the exoskeleton emulator's simulated user grasps once per
+    period, so choose a swap time at which that hand is open; a swap during a grasp changes the
+    force at once). ``object`` gives the index per sample, so analyses can split by object.
+    A plain transform (no loop delay: that sits at the serial_io block): one output per command
+    sample, at its time; commands outside [0, 1] are clipped (counted ``clipped``). Pure and
+    deterministic; a sequential per-sample loop, so chunking never changes a bit. State: the three
+    closures (starting open, 0) and the last timestamp. ``end`` is passed on.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from flowtact.blocks.teleop.grasp_sim import GraspSim
+    >>> from flowtact.testing import run_offline
+    >>> grip = np.full((300, 3), 0.6)                     # 3 s closed to 0.6 on the strawberry
+    >>> out = run_offline(GraspSim(), grip=grip, rate_hz=100.0)
+    >>> np.round(out["force"].data[-1], 3).tolist()       # 4 N × (0.6 − 0.45)
+    [0.6, 0.6, 0.6]
+    """
+
+    config_cls = GraspSimConfig
+    inputs = {
+        "grip": Port(
+            dtype="float64", shape=(3,), units="1", doc="gripper command per finger, 0 open, 1 closed"
+        )
+    }
+    outputs = {
+        "force": Port(dtype="float64", shape=(3,), units="N", doc="true contact force per finger, N"),
+        "object": Port(dtype="float64", shape=(), units="1", doc="index of the object in hand"),
+    }
+    counter_docs = {
+        "clipped": "command samples with a finger outside [0, 1] (beyond open or closed): clipped into range",
+        **nonfinite_counter_docs("command samples on 'grip'"),
+    }
+
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+        if "grip" not in inputs:
+            raise SpecError("grip", "input 'grip' must be connected")
+        g = inputs["grip"]
+        if g.events or g.rate_hz is None:
+            raise SpecError("grip", f"input 'grip' must be a sampled stream, got {g.describe()}")
+        if g.dtype != "float64" or g.shape != (N_FINGERS,):
+            raise SpecError("grip", f"input 'grip' must be float64 of shape (3,), got {g.describe()}")
+        if g.units != "1":
+            raise SpecError("grip", f"input 'grip' must be a command in [0, 1] (units '1'), got '{g.units}'")
+        return {
+            "force": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=g.rate_hz, labels=FINGERS),
+            "object": StreamSpec(shape=(), units="1", rate_hz=g.rate_hz),
+        }
+
+    def reset(self) -> None:
+        cfg = self.config
+        self._state = np.zeros(N_FINGERS)
+        self._prev_t = -math.inf
+        self._dt0 = 1.0 / float(self.input_specs["grip"].rate_hz or 1.0)
+        self._stiff = np.asarray(cfg.stiffness_n, np.float64)
+        self._contact = np.asarray(cfg.contact, np.float64)
+        self._last: np.ndarray | None = None
+
+    def step(self, grip: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
+        cfg = self.config
+        if grip is None:
+            grip = Chunk(np.empty(0), np.empty((0, N_FINGERS)))
+        if len(grip) and not np.isfinite(np.add.reduce(grip.data, axis=None)):
+            grip, self._last = screen_nonfinite(self, grip, cfg.on_bad_data, "grip", self._last)
+        elif len(grip) and cfg.on_bad_data == "hold":
+            self._last = grip.data[-1].copy()
+        u = grip.data
+        outside = (u < 0.0) | (u > 1.0)
+        if outside.any():
+            self.count("clipped", int(outside.any(axis=1).sum()))
+            u = np.clip(u, 0.0, 1.0)
+        obj = object_index(grip.t, len(cfg.object_names), cfg.period_s, cfg.swap_at_s)
+        f, self._prev_t = grasp_sim_apply(
+            grip.t, u, obj, self._state, self._prev_t, self._stiff, self._contact,
+            cfg.tau_s, cfg.damping_n_s, cfg.max_force_n, self._dt0,
+        )  # fmt: skip
+        out = {}
+        if "force" in self.demanded:
+            out["force"] = Chunk(grip.t, f, grip.end)
+        if "object" in self.demanded:
+            out["object"] = Chunk(grip.t, obj, grip.end)
+        return out
+
+    @classmethod
+    def example(cls) -> Example:
+        n = 200  # 2 s at 100 Hz, objects swapped every second: grasp, release, grasp
+        t = np.arange(n) / 100.0
+        grasp = np.clip(np.sin(2 * np.pi * t), 0.0, 1.0)
+        grip = np.outer(grasp, [0.7, 0.8, 0.75])
+        grip[150, 0] = 1.2  # out of range: clipped
+        return Example(params={"period_s": 1.0, "damping_n_s": 0.5}, inputs={"grip": grip}, rate_hz=100.0)

@@ -1,0 +1,320 @@
+"""Synthetic sensors: the four-gauge gold-nanoparticle (AuNP) sensor of Rager et al.
+
+The sensor is a source: it plays a touch, slip or rest trial and emits what the real sensor
+would (four gauge signals and a reference gauge, ΔR/R) together with the true force, so that a
+graph's force reconstruction and afferent models can be checked against the truth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from flowtact.block import Example, Port, Source
+from flowtact.chunk import Chunk, StreamSpec
+from flowtact.params import Config, param
+
+from .aunp import SENSITIVITY_PER_N
+
+__all__ = ["AunpSensor", "AunpSensorConfig", "raised_cosine"]
+
+
+def raised_cosine(x: np.ndarray) -> np.ndarray:
+    """Smooth step: 0 for x ≤ 0, ½ − ½·cos(πx) on [0, 1], 1 for x ≥ 1 (C¹, zero slope at both ends)."""
+    return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class AunpSensorConfig(Config):
+    scenario: Literal["touch", "slip", "rest"] = param(
+        "touch", doc="trial played: normal-force touch, tangential slip, or baseline load only"
+    )
+    rate_hz: float = param(1000.0, doc="sample rate of every output (the paper samples at 1 kHz)", gt=0)
+    baseline_n: float = param(0.12, doc="normal force holding the sensor (the paper's 120 mN)", ge=0)
+    indentation_um: float = param(
+        20.0, doc="indentation of the bump added by the probe (touch and slip)", ge=0
+    )
+    stiffness_n_per_mm: float = param(
+        10.0, doc="normal stiffness of the PDMS bump turning indentation into added Fz", gt=0
+    )
+    onset_s: float = param(0.2, doc="time the probe starts loading the bump (first trial)", ge=0)
+    ramp_s: float = param(0.01, doc="duration of the raised-cosine normal loading ramp", gt=0)
+    unload_s: float = param(0.03, doc="duration of the raised-cosine normal unloading ramp", gt=0)
+    hold_s: float = param(
+        0.5, doc="touch: plateau of the added normal force; slip: time held after the slip", ge=0
+    )
+    period_s: float = param(2.0, doc="time between the onsets of repeated trials", gt=0)
+    repeat: int = param(1, doc="number of trials played (0 = repeat for ever)", ge=0)
+    shear_ratio: float = param(
+        0.8, doc="touch: tangential/normal ratio of the probe load on the plateau (<= friction_mu)", ge=0
+    )
+    shear_angle_deg: float = param(
+        0.0, doc="direction in the x-y plane of the touch's tangential force and of the slip drag (0 = +x)"
+    )
+    shear_rise_s: float = param(0.08, doc="touch: raised-cosine build-up time of the tangential force", gt=0)
+    shear_release_s: float = param(
+        0.003, doc="touch: time the stored tangential force takes to spring back at unloading", gt=0
+    )
+    friction_mu: float = param(1.0, doc="static friction coefficient of probe on PDMS (eq. 4, mu_s)", gt=0)
+    kinetic_ratio: float = param(0.6, doc="slip: kinetic/static friction ratio (mu_k / mu_s)", gt=0, le=1)
+    drag_s: float = param(0.3, doc="slip: tangential loading time from zero to the friction limit", gt=0)
+    slip_s: float = param(0.26, doc="slip: duration of the slip event (the paper's ~260 ms)", gt=0)
+    slip_turn_deg: float = param(
+        180.0, doc="slip: rotation of the tangential force during the slip event", ge=-360, le=360
+    )
+    noise_sd: float = param(1e-5, doc="white noise of each gauge and of the reference, in ΔR/R", ge=0)
+    temp_drift_c: float = param(0.5, doc="amplitude of the slow temperature drift (0 = off)", ge=0)
+    temp_period_s: float = param(20.0, doc="period of the temperature drift", gt=0)
+    temp_coeff_per_c: float = param(-1e-3, doc="temperature coefficient of every gauge, ΔR/R per °C")
+    ambient_c: float = param(25.0, doc="mean sensor temperature")
+    sensitivity_per_n: tuple[float, ...] = param(
+        SENSITIVITY_PER_N,
+        doc="gauge sensitivities (Xs, Ys, Zs) of eq. 2, ΔR/R per N",
+        gt=0,
+        min_len=3,
+        max_len=3,
+    )
+
+    def trial_s(self) -> float:
+        """Length of one trial from its onset until every force is back to baseline."""
+        if self.scenario == "touch":
+            return self.ramp_s + self.hold_s + max(self.unload_s, self.shear_release_s)
+        if self.scenario == "slip":
+            return self.ramp_s + self.drag_s + self.slip_s + self.hold_s + self.unload_s
+        return 0.0
+
+    def check(self) -> None:
+        if self.shear_ratio > self.friction_mu:
+            raise self.error(
+                "shear_ratio",
+                f"must be <= friction_mu ({self.friction_mu:g}): a stuck contact cannot carry more "
+                f"tangential force than mu_s times its normal load; got {self.shear_ratio:g}",
+            )
+        if self.shear_release_s > self.unload_s:
+            raise self.error(
+                "shear_release_s",
+                f"must be <= unload_s ({self.unload_s:g}): the tangential force cannot outlast the normal load "
+                f"that holds it by friction; got {self.shear_release_s:g}",
+            )
+        if self.repeat != 1 and self.period_s < self.trial_s():
+            raise self.error(
+                "period_s",
+                f"must be >= the length of one {self.scenario} trial ({self.trial_s():g} s) when trials "
+                f"repeat; got {self.period_s:g}",
+            )
+
+
+class AunpSensor(Source):
+    """Synthetic four-gauge AuNP tactile sensor (Rager et al.) playing touch, slip or rest trials.
+
+    Ports
+    -----
+    r : float64 (4,), units "1"
+        ΔR/R of gauges 1..4 (eq. 2 layout: gauges 1 and 3 on the x axis, 2 and 4 on the y axis)
+        including the common temperature term and white noise.
+    ref : float64 (), units "1"
+        The reference gauge: no strain, same temperature term, own noise.
+    temp_c : float64 (), units "degC"
+        The sensor temperature.
+    force : float64 (3,), units "N", labels (Fx, Fy, Fz)
+        The TRUE force on the bump, for evaluation (noise- and drift-free).
+
+    Config
+    ------
+    See the field docs (``flowtact blocks aunp_sensor``). Units are in the field names.
+
+    Notes
+    -----
+    *Gauge model.* The gauges are the inverse of eq. 2 with identical gauges,
+    ``r1 = Fz·Zs/4 − Fx·Xs/2``, ``r3 = Fz·Zs/4 + Fx·Xs/2``, ``r2 = Fz·Zs/4 + Fy·Ys/2``,
+    ``r4 = Fz·Zs/4 − Fy·Ys/2`` (``reduced_matrix`` of blocks/touch/aunp.py maps them back exactly), plus
+    ``temp_coeff_per_c · ΔT(t)`` on every gauge and on the reference (so subtracting ``ref``
+    removes it), plus independent white noise ``noise_sd``. ``ΔT(t) = temp_drift_c ·
+    sin(2π t / temp_period_s + φ)`` with φ drawn from the block's seed. AuNP films have a
+    temperature coefficient of resistance of order −1e-3/°C; with the default sensitivities a 0.5 °C
+    drift moves the uncompensated Fz by ~0.05 N, a quarter of a touch, which is why the reference
+    gauge exists. ``noise_sd = 1e-5`` gives ≈ 0.7 mN RMS on Fx/Fy and 0.5 mN on Fz after eq. 2
+    (1.1 mN on Fz once the reference, with its own noise, is subtracted from every gauge).
+    The paper gives neither sensitivities, temperature coefficient nor noise: these are
+    order-of-magnitude assumptions.
+
+    *Touch* (Fig. 4.1): a probe adds ``ΔFz = stiffness_n_per_mm · indentation_um/1000`` on top of
+    ``baseline_n``: a raised-cosine loading ramp of ``ramp_s``, a plateau of ``hold_s`` and an
+    unloading ramp of ``unload_s`` (20 µm in 10 ms is a 2 mm/s probe; the unloading is slower,
+    as the PDMS recovers viscoelastically). The default stiffness is that of a PDMS (Sylgard 184,
+    E ≈ 1.6 MPa) cylinder of 2 mm diameter and 0.5 mm height, k = E·A/L ≈ 10 N/mm, so the paper's
+    20 µm indentation adds ≈ 0.2 N (the paper does not give the bump's geometry or force).
+    The probe also loads the bump tangentially (a slightly tilted or off-centre probe bends the
+    bump; ``shear_ratio`` of the added normal load, in direction ``shear_angle_deg``). That
+    tangential force follows a stick/creep-then-release hysteresis: while loading, the contact sticks
+    and the shear builds with the viscoelastic creep of the PDMS, lagging the normal force
+    (raised-cosine rise over ``shear_rise_s`` > ``ramp_s``); at unloading the contact pressure
+    drops, the stuck contact lets go and the shear stored in the bump springs back elastically,
+    without the creep lag, within ``shear_release_s`` (a few ms), faster than the normal force
+    unloads. The tangential force never exceeds ``friction_mu`` times the probe's normal load.
+
+    Why it is shaped so: Table I's FA1 drive is linear in F and F' with w6 = +0.024 on Fz' and
+    w4 = −0.012 on Fx'. At unloading Fz' < 0 can only inhibit FA1; the fast release of a positive
+    Fx (Fx' ≪ 0, so −0.012·Fx' > 0) is what can give FA1 an offset transient (Fig. 4), while the
+    slow build-up keeps −0.012·Fx' small during loading so that the +0.024·Fz' onset transient
+    stands. The offset kick integrates to 0.012·ΔFx, the onset kick to 0.024·ΔFz: with a
+    tangential force bounded by friction, the offset response needs a large ``shear_ratio`` (0.8)
+    and a release much faster than the unloading. Noise-free Table I drives with the defaults
+    (5-point centred derivative): FA1 0.054 at rest, peak 0.85 at onset, 0.37 on the plateau, peak
+    1.09 at offset, down to −0.16 during the rest of the unloading; SA1 0.046 at rest, 0.19 on the
+    plateau (0.24 briefly at offset), no onset overshoot: SA1's extra onset activity must come from
+    the neuron model's adaptation, not from the force.
+
+    *Slip* (Fig. 4.2): the flat probe adds the same ΔFz over ``ramp_s``; then drags: the
+    tangential force builds over ``drag_s`` (raised cosine, direction ``shear_angle_deg``) up to the
+    traction limit ``friction_mu · Fz`` (eq. 4, with Fz the total normal force the sensor
+    measures). At that instant the probe slips for ``slip_s`` (≈ 260 ms): the tangential magnitude
+    falls to the kinetic level ``kinetic_ratio · friction_mu · Fz`` while its direction turns by
+    ``slip_turn_deg`` (180° = the shear reverses through the perpendicular axis: the "marked change
+    of direction" of the paper). The contact then sticks again, holds for ``hold_s`` and the probe
+    lifts (every force back to baseline over ``unload_s``). |F_xy| ≤ μs·Fz at every sample.
+
+    *Rest*: the baseline normal force only (plus drift and noise).
+
+    Profiles are analytic functions of the sample time ``t = i / rate_hz`` (an integer counter),
+    C¹ (raised cosines), so derivatives are meaningful. Trials repeat every ``period_s``. Noise and
+    the drift phase come from generators spawned from the block's seed; all outputs share them,
+    so the signals do not depend on which outputs are demanded (undemanded ones are not built).
+    State: the sample counter and the noise generator. No latency.
+
+    Example
+    -------
+    >>> from flowtact.testing import run_source
+    >>> out = run_source(AunpSensor(scenario="touch", hold_s=0.3), 0.8)
+    >>> out["force"].data.shape, round(float(out["force"].data[:, 2].max()), 2)
+    ((800, 3), 0.32)
+    """
+
+    config_cls = AunpSensorConfig
+    outputs = {
+        "r": Port(shape=(4,), units="1", doc="ΔR/R of gauges 1..4 (strain + temperature + noise)"),
+        "ref": Port(shape=(), units="1", doc="ΔR/R of the unstrained reference gauge (temperature + noise)"),
+        "temp_c": Port(shape=(), units="degC", doc="sensor temperature"),
+        "force": Port(shape=(3,), units="N", doc="true force [Fx, Fy, Fz] on the bump, for evaluation"),
+    }
+
+    def specs(self, inputs: object) -> dict[str, StreamSpec]:  # type: ignore[override]
+        rate = self.config.rate_hz
+        labels = {"r": ("r1", "r2", "r3", "r4"), "force": ("Fx", "Fy", "Fz")}
+        return {
+            name: StreamSpec(
+                dtype="float64",
+                shape=p.shape or (),
+                units=p.units or "1",
+                rate_hz=rate,
+                labels=labels.get(name),
+            )
+            for name, p in self.outputs.items()
+        }
+
+    def reset(self) -> None:
+        self.i = 0
+        noise_rng, temp_rng = self.rng.spawn(2)
+        self.noise_rng = noise_rng
+        self.temp_phase = float(temp_rng.uniform(0.0, 2.0 * np.pi))
+
+    # -- force profiles (pure functions of time) ------------------------------------------------
+    def forces(self, t: np.ndarray) -> np.ndarray:
+        """True [Fx, Fy, Fz] (n, 3) in N at times ``t`` (pure: no state)."""
+        c = self.config
+        f = np.zeros((len(t), 3))
+        f[:, 2] = c.baseline_n
+        if c.scenario == "rest" or len(t) == 0:
+            return f
+        k = np.floor((t - c.onset_s) / c.period_s)
+        k = np.clip(k, 0.0, (c.repeat - 1) if c.repeat else np.inf)
+        u = t - c.onset_s - k * c.period_s
+        d_fz = c.stiffness_n_per_mm * c.indentation_um * 1e-3
+        theta = math.radians(c.shear_angle_deg)
+        if c.scenario == "touch":
+            u_off = c.ramp_s + c.hold_s
+            s = raised_cosine(u / c.ramp_s) - raised_cosine((u - u_off) / c.unload_s)
+            q_off = float(raised_cosine(np.array(u_off / c.shear_rise_s)))
+            q = np.where(
+                u < u_off,
+                raised_cosine(u / c.shear_rise_s),
+                q_off * (1.0 - raised_cosine((u - u_off) / c.shear_release_s)),
+            )
+            fz = c.baseline_n + d_fz * s
+            m = c.shear_ratio * d_fz * q
+            phi = np.full_like(u, theta)
+        else:
+            u1 = c.ramp_s
+            u2 = u1 + c.drag_s
+            u3 = u2 + c.slip_s
+            u_lift = u3 + c.hold_s
+            s = raised_cosine(u / c.ramp_s) - raised_cosine((u - u_lift) / c.unload_s)
+            fz = c.baseline_n + d_fz * s
+            fz_top = c.baseline_n + d_fz
+            mu_s, mu_k = c.friction_mu, c.friction_mu * c.kinetic_ratio
+            m = np.where(
+                u < u2,
+                mu_s * fz_top * raised_cosine((u - u1) / c.drag_s),
+                np.where(
+                    u < u3,
+                    fz_top * (mu_s - (mu_s - mu_k) * raised_cosine((u - u2) / c.slip_s)),
+                    mu_k * fz_top * (1.0 - raised_cosine((u - u_lift) / c.unload_s)),
+                ),
+            )
+            phi = theta + math.radians(c.slip_turn_deg) * raised_cosine((u - u2) / c.slip_s)
+        f[:, 0] = m * np.cos(phi)
+        f[:, 1] = m * np.sin(phi)
+        f[:, 2] = fz
+        return f
+
+    def delta_temp(self, t: np.ndarray) -> np.ndarray:
+        """Temperature deviation ΔT (°C) from ``ambient_c`` at times ``t``."""
+        c = self.config
+        if c.temp_drift_c == 0.0:
+            return np.zeros(len(t))
+        return c.temp_drift_c * np.sin((2.0 * np.pi / c.temp_period_s) * t + self.temp_phase)
+
+    def gauges(self, f: np.ndarray) -> np.ndarray:
+        """Noise-free ΔR/R (n, 4) of the four gauges under force ``f`` (inverse of eq. 2)."""
+        xs, ys, zs = self.config.sensitivity_per_n
+        r = np.empty((len(f), 4))
+        common = f[:, 2] * (zs / 4.0)
+        sx = f[:, 0] * (xs / 2.0)
+        sy = f[:, 1] * (ys / 2.0)
+        r[:, 0] = common - sx
+        r[:, 1] = common + sy
+        r[:, 2] = common + sx
+        r[:, 3] = common - sy
+        return r
+
+    def step(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+        c = self.config
+        n = self.due(now, c.rate_hz) - self.i
+        n = max(n, 0)
+        t = (self.i + np.arange(n)) / c.rate_hz
+        self.i += n
+        want = self.demanded
+        out: dict[str, Chunk] = {}
+        need_force = "force" in want or "r" in want
+        f = self.forces(t) if need_force else None
+        need_temp = bool(want & {"r", "ref", "temp_c"})
+        dtemp = self.delta_temp(t) if need_temp else None
+        if want & {"r", "ref"}:
+            noise = self.noise_rng.standard_normal((n, 5)) * c.noise_sd
+            drift = c.temp_coeff_per_c * dtemp
+            if "r" in want:
+                out["r"] = Chunk(t, self.gauges(f) + drift[:, None] + noise[:, :4])
+            if "ref" in want:
+                out["ref"] = Chunk(t, drift + noise[:, 4])
+        if "temp_c" in want:
+            out["temp_c"] = Chunk(t, c.ambient_c + dtemp)
+        if "force" in want:
+            out["force"] = Chunk(t, f)
+        return out
+
+    @classmethod
+    def example(cls) -> Example:
+        return Example(params={"scenario": "touch", "onset_s": 0.1, "hold_s": 0.3}, duration_s=0.8)

@@ -1,0 +1,327 @@
+"""Calibration of the AuNP strain-gauge sensor (Rager et al.): gauge signals → force and shear angle.
+
+Gauge signals are relative resistance changes r_i = ΔR_i/R_i (dimensionless, units ``"1"``) of
+gauges 1..4; gauges 1 and 3 lie on the x axis, 2 and 4 on the y axis (blocks/touch/aunp.py).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from flowtact import (
+    Block,
+    Chunk,
+    Config,
+    Example,
+    Port,
+    SpecError,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
+from flowtact.align import Aligner, screen_aligned
+
+from .aunp import SENSITIVITY_PER_N, reduced_matrix
+
+__all__ = ["GaugeForce", "GaugeForceConfig", "ShearAngle", "ShearAngleConfig"]
+
+_LABELS = ("Fx", "Fy", "Fz")
+
+
+def _check_gauges(port: str, spec: StreamSpec, shape: tuple[int, ...]) -> None:
+    if spec.events or spec.rate_hz is None:
+        raise SpecError(port, f"input '{port}' must be a sampled stream, got {spec.describe()}")
+    if spec.dtype != "float64":
+        raise SpecError(port, f"input '{port}' must be float64, got {spec.dtype}")
+    if spec.shape != shape:
+        raise SpecError(port, f"input '{port}' must have shape {shape}, got {spec.shape}")
+    if spec.units != "1":
+        raise SpecError(
+            port,
+            f"input '{port}' must be relative resistance change ΔR/R (units '1'), got '{spec.units}'",
+        )
+
+
+# -- gauge_force ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GaugeForceConfig(Config):
+    """Parameters of :class:`GaugeForce`."""
+
+    mode: Literal["general", "reduced"] = param(
+        "reduced", doc="general: F = A·r with 'matrix' (eq. 1); reduced: orthogonal identical gauges (eq. 2)"
+    )
+    matrix: tuple[tuple[float, ...], ...] | None = param(
+        None,
+        doc="3×4 calibration matrix A, rows Fx, Fy, Fz, in N per unit ΔR/R (mode general)",
+        min_len=3,
+        max_len=3,
+    )
+    sensitivity_per_n: tuple[float, ...] = param(
+        SENSITIVITY_PER_N,
+        doc="(Xs, Ys, Zs): ΔR/R per newton of eq. 2 (mode reduced)",
+        min_len=3,
+        max_len=3,
+        gt=0,
+    )
+    tare_samples: int = param(0, doc="subtract the mean force of the first k samples (0 = off)", ge=0)
+    on_bad_data: Literal["raise", "drop", "hold"] = param(
+        "raise", doc="non-finite samples: raise, drop the instant, or hold the last good value"
+    )
+
+    def check(self) -> None:
+        if self.mode == "general":
+            if self.matrix is None:
+                raise self.error("matrix", "is required with mode 'general' (3 rows of 4 numbers, F = A·r)")
+            for i, row in enumerate(self.matrix):
+                if len(row) != 4:
+                    raise self.error(
+                        "matrix", f"must have 4 columns (gauges 1..4); row {i + 1} has {len(row)}"
+                    )
+        elif self.matrix is not None:
+            raise self.error(
+                "matrix", "is only used with mode 'general' (mode 'reduced' uses sensitivity_per_n)"
+            )
+
+    def calibration_matrix(self) -> np.ndarray:
+        """The 3×4 matrix A applied (eq. 2 written as a matrix in reduced mode)."""
+        if self.mode == "general":
+            assert self.matrix is not None
+            return np.array(self.matrix, np.float64)
+        return np.array(reduced_matrix(*self.sensitivity_per_n), np.float64)
+
+
+class GaugeForce(Block):
+    """Force [Fx, Fy, Fz] from the four strain gauges: eq. 1 (F = A·r) or eq. 2 of Rager et al.
+
+    Ports
+    -----
+    r : float64, shape (4,), units "1" — ΔR/R of gauges 1..4
+    ref : float64, shape (), units "1", optional — reference gauge, subtracted from every gauge
+        (temperature compensation); must be sample-aligned with ``r``
+    f : float64, shape (3,), units "N", labels (Fx, Fy, Fz)
+
+    Config
+    ------
+    See :class:`GaugeForceConfig`. ``reduced`` (default): Fx = (r3 − r1)/Xs, Fy = (r2 − r4)/Ys,
+    Fz = (r1 + r2 + r3 + r4)/Zs with ``sensitivity_per_n`` = (Xs, Ys, Zs), defaults from
+    blocks/touch/aunp.py (the synthetic sensor's constants, so the default graph recovers its force);
+    ``general``: any 3×4 ``matrix`` from a calibration fit.
+
+    Notes
+    -----
+    Reduced mode is computed as ``general`` with ``aunp.reduced_matrix`` (bit-identical). The
+    product is written out element by element (no BLAS), so chunking never changes a bit.
+    ``tare_samples: k`` (off by default) subtracts the mean force of the first k samples — for a
+    sensor that starts unloaded but with a gauge offset. Those k samples are held back until the
+    offset is known, then emitted tared (a one-off start-up latency of k samples; no sample is
+    lost); a stream shorter than k is tared with the mean of what arrived, at flush. Beware: a
+    tare taken under load (the paper's 120 mN baseline) removes real force. Latency otherwise 0;
+    with ``ref`` connected, that of the later of ``r`` and ``ref``.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from flowtact.blocks.touch.calibration import GaugeForce
+    >>> from flowtact.testing import run_offline
+    >>> r = np.array([[0.0, 0.01, 0.02, 0.01]])           # r3 − r1 = 0.02, sum 0.04
+    >>> run_offline(GaugeForce(), r=r)["f"].data.round(12).tolist()   # Xs = Ys = 0.02, Zs = 0.04
+    [[1.0, 0.0, 1.0]]
+    """
+
+    config_cls = GaugeForceConfig
+    inputs = {
+        "r": Port(dtype="float64", shape=(4,), units="1", doc="ΔR/R of gauges 1..4"),
+        "ref": Port(
+            dtype="float64", shape=(), units="1", optional=True, doc="reference gauge ΔR/R (temperature)"
+        ),
+    }
+    outputs = {"f": Port(dtype="float64", shape=(3,), units="N", doc="force [Fx, Fy, Fz] in N")}
+    counter_docs = {
+        "nonfinite_drop": "instants where 'r' or 'ref' had NaN/inf, removed (on_bad_data: drop): "
+        "upstream sent bad data",
+        "nonfinite_hold": "gauge samples (per input, 'r' and 'ref') with NaN/inf, held at the last finite "
+        "value (on_bad_data: hold): upstream sent bad data",
+        "unpaired_at_end": "samples of 'r' or 'ref' with no partner on the other input when the stream "
+        "ended: not used (the inputs delivered different numbers of samples)",
+        "tare_short": "the stream ended before tare_samples samples arrived: the tare offset is the mean "
+        "of fewer samples",
+    }
+
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+        if "r" not in inputs:
+            raise SpecError("r", "input 'r' must be connected")
+        r = inputs["r"]
+        _check_gauges("r", r, (4,))
+        if "ref" in inputs:
+            _check_gauges("ref", inputs["ref"], ())
+            if not math.isclose(inputs["ref"].rate_hz or 0.0, r.rate_hz or 0.0, rel_tol=1e-9):
+                raise SpecError("ref", f"'ref' is {inputs['ref'].rate_hz:g} Hz but 'r' is {r.rate_hz:g} Hz")
+        return {"f": StreamSpec(dtype="float64", shape=(3,), units="N", rate_hz=r.rate_hz, labels=_LABELS)}
+
+    def reset(self) -> None:
+        self._a = self.config.calibration_matrix()
+        self._ports = ["r", "ref"] if "ref" in self.input_specs else ["r"]
+        rate = self.input_specs["r"].rate_hz or 1.0
+        self._align = Aligner(self.node, self.input_specs, self._ports, tol_s=1e-6 / rate)
+        self._last: dict[str, np.ndarray | None] = {p: None for p in self._ports}
+        self._offset: np.ndarray | None = None if self.config.tare_samples else np.zeros(3)
+        self._acc = np.zeros(3)
+        self._seen = 0
+        self._held: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def _force(self, data: dict[str, np.ndarray]) -> np.ndarray:
+        r = data["r"]
+        if "ref" in data:
+            r = r - data["ref"][:, None]
+        a = self._a
+        f = np.empty((len(r), 3))
+        for i in range(3):
+            acc = a[i, 0] * r[:, 0]
+            for j in range(1, 4):
+                acc = acc + a[i, j] * r[:, j]
+            f[:, i] = acc
+        return f
+
+    def step(self, **chunks: Chunk) -> dict[str, Chunk]:
+        t, data = self._align.push(chunks)
+        if len(t):
+            t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
+        f = self._force(data)
+        if self._offset is None:
+            return {"f": self._tare(t, f)}
+        return {"f": Chunk(t, f - self._offset)}
+
+    def _tare(self, t: np.ndarray, f: np.ndarray) -> Chunk:
+        k = self.config.tare_samples
+        take = min(k - self._seen, len(t))
+        for i in range(take):  # sequential sum: the same additions whatever the chunking
+            self._acc = self._acc + f[i]
+        self._seen += take
+        if len(t):
+            self._held.append((t, f))
+        if self._seen < k:
+            return Chunk(np.empty(0), np.empty((0, 3)))
+        return self._release()
+
+    def _release(self) -> Chunk:
+        self._offset = self._acc / self._seen
+        t = np.concatenate([h[0] for h in self._held])
+        f = np.concatenate([h[1] for h in self._held])
+        self._held = []
+        return Chunk(t, f - self._offset)
+
+    def flush(self) -> dict[str, Chunk]:
+        self.count("unpaired_at_end", sum(self._align.pending().values()))
+        if self._offset is None and self._seen:
+            self.count("tare_short", 1)
+            return {"f": self._release()}
+        return {}
+
+    @classmethod
+    def example(cls) -> Example:
+        rng = np.random.default_rng(4)
+        n = 400
+        t = np.arange(n) / 1000.0
+        force = np.stack(
+            [0.2 * np.sin(2 * np.pi * 3 * t), 0.1 * np.cos(2 * np.pi * 2 * t), 0.12 + 0.3 * t], 1
+        )
+        xs, ys, zs = SENSITIVITY_PER_N
+        drift = 1e-3 * t  # temperature: every gauge and the reference drift together
+        r = (
+            np.stack(
+                [
+                    force[:, 2] * zs / 4 - force[:, 0] * xs / 2,
+                    force[:, 2] * zs / 4 + force[:, 1] * ys / 2,
+                    force[:, 2] * zs / 4 + force[:, 0] * xs / 2,
+                    force[:, 2] * zs / 4 - force[:, 1] * ys / 2,
+                ],
+                1,
+            )
+            + drift[:, None]
+            + rng.normal(0, 1e-5, (n, 4))
+        )
+        return Example(params={"tare_samples": 30}, inputs={"r": r, "ref": drift + 0.001})
+
+
+# -- shear_angle ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ShearAngleConfig(Config):
+    """Parameters of :class:`ShearAngle`."""
+
+    on_bad_data: Literal["raise", "drop", "hold"] = param(
+        "raise", doc="non-finite samples: raise, drop them, or hold the last good value"
+    )
+
+
+class ShearAngle(Block):
+    """Direction of the shear force from the gauges: Θ = atan2(r2 − r4, r3 − r1) (eq. 3, Rager et al.).
+
+    Ports
+    -----
+    r : float64, shape (4,), units "1" — ΔR/R of gauges 1..4
+    theta : float64, shape (), units "rad", in (−π, π]; 0 along +x (gauge 3), π/2 along +y (gauge 2)
+
+    Config
+    ------
+    See :class:`ShearAngleConfig` (only the bad-data policy).
+
+    Notes
+    -----
+    Stateless, latency 0. Eq. 3 assumes identical x and y gauge sensitivities (Xs = Ys); it
+    ignores any common-mode term (temperature, normal force), so no reference gauge is needed.
+    With no shear (r2 = r4, r3 = r1) the angle is atan2(0, 0) = 0 and, in practice, the angle of
+    the noise: gate it on the shear magnitude downstream if that matters.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from flowtact.blocks.touch.calibration import ShearAngle
+    >>> from flowtact.testing import run_offline
+    >>> r = np.array([[0.0, 0.01, 0.0, 0.0]])             # r2 > r4: shear along +y
+    >>> float(run_offline(ShearAngle(), r=r)["theta"].data[0])   # π/2
+    1.5707963267948966
+    """
+
+    config_cls = ShearAngleConfig
+    inputs = {"r": Port(dtype="float64", shape=(4,), units="1", doc="ΔR/R of gauges 1..4")}
+    outputs = {"theta": Port(dtype="float64", shape=(), units="rad", doc="shear angle in radians")}
+    counter_docs = nonfinite_counter_docs("gauge samples")
+
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+        if "r" not in inputs:
+            raise SpecError("r", "input 'r' must be connected")
+        _check_gauges("r", inputs["r"], (4,))
+        return {"theta": StreamSpec(dtype="float64", shape=(), units="rad", rate_hz=inputs["r"].rate_hz)}
+
+    def reset(self) -> None:
+        self._last: np.ndarray | None = None
+
+    def step(self, r: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
+        if r is None or len(r) == 0:
+            return {"theta": Chunk(np.empty(0), np.empty(0))}
+        if not np.isfinite(np.add.reduce(r.data, axis=None)):
+            r, self._last = screen_nonfinite(self, r, self.config.on_bad_data, "r", self._last)
+        elif self.config.on_bad_data == "hold":
+            self._last = r.data[-1].copy()
+        d = r.data
+        return {"theta": Chunk(r.t, np.arctan2(d[:, 1] - d[:, 3], d[:, 2] - d[:, 0]))}
+
+    @classmethod
+    def example(cls) -> Example:
+        rng = np.random.default_rng(5)
+        n = 300
+        phi = np.linspace(-3.0, 3.0, n)
+        r = 0.01 + rng.normal(0, 1e-4, (n, 4))
+        r[:, 2] += 0.005 * np.cos(phi)
+        r[:, 1] += 0.005 * np.sin(phi)
+        return Example(inputs={"r": r})

@@ -1,0 +1,98 @@
+"""YAML read with the file location of every value, and errors reported at those locations.
+
+Every problem found in a graph file is a :class:`GraphError` at ``file:line:col``; loaders collect
+them and raise one :class:`GraphErrors`. :class:`Located` keeps, beside the plain values that
+``yaml.safe_load`` would give, where each value (and each mapping key) was written.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import yaml
+
+__all__ = ["GraphError", "GraphErrors", "Loc", "Located"]
+
+
+@dataclass(frozen=True)
+class Loc:
+    """A place in a graph file (1-based line and column)."""
+
+    path: str
+    line: int = 1
+    col: int = 1
+
+    def __str__(self) -> str:
+        return f"{self.path}:{self.line}:{self.col}"
+
+
+@dataclass(frozen=True)
+class GraphError:
+    """One problem with a graph, at a place, with an optional hint on what would be right."""
+
+    loc: Loc
+    message: str
+    hint: str = ""
+
+    def __str__(self) -> str:
+        text = f"{self.loc}: {self.message}"
+        return f"{text}\n    hint: {self.hint}" if self.hint else text
+
+
+class GraphErrors(Exception):
+    """Raised with every :class:`GraphError` found; ``str()`` lists them one per line."""
+
+    def __init__(self, errors: Iterable[GraphError]) -> None:
+        self.errors = list(errors)
+        super().__init__("\n".join(map(str, self.errors)))
+
+
+class Located:
+    """Plain values plus a location for each YAML node, keyed by the value's path."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.locs: dict[tuple[Any, ...], Loc] = {}
+        self.key_locs: dict[tuple[Any, ...], Loc] = {}
+        self.errors: list[GraphError] = []
+
+    def loc(self, *keys: Any) -> Loc:
+        """Location of the value at ``keys`` (or of its closest parent)."""
+        while keys not in self.locs and keys:
+            keys = keys[:-1]
+        return self.locs.get(keys, Loc(self.path))
+
+    def key_loc(self, *keys: Any) -> Loc:
+        """Location of the mapping key that introduces ``keys``."""
+        return self.key_locs.get(keys, self.loc(*keys))
+
+    def convert(self, node: yaml.Node, keys: tuple[Any, ...] = ()) -> Any:
+        mark = node.start_mark
+        self.locs[keys] = Loc(self.path, mark.line + 1, mark.column + 1)
+        if isinstance(node, yaml.MappingNode):
+            out: dict[Any, Any] = {}
+            for k_node, v_node in node.value:
+                key = yaml.SafeLoader.construct_object(_LOADER, k_node, deep=True)  # type: ignore[arg-type]
+                kmark = k_node.start_mark
+                kloc = Loc(self.path, kmark.line + 1, kmark.column + 1)
+                if key in out:
+                    what = "node" if keys == ("nodes",) else "key"
+                    self.errors.append(
+                        GraphError(
+                            kloc,
+                            f"duplicate {what} '{key}'",
+                            f"first defined at {self.key_locs[(*keys, key)]}",
+                        )
+                    )
+                    continue
+                self.key_locs[(*keys, key)] = kloc
+                out[key] = self.convert(v_node, (*keys, key))
+            return out
+        if isinstance(node, yaml.SequenceNode):
+            return [self.convert(v, (*keys, i)) for i, v in enumerate(node.value)]
+        return yaml.SafeLoader.construct_object(_LOADER, node, deep=True)  # type: ignore[arg-type]
+
+
+_LOADER = yaml.SafeLoader("")
