@@ -422,4 +422,16 @@ class Nlif(Block):
     def example(cls) -> Example:
         t = np.arange(1500) / 1000.0
         drive = 0.06 + 0.05 * np.sin(2 * np.pi * 3 * t) + 0.08 * (t > 0.7)
-        return Example(params={"n": 8, "tau_s": 0.01, "v_leak": -0.8, "gain": 30.0, "sigma": 1.5, "refractory_s": 0.0035, "h_weights": [0.0, 0.0, -0.5, -0.5]}, inputs={"x": drive}, rate_hz=1000.0)
+        return Example(
+            params={
+                "n": 8,
+                "tau_s": 0.01,
+                "v_leak": -0.8,
+                "gain": 30.0,
+                "sigma": 1.5,
+                "refractory_s": 0.0035,
+                "h_weights": [0.0, 0.0, -0.5, -0.5],
+            },
+            inputs={"x": drive},
+            rate_hz=1000.0,
+        )
