@@ -1,7 +1,9 @@
 """flowtact: YAML graphs of reusable streaming blocks for tactile sensing and haptics."""
 
 from flowtact.block import (
+    BadDataConfig,
     BadDataError,
+    BadDataPolicy,
     Block,
     Example,
     Port,
@@ -11,17 +13,21 @@ from flowtact.block import (
     screen_nonfinite,
 )
 from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.errors import FlowtactError
 from flowtact.params import Config, ConfigError, param
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "BadDataConfig",
     "BadDataError",
+    "BadDataPolicy",
     "Block",
     "Chunk",
     "Config",
     "ConfigError",
     "Example",
+    "FlowtactError",
     "Port",
     "Source",
     "SpecError",

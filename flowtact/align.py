@@ -14,13 +14,14 @@ import numpy as np
 
 from flowtact.block import Block, screen_nonfinite
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import FlowtactError
 
 __all__ = ["Aligner", "MisalignedError", "screen_aligned"]
 
 BadData = Literal["raise", "drop", "hold"]
 
 
-class MisalignedError(ValueError):
+class MisalignedError(FlowtactError, ValueError):
     """Samples that should describe the same instant carry different timestamps."""
 
 

@@ -15,11 +15,14 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config
+from flowtact.errors import FlowtactError
+from flowtact.params import Config, param
 from flowtact.presets import apply_preset
 
 __all__ = [
+    "BadDataConfig",
     "BadDataError",
+    "BadDataPolicy",
     "Block",
     "Example",
     "Port",
@@ -38,7 +41,10 @@ class Port:
 
     ``events`` marks an event stream (spike times + unit index); ``optional`` an input that may be
     left unconnected; ``delay`` an input that receives data one tick late, which is what lets a
-    feedback loop through it.
+    feedback loop through it. On inputs, ``ndim`` lists the sample ranks accepted where ``shape``
+    is left open (``(0, 1)``: a value or a vector of channels) and ``require_rate`` asks for a
+    sample stream with a nominal rate. The framework checks inputs against these declarations on
+    every path (graph compile, in-process, worker, offline), so a block never re-checks them.
     """
 
     dtype: str | None = "float64"
@@ -48,9 +54,29 @@ class Port:
     optional: bool = False
     delay: bool = False
     doc: str = ""
+    ndim: tuple[int, ...] | None = None
+    require_rate: bool = False
+
+    def mismatch(self, spec: StreamSpec) -> str | None:
+        """Why a stream cannot feed this input port (``"expects …, gets …"``), or None."""
+        if self.events != spec.events:
+            want = "an event stream" if self.events else "a sample stream"
+            return f"expects {want} but gets {spec.describe()}"
+        if self.require_rate and not spec.events and spec.rate_hz is None:
+            return f"expects a sample stream with a nominal rate but gets {spec.describe()}"
+        if self.dtype is not None and self.dtype != spec.dtype:
+            return f"expects dtype {self.dtype} but gets {spec.dtype}"
+        if self.shape is not None and tuple(self.shape) != tuple(spec.shape):
+            return f"expects sample shape {tuple(self.shape)} but gets {tuple(spec.shape)}"
+        if self.ndim is not None and len(spec.shape) not in self.ndim:
+            ranks = " or ".join({0: "()", 1: "(channels,)"}.get(n, f"{n} dimensions") for n in self.ndim)
+            return f"expects sample shape {ranks} but gets {tuple(spec.shape)}"
+        if self.units is not None and self.units != spec.units:
+            return f"expects units '{self.units}' but gets '{spec.units}'"
+        return None
 
 
-class SpecError(ValueError):
+class SpecError(FlowtactError, ValueError):
     """An input stream does not fit what a block expects (``port`` names the input, if any)."""
 
     def __init__(self, port: str | None, message: str) -> None:
@@ -58,8 +84,24 @@ class SpecError(ValueError):
         super().__init__(message)
 
 
-class BadDataError(ValueError):
+class BadDataError(FlowtactError, ValueError):
     """Non-finite samples reached a block whose policy is ``raise``."""
+
+
+@dataclass(frozen=True)
+class BadDataConfig(Config):
+    """Base of the config of a block that screens its input for NaN/inf: the one policy field.
+
+    The block applies it with :func:`screen_nonfinite` and documents what it counts with
+    :func:`nonfinite_counter_docs`.
+    """
+
+    on_bad_data: Literal["raise", "drop", "hold"] = param(
+        "raise",
+        doc="non-finite (NaN/inf) input samples: raise (stop, naming node and port), drop them, or hold "
+        "the last finite value",
+        kw_only=True,
+    )
 
 
 @dataclass(frozen=True)
@@ -114,6 +156,7 @@ class Block:
         self.config: Any = config if config is not None else self.configure(params, owner=owner)
         self.seed: int = 0
         self.demanded: frozenset[str] = frozenset(self.outputs)
+        self.needed: frozenset[str] = frozenset()
         self.input_specs: dict[str, StreamSpec] = {}
         self.output_specs: dict[str, StreamSpec] = {}
         self.counters: dict[str, int] = {}
@@ -161,8 +204,15 @@ class Block:
     def reset(self) -> None:
         """Build state from ``self.config``, ``self.input_specs`` and ``self.rng``."""
 
-    def step(self, **chunks: Chunk) -> dict[str, Chunk]:
-        """Turn the input chunks that arrived into output chunks (absent ports: nothing came)."""
+    def step(self, *args: Any, **inputs: Any) -> dict[str, Chunk]:
+        """Turn this step's input chunks into output chunks (port name -> chunk).
+
+        The one convention: inputs come as keyword arguments named after the ports, exactly the
+        needed ones (connected, and relevant to the config), each a chunk, empty when nothing
+        came; so a block writes ``def step(self, x: Chunk, gain: Chunk | None = None)`` (or
+        ``**inputs: Chunk`` when its inputs are interchangeable). A :class:`Source` takes the
+        graph time ``now`` first.
+        """
         raise NotImplementedError
 
     def flush(self) -> dict[str, Chunk]:
@@ -177,14 +227,34 @@ class Block:
         seed: int = 0,
         demanded: frozenset[str] | None = None,
     ) -> dict[str, StreamSpec]:
-        """Resolve specs, set the block's own random stream and demanded outputs, then reset."""
+        """Check the inputs against the declared ports, resolve specs, seed, then reset.
+
+        Raises :class:`SpecError` naming the port when an input is unknown, missing or does not
+        fit its declaration.
+        """
+        self.check_inputs(inputs)
         self.input_specs = dict(inputs)
+        self.needed = self.needs(frozenset(self.input_specs))
         self.output_specs = self.specs(self.input_specs)
         self.seed = int(seed)
         if demanded is not None:
             self.demanded = frozenset(demanded)
         self.restart()
         return self.output_specs
+
+    def check_inputs(self, inputs: Mapping[str, StreamSpec]) -> None:
+        """Raise :class:`SpecError` for an unknown, missing or mismatched input (the declared ports)."""
+        for name, spec in inputs.items():
+            port = self.inputs.get(name)
+            if port is None:
+                raise SpecError(name, f"{self.name} has no input '{name}' (inputs: {', '.join(self.inputs)})")
+            why = port.mismatch(spec)
+            if why:
+                what = f" ({port.doc})" if port.doc else ""
+                raise SpecError(name, f"input '{name}'{what} {why}")
+        for name, port in self.inputs.items():
+            if not port.optional and name not in inputs:
+                raise SpecError(name, f"input '{name}' must be connected ({port.doc or 'required'})")
 
     def restart(self) -> None:
         """Rebuild state from scratch (same config, same seed): a fresh, deterministic start."""
@@ -194,10 +264,18 @@ class Block:
         self._bound = True
 
     def __call__(self, **chunks: Chunk) -> dict[str, Chunk]:
-        """Run one step on read-only views, binding first if the block was never bound."""
+        """Run one step: ``step`` gets every needed input, read-only, empty where nothing came."""
         if not self._bound:
             raise RuntimeError(f"{self.node}: bind() the block to its input specs before stepping it")
-        return self.step(**{k: c.readonly() for k, c in chunks.items()})
+        return self.step(**self._inputs(chunks))
+
+    def _inputs(self, chunks: Mapping[str, Chunk]) -> dict[str, Chunk]:
+        """The needed inputs as read-only chunks (an empty chunk for each that got nothing)."""
+        got = {}
+        for p in self.needed:
+            c = chunks.get(p)
+            got[p] = c.readonly() if c is not None else Chunk.empty(self.input_specs[p])
+        return got
 
     def count(self, what: str, n: int = 1) -> None:
         """Add ``n`` to a named counter (reported in the run summary and recording)."""
@@ -231,13 +309,14 @@ class Source(Block):
     what arrived since the last tick (possibly an empty chunk).
     """
 
-    def step(self, now: float, **chunks: Chunk) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, *args: Any, **inputs: Any) -> dict[str, Chunk]:
+        """``step(now, **inputs)``: emit every sample due before graph time ``now``."""
         raise NotImplementedError
 
     def __call__(self, now: float, **chunks: Chunk) -> dict[str, Chunk]:  # type: ignore[override]
         if not self._bound:
             raise RuntimeError(f"{self.node}: bind() the source before ticking it")
-        return self.step(now, **{k: c.readonly() for k, c in chunks.items()})
+        return self.step(now, **self._inputs(chunks))
 
     @staticmethod
     def due(now: float, rate_hz: float) -> int:
@@ -269,6 +348,9 @@ def screen_nonfinite(
     d = chunk.data
     if len(chunk) == 0 or d.dtype.kind != "f":
         return chunk, last
+    with np.errstate(over="ignore", invalid="ignore"):  # inf - inf, or a sum past 1e308: slow path
+        if np.isfinite(np.add.reduce(d, axis=None)):  # the common case, one cheap pass: all finite
+            return chunk, d[-1].copy()
     flat = d.reshape(len(chunk), -1)
     bad = ~np.isfinite(flat).all(axis=1)
     if not bad.any():

@@ -27,9 +27,20 @@ class Chunk:
         return int(self.t.shape[0])
 
     @staticmethod
-    def empty(spec: StreamSpec) -> Chunk:
-        """A zero-sample chunk of the stream described by ``spec``."""
-        return Chunk(np.empty(0, np.float64), np.empty((0, *spec.shape), spec.dtype))
+    def empty(
+        spec: StreamSpec | None = None,
+        *,
+        shape: tuple[int, ...] = (),
+        dtype: str = "float64",
+        end: float | None = None,
+    ) -> Chunk:
+        """A zero-sample chunk: of the stream ``spec`` describes, or of samples ``shape``/``dtype``.
+
+        ``end`` marks the end of the stream (a flush's last chunk).
+        """
+        if spec is not None:
+            shape, dtype = tuple(spec.shape), spec.dtype
+        return Chunk(np.empty(0, np.float64), np.empty((0, *shape), dtype), end)
 
     def readonly(self) -> Chunk:
         """A view of this chunk whose arrays cannot be written (what blocks receive)."""
@@ -71,6 +82,11 @@ class StreamSpec:
     events: bool = False
     n_units: int | None = None
     labels: tuple[str, ...] | None = None
+
+    @property
+    def size(self) -> int:
+        """Values per sample: 1 for a scalar, C for a vector of C channels, H·W for a frame."""
+        return int(np.prod(self.shape)) if self.shape else 1
 
     def with_(self, **changes: object) -> StreamSpec:
         """A copy with some fields changed."""

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flowtact.block import Block, Port, SpecError
+from flowtact.block import Block, SpecError
 from flowtact.chunk import StreamSpec
 from flowtact.graph import Edge, Graph, GraphError, GraphErrors
 
@@ -68,20 +68,6 @@ def node_seed(graph_seed: int, node: str) -> int:
 def _essential(spec: StreamSpec) -> tuple[object, ...]:
     """What a delayed stream must agree on: dtype, shape, units, rate, kind."""
     return (spec.dtype, tuple(spec.shape), spec.units, spec.rate_hz, spec.events)
-
-
-def _check_port(port: Port, spec: StreamSpec) -> str | None:
-    """Why a stream cannot feed a declared input port, or None."""
-    if port.events != spec.events:
-        want = "an event stream" if port.events else "a sample stream"
-        return f"expects {want} but gets {spec.describe()}"
-    if port.dtype is not None and port.dtype != spec.dtype:
-        return f"expects dtype {port.dtype} but gets {spec.dtype}"
-    if port.shape is not None and tuple(port.shape) != tuple(spec.shape):
-        return f"expects sample shape {tuple(port.shape)} but gets {tuple(spec.shape)}"
-    if port.units is not None and port.units != spec.units:
-        return f"expects units '{port.units}' but gets '{spec.units}'"
-    return None
 
 
 def _topo_order(graph: Graph, errors: list[GraphError]) -> list[str]:
@@ -166,9 +152,13 @@ def compile_graph(graph: Graph) -> Plan:
             if src not in specs:  # fed through a delay by a node later in the order
                 delayed[n] = None
                 continue
-            why = _check_port(cls.inputs[e.dst_port], specs[src])
+            port = cls.inputs[e.dst_port]
+            why = port.mismatch(specs[src])
             if why:
-                errors.append(GraphError(e.loc, f"{e}: input '{e.dst_port}' of '{n}' ({cls.name}) {why}"))
+                what = f": {port.doc}" if port.doc else ""
+                errors.append(
+                    GraphError(e.loc, f"{e}: input '{e.dst_port}' of '{n}' ({cls.name}{what}) {why}")
+                )
                 broken.add(n)
             inputs[e.dst_port] = specs[src]
         if n in broken:

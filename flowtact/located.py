@@ -13,6 +13,8 @@ from typing import Any
 
 import yaml
 
+from flowtact.errors import FlowtactError
+
 __all__ = ["GraphError", "GraphErrors", "Loc", "Located"]
 
 
@@ -41,7 +43,7 @@ class GraphError:
         return f"{text}\n    hint: {self.hint}" if self.hint else text
 
 
-class GraphErrors(Exception):
+class GraphErrors(FlowtactError):
     """Raised with every :class:`GraphError` found; ``str()`` lists them one per line."""
 
     def __init__(self, errors: Iterable[GraphError]) -> None:

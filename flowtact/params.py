@@ -16,10 +16,12 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self, get_args, get_origin
 
+from flowtact.errors import FlowtactError
+
 __all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param"]
 
 
-class ConfigError(ValueError):
+class ConfigError(FlowtactError, ValueError):
     """A parameter broke a rule: ``"<owner>: 'field' must be <rule>; got <value>"``."""
 
     def __init__(self, owner: str, field: str | None, message: str, *, type_error: bool = False) -> None:
@@ -92,12 +94,16 @@ def param(
     odd: bool = False,
     min_len: int | None = None,
     max_len: int | None = None,
+    kw_only: bool = False,
 ) -> Any:
-    """Declare a config field with its one-line doc and rules (units belong in the field name)."""
+    """Declare a config field with its one-line doc and rules (units belong in the field name).
+
+    ``kw_only`` lets a base config's field (with a default) precede a subclass's required fields.
+    """
     if isinstance(default, list):
         default = _freeze(default)
     rules = Rules(ge, gt, le, lt, odd, min_len, max_len)
-    return dataclasses.field(default=default, metadata={"doc": doc, "rules": rules})
+    return dataclasses.field(default=default, metadata={"doc": doc, "rules": rules}, kw_only=kw_only)
 
 
 @dataclass(frozen=True)

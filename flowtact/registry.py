@@ -11,6 +11,7 @@ from functools import cache
 from importlib.metadata import entry_points
 
 from flowtact.block import Block
+from flowtact.errors import FlowtactError
 from flowtact.params import did_you_mean
 
 __all__ = ["UnknownBlockError", "block_names", "load_block"]
@@ -18,7 +19,7 @@ __all__ = ["UnknownBlockError", "block_names", "load_block"]
 GROUP = "flowtact.blocks"
 
 
-class UnknownBlockError(LookupError):
+class UnknownBlockError(FlowtactError, LookupError):
     """No block of that name is registered (the message suggests the closest one)."""
 
 

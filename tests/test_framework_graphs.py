@@ -153,8 +153,9 @@ def test_units_and_rate_mismatches_are_errors_at_the_edge():
     """
     with pytest.raises(GraphErrors) as e:
         compile_graph(load(text))
-    assert "g.yaml:6:5: src.y -> add.a: input 'a' of 'add' (add) expects units 'N' but gets 'mN'" in str(
-        e.value
+    assert (
+        "g.yaml:6:5: src.y -> add.a: input 'a' of 'add' (add: first) expects units 'N' but gets 'mN'"
+        in str(e.value)
     )
     text = """
     nodes:

@@ -79,11 +79,8 @@ class Delay(Block):
             )
         }
 
-    def reset(self) -> None:
-        self._empty = Chunk.empty(self.input_specs["x"])
-
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        return {"y": self._empty if x is None else x}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
+        return {"y": x}
 
     @classmethod
     def example(cls) -> Example:

@@ -11,9 +11,9 @@ import numpy as np
 from numba import njit
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
-    Config,
     Example,
     Port,
     SpecError,
@@ -23,11 +23,7 @@ from flowtact import (
     screen_nonfinite,
 )
 
-from .savgol import _n_channels
-
 __all__ = ["Lowpass", "LowpassConfig", "lowpass_apply", "lowpass_apply_python"]
-
-BadData = Literal["raise", "drop", "hold"]
 
 
 @njit(cache=True)
@@ -122,7 +118,7 @@ def lowpass_apply_python(
 
 
 @dataclass(frozen=True)
-class LowpassConfig(Config):
+class LowpassConfig(BadDataConfig):
     """Parameters of :class:`Lowpass`."""
 
     cutoff_hz: float = param(10.0, doc="-3 dB cut-off frequency of the first-order low-pass, Hz", gt=0)
@@ -132,9 +128,6 @@ class LowpassConfig(Config):
     )
     initial: Literal["first", "zero"] = param(
         "first", doc="state before the stream: its first sample (no start transient) or zero"
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite samples: raise, drop them, or hold the last good value"
     )
 
 
@@ -189,8 +182,6 @@ class Lowpass(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' must be connected")
         x = inputs["x"]
         if x.events or x.rate_hz is None:
             raise SpecError("x", f"input 'x' must be a sampled stream with a rate, got {x.describe()}")
@@ -208,7 +199,7 @@ class Lowpass(Block):
         cfg = self.config
         spec = self.input_specs["x"]
         self._shape = spec.shape
-        self._nc = _n_channels(spec)
+        self._nc = spec.size
         self._w = 2.0 * math.pi * cfg.cutoff_hz
         self._alpha = -math.expm1(-self._w / float(spec.rate_hz or 1.0))
         self._state = np.zeros(self._nc)
@@ -216,17 +207,12 @@ class Lowpass(Block):
         self._started = False
         self._last: np.ndarray | None = None
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None:
-            return {"y": Chunk(np.empty(0), np.empty((0, *self._shape)))}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
         cfg = self.config
-        if len(x) and not np.isfinite(np.add.reduce(x.data, axis=None)):
-            x, self._last = screen_nonfinite(self, x, cfg.on_bad_data, "x", self._last)
-        elif len(x) and cfg.on_bad_data == "hold":
-            self._last = x.data[-1].copy()
+        x, self._last = screen_nonfinite(self, x, cfg.on_bad_data, "x", self._last)
         n = len(x)
         if n == 0:
-            return {"y": Chunk(np.empty(0), np.empty((0, *self._shape)), x.end)}
+            return {"y": Chunk.empty(shape=self._shape, end=x.end)}
         y, self._prev_t, self._started, bad = lowpass_apply(
             np.ascontiguousarray(x.t, np.float64),
             np.ascontiguousarray(x.data.reshape(n, self._nc), np.float64),

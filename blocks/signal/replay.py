@@ -387,7 +387,7 @@ class Replay(Source):
             j += 1
         return j
 
-    def step(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, now: float) -> dict[str, Chunk]:
         src = self._src
         assert src is not None
         ts: list[np.ndarray] = []

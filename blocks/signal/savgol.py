@@ -18,9 +18,9 @@ import numpy as np
 from numba import njit
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
-    Config,
     Example,
     Port,
     SpecError,
@@ -38,8 +38,6 @@ __all__ = [
     "savgol_apply_numpy",
     "savgol_coeffs",
 ]
-
-BadData = Literal["raise", "drop", "hold"]
 
 #: The defaults: Savitzky–Golay, polynomial order 4, frame of 5 samples (the filter of Rager et al.).
 DEFAULT_WINDOW, DEFAULT_ORDER = 5, 4
@@ -60,19 +58,6 @@ def deriv_units(units: str, deriv: int) -> str:
     base, k = (m.group(1), int(m.group(2) or 1)) if m else (units, 0)
     k += deriv
     return f"{base}/s" if k == 1 else f"{base}/s^{k}"
-
-
-def _n_channels(spec: StreamSpec) -> int:
-    return int(np.prod(spec.shape)) if spec.shape else 1
-
-
-def _check_float_stream(port: str, spec: StreamSpec) -> None:
-    if spec.events or spec.rate_hz is None:
-        raise SpecError(port, f"input '{port}' must be a sampled stream with a rate, got {spec.describe()}")
-    if spec.dtype != "float64":
-        raise SpecError(port, f"input '{port}' must be float64, got {spec.dtype}")
-    if len(spec.shape) > 1:
-        raise SpecError(port, f"input '{port}' must have shape () or (channels,), got {spec.shape}")
 
 
 # -- Savitzky–Golay coefficients ------------------------------------------------------------------
@@ -182,7 +167,7 @@ def savgol_apply_numpy(coef: np.ndarray, tail: np.ndarray, x: np.ndarray) -> np.
 
 
 @dataclass(frozen=True)
-class SavGolConfig(Config):
+class SavGolConfig(BadDataConfig):
     """Parameters of :class:`SavGol`."""
 
     window: int = param(DEFAULT_WINDOW, doc="frame length in samples (odd, > order)", ge=3, odd=True)
@@ -198,9 +183,6 @@ class SavGolConfig(Config):
     padding: Literal["zeros", "hold"] = param(
         "zeros",
         doc="signal assumed outside the stream: zeros (the paper's zero padding) or hold (its first/last sample: no edge transients)",
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite samples: raise, drop them, or hold the last good value"
     )
 
     def check(self) -> None:
@@ -268,15 +250,15 @@ class SavGol(Block):
 
     name = "savgol"
     config_cls = SavGolConfig
-    inputs = {"x": Port(dtype="float64", doc="signal, shape () or (channels,)")}
+    inputs = {
+        "x": Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="signal, shape () or (channels,)")
+    }
     outputs = {"y": Port(dtype="float64", doc="smoothed signal or its derivative, per second")}
     counter_docs = nonfinite_counter_docs("samples on 'x'")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         x = inputs["x"]
-        _check_float_stream("x", x)
         want = self.config.rate_hz
-        assert x.rate_hz is not None
         if want is not None and not math.isclose(want, x.rate_hz, rel_tol=1e-9):
             raise SpecError("x", f"expects {want:g} Hz (rate_hz) but the input stream is {x.rate_hz:g} Hz")
         return {"y": x.with_(units=deriv_units(x.units, self.config.deriv))}
@@ -293,24 +275,18 @@ class SavGol(Block):
         pos = cfg.window - 1 if cfg.mode == "causal" else (cfg.window - 1) // 2
         self._coef = savgol_coeffs(cfg.window, cfg.order, cfg.deriv, pos=pos, rate_hz=float(rate))
         self._shape = spec.shape
-        self._nc = _n_channels(spec)
+        self._nc = spec.size
         self._tail = np.zeros((cfg.window - 1, self._nc))
         self._h = self.latency_samples
         self._t_hist = np.empty(0)  # stamps of the last <= h samples (centred)
         self._last: np.ndarray | None = None
         self._started = False  # has a sample arrived (padding: hold primes the history with it)
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None or len(x) == 0:
-            return {"y": Chunk(np.empty(0), np.empty((0, *self._shape)))}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
+        x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
+        if len(x) == 0:
+            return {"y": Chunk.empty(shape=self._shape)}
         d = x.data
-        if not np.isfinite(np.add.reduce(d, axis=None)):  # cheap screen; exact check only on suspicion
-            x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
-            d = x.data
-            if len(x) == 0:
-                return {"y": Chunk(np.empty(0), np.empty((0, *self._shape)))}
-        elif self.config.on_bad_data == "hold":
-            self._last = d[-1].copy()
         n = len(x)
         if not self._started:
             self._started = True
@@ -323,7 +299,7 @@ class SavGol(Block):
         emit = len(t_all) - self._h
         self._t_hist = t_all[max(emit, 0) :].copy()
         if emit <= 0:
-            return {"y": Chunk(np.empty(0), np.empty((0, *self._shape)))}
+            return {"y": Chunk.empty(shape=self._shape)}
         return {"y": Chunk(t_all[:emit], y[n - emit :].reshape(emit, *self._shape))}
 
     def flush(self) -> dict[str, Chunk]:

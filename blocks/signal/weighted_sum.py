@@ -5,14 +5,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
-    Config,
     Example,
     Port,
     SpecError,
@@ -21,15 +20,13 @@ from flowtact import (
 )
 from flowtact.align import Aligner, screen_aligned
 
-from .savgol import _check_float_stream, _n_channels
-
 __all__ = ["WeightedSum", "WeightedSumConfig"]
 
 _INPUTS = ("x1", "x2", "x3", "x4")
 
 
 @dataclass(frozen=True)
-class WeightedSumConfig(Config):
+class WeightedSumConfig(BadDataConfig):
     """Parameters of :class:`WeightedSum`."""
 
     w1: tuple[float, ...] | None = param(None, doc="weights on x1, one per channel", min_len=1)
@@ -41,9 +38,6 @@ class WeightedSumConfig(Config):
     expect_units: tuple[str, ...] = param(
         (),
         doc="units the inputs must have, x1 first (weights are per unit: N and mN differ 1000x); empty: any",
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite samples: raise, drop the instant, or hold the last good value"
     )
 
     def check(self) -> None:
@@ -103,10 +97,10 @@ class WeightedSum(Block):
 
     config_cls = WeightedSumConfig
     inputs = {
-        "x1": Port(dtype="float64", doc="first input (the output's clock)"),
-        "x2": Port(dtype="float64", optional=True, doc="second input"),
-        "x3": Port(dtype="float64", optional=True, doc="third input"),
-        "x4": Port(dtype="float64", optional=True, doc="fourth input"),
+        "x1": Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="first input (the output's clock)"),
+        "x2": Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="second input"),
+        "x3": Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="third input"),
+        "x4": Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="fourth input"),
     }
     outputs = {"y": Port(dtype="float64", shape=(), doc="weighted sum, one value per sample")}
     counter_docs = {
@@ -126,8 +120,6 @@ class WeightedSum(Block):
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         cfg, w = self.config, self.config.weights()
-        if "x1" not in inputs:
-            raise SpecError("x1", "input 'x1' must be connected")
         for p in _INPUTS:
             wp = w[p]
             if p not in inputs:
@@ -135,15 +127,14 @@ class WeightedSum(Block):
                     raise SpecError(p, f"w{p[1]} gives non-zero weights to '{p}' but '{p}' is not connected")
                 continue
             spec = inputs[p]
-            _check_float_stream(p, spec)
             if wp is None:
                 raise SpecError(
                     p, f"input '{p}' is connected but has no weights (set w{p[1]}, or disconnect it)"
                 )
-            if len(wp) != _n_channels(spec):
+            if len(wp) != spec.size:
                 raise SpecError(
                     p,
-                    f"w{p[1]} has {len(wp)} weights but input '{p}' has {_n_channels(spec)} channel(s)",
+                    f"w{p[1]} has {len(wp)} weights but input '{p}' has {spec.size} channel(s)",
                 )
             i = int(p[1]) - 1
             if i < len(cfg.expect_units) and spec.units != cfg.expect_units[i]:
@@ -163,13 +154,13 @@ class WeightedSum(Block):
         used = self.needs(frozenset(self.input_specs))
         self._ports = [p for p in _INPUTS if p in used]
         self._w = {p: np.asarray(w[p], np.float64) for p in self._ports}
-        self._nc = {p: _n_channels(self.input_specs[p]) for p in self._ports}
+        self._nc = {p: self.input_specs[p].size for p in self._ports}
         rate = self.input_specs["x1"].rate_hz or 1.0
         self._align = Aligner(self.node, self.input_specs, self._ports, tol_s=1e-6 / rate)
         self._last: dict[str, np.ndarray | None] = {p: None for p in self._ports}
 
-    def step(self, **chunks: Chunk) -> dict[str, Chunk]:
-        t, data = self._align.push(chunks)
+    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
+        t, data = self._align.push(inputs)
         n = len(t)
         if n:
             t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)

@@ -11,7 +11,15 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from flowtact.block import Block, Example, Port, SpecError, nonfinite_counter_docs, screen_nonfinite
+from flowtact.block import (
+    BadDataConfig,
+    Block,
+    Example,
+    Port,
+    SpecError,
+    nonfinite_counter_docs,
+    screen_nonfinite,
+)
 from flowtact.blocks.spiking._lif_kernels import (
     NOISE_INTERNAL,
     NOISE_OFF,
@@ -24,7 +32,7 @@ from flowtact.blocks.spiking._lif_kernels import (
 )
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
+from flowtact.params import param
 
 __all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig"]
 
@@ -47,7 +55,7 @@ TILE = 4096
 
 
 @dataclass(frozen=True)
-class NlifConfig(Config):
+class NlifConfig(BadDataConfig):
     """Parameters of :class:`Nlif`; ``None`` means the value in :data:`NLIF_DEFAULTS`."""
 
     n: int = param(1, doc="number of neurons in the population", ge=1)
@@ -87,9 +95,6 @@ class NlifConfig(Config):
     )
     h_offset_s: float | None = param(
         None, doc="post-spike basis: log-time offset b in s (small = finer early lags; default 0.005)", gt=0
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite input samples: raise, drop the sample (no update), or hold the last value"
     )
 
     def resolved(self) -> dict[str, Any]:
@@ -229,7 +234,15 @@ class Nlif(Block):
     """
 
     config_cls = NlifConfig
-    inputs = {"x": Port(dtype="float64", units="1", doc="drive, shape () for all neurons or (n,) per neuron")}
+    inputs = {
+        "x": Port(
+            dtype="float64",
+            units="1",
+            ndim=(0, 1),
+            require_rate=True,
+            doc="drive, shape () for all neurons or (n,) per neuron",
+        )
+    }
     outputs = {
         "spikes": Port(dtype="int64", shape=(), units="1", events=True, doc="spike times and neuron indices"),
         "v": Port(dtype="float64", units="1", doc="membrane at each input sample time, shape (n,)"),
@@ -239,22 +252,10 @@ class Nlif(Block):
     # -- specs -------------------------------------------------------------------------------
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         n = self.config.n
-        x = inputs.get("x")
-        if x is None:
-            raise SpecError("x", f"{self.node}: input 'x' (the drive) must be connected")
-        if x.events or not x.rate_hz or x.rate_hz <= 0:
-            raise SpecError(
-                "x", f"{self.node}: input 'x' must be a sampled stream with a rate; got {x.describe()}"
-            )
-        if np.dtype(x.dtype).kind != "f":
-            raise SpecError("x", f"{self.node}: input 'x' must be float; got {x.dtype}")
+        x = inputs["x"]
         if x.shape not in ((), (n,)):
             raise SpecError(
                 "x", f"{self.node}: input 'x' must have shape () or ({n},) for n = {n}; got {x.shape}"
-            )
-        if x.units != "1":
-            raise SpecError(
-                "x", f"{self.node}: input 'x' must be a dimensionless drive (units '1'); got '{x.units}'"
             )
         p = self.config.resolved()
         dt = 1.0 / x.rate_hz
@@ -325,13 +326,13 @@ class Nlif(Block):
     def _empty(self) -> dict[str, Chunk]:
         out = {}
         if "spikes" in self.demanded:
-            out["spikes"] = Chunk(np.empty(0), np.empty(0, np.int64), self._end)
+            out["spikes"] = Chunk.empty(dtype="int64", end=self._end)
         if "v" in self.demanded:
-            out["v"] = Chunk(np.empty(0), np.empty((0, self._n)))
+            out["v"] = Chunk.empty(shape=(self._n,))
         return out
 
-    def step(self, x: Chunk | None = None) -> dict[str, Chunk]:  # type: ignore[override]
-        if x is None or x.t.shape[0] == 0:
+    def step(self, x: Chunk) -> dict[str, Chunk]:
+        if x.t.shape[0] == 0:
             return self._empty()
         u = x.data
         if u.dtype is not _F64 or not u.flags.c_contiguous:

@@ -9,14 +9,21 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 from numba import njit
 
-from flowtact.block import Block, Example, Port, SpecError, nonfinite_counter_docs, screen_nonfinite
+from flowtact.block import (
+    BadDataConfig,
+    Block,
+    Example,
+    Port,
+    SpecError,
+    nonfinite_counter_docs,
+    screen_nonfinite,
+)
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
+from flowtact.params import param
 
 __all__ = ["FLAGS", "Pulses", "PulsesConfig", "pulse_kernel", "pulse_kernel_py"]
 
@@ -108,7 +115,7 @@ pulse_kernel.__doc__ = "numba version of :func:`pulse_kernel_py` (the per-event 
 
 
 @dataclass(frozen=True)
-class PulsesConfig(Config):
+class PulsesConfig(BadDataConfig):
     amplitude_ua: float = param(
         60.0, doc="pulse amplitude per spike (also held before the first amplitude sample)", gt=0
     )
@@ -131,9 +138,6 @@ class PulsesConfig(Config):
         gt=0,
     )
     max_units: int = param(64, doc="most stimulation channels (units) the stream may index", ge=1)
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite amplitude samples: stop, ignore the sample, or keep the last finite value"
-    )
 
     def charge_ceiling_ua(self) -> float:
         """Largest amplitude allowed by the charge limit at this width: 1000·max_charge_nc / width_us."""
@@ -255,13 +259,7 @@ class Pulses(Block):
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         c = self.config
-        sp = inputs.get("spikes")
-        if sp is None:
-            raise SpecError("spikes", "input 'spikes' must be connected")
-        if not sp.events:
-            raise SpecError(
-                "spikes", f"expects an event stream (spike times + unit index); got {sp.describe()}"
-            )
+        sp = inputs["spikes"]
         if np.dtype(sp.dtype).kind not in "iu":
             raise SpecError("spikes", f"expects integer unit indices; got dtype {sp.dtype}")
         if sp.shape != ():
@@ -310,10 +308,10 @@ class Pulses(Block):
         self.pend_t = np.empty(0)
         self.pend_u = np.empty(0, np.int64)
 
-    def step(self, spikes: Chunk | None = None, amplitude: Chunk | None = None) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, spikes: Chunk, amplitude: Chunk | None = None) -> dict[str, Chunk]:
         c = self.config
-        new_t = np.empty(0) if spikes is None else np.asarray(spikes.t, np.float64)
-        new_u = np.empty(0, np.int64) if spikes is None else np.asarray(spikes.data).astype(np.int64)
+        new_t = np.asarray(spikes.t, np.float64)
+        new_u = np.asarray(spikes.data).astype(np.int64)
         bad = ~np.isfinite(new_t)
         if bad.any():
             self.count("bad_time", int(bad.sum()))
@@ -321,8 +319,7 @@ class Pulses(Block):
         ev_t = np.concatenate([self.pend_t, new_t]) if len(self.pend_t) else new_t
         ev_u = np.concatenate([self.pend_u, new_u]) if len(self.pend_u) else new_u
         if not self.has_amp:
-            end = spikes.end if spikes is not None else None
-            return {"y": self._deliver(ev_t, ev_u, np.full(len(ev_t), c.amplitude_ua), end)}
+            return {"y": self._deliver(ev_t, ev_u, np.full(len(ev_t), c.amplitude_ua), spikes.end)}
         # Sample-and-hold lookup over [last held sample] + this chunk's (screened) samples.
         a_t, a_v = np.array([self.amp_t]), self.amp_last[None, :]
         if amplitude is not None and len(amplitude):
@@ -345,7 +342,7 @@ class Pulses(Block):
         k = np.searchsorted(a_t, ev_t, side="right") - 1
         req = a_v[np.maximum(k, 0), np.clip(ev_u, 0, self.n_units - 1)]
         self.amp_t, self.amp_last = horizon, a_v[-1].copy()
-        end = horizon if spikes is None or spikes.end is None else min(horizon, spikes.end)
+        end = horizon if spikes.end is None else min(horizon, spikes.end)
         return {"y": self._deliver(ev_t, ev_u, req, end)}
 
     def flush(self) -> dict[str, Chunk]:

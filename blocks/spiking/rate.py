@@ -70,13 +70,7 @@ class Rate(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        s = inputs.get("spikes")
-        if s is None:
-            raise SpecError("spikes", f"{self.node}: input 'spikes' must be connected")
-        if not s.events:
-            raise SpecError(
-                "spikes", f"{self.node}: input 'spikes' must be an event stream; got {s.describe()}"
-            )
+        s = inputs["spikes"]
         if not s.n_units or s.n_units < 1:
             raise SpecError(
                 "spikes", f"{self.node}: input 'spikes' must declare its number of units (n_units)"
@@ -103,31 +97,30 @@ class Rate(Block):
             return 0
         return int(self._bin_of(np.array([wm]))[0])
 
-    def step(self, spikes: Chunk | None = None) -> dict[str, Chunk]:  # type: ignore[override]
-        if spikes is not None:
-            if len(spikes):
-                idx = np.asarray(spikes.data, dtype=np.int64)
-                if idx.min() < 0 or idx.max() >= self._units:
-                    raise ValueError(
-                        f"{self.node} ({self.name}): unit index out of range 0..{self._units - 1} "
-                        f"(got {idx.min()}..{idx.max()})"
+    def step(self, spikes: Chunk) -> dict[str, Chunk]:
+        if len(spikes):
+            idx = np.asarray(spikes.data, dtype=np.int64)
+            if idx.min() < 0 or idx.max() >= self._units:
+                raise ValueError(
+                    f"{self.node} ({self.name}): unit index out of range 0..{self._units - 1} "
+                    f"(got {idx.min()}..{idx.max()})"
+                )
+            k = self._bin_of(spikes.t)
+            late = k < self._next
+            if late.any():
+                self.count("late_events", int(late.sum()))
+                k, idx = k[~late], idx[~late]
+            if len(k):
+                need = int(k.max()) - self._next + 1
+                if need > len(self._counts):
+                    self._counts = np.vstack(
+                        [self._counts, np.zeros((need - len(self._counts), self._units))]
                     )
-                k = self._bin_of(spikes.t)
-                late = k < self._next
-                if late.any():
-                    self.count("late_events", int(late.sum()))
-                    k, idx = k[~late], idx[~late]
-                if len(k):
-                    need = int(k.max()) - self._next + 1
-                    if need > len(self._counts):
-                        self._counts = np.vstack(
-                            [self._counts, np.zeros((need - len(self._counts), self._units))]
-                        )
-                    flat = (k - self._next) * self._units + idx
-                    self._counts += np.bincount(flat, minlength=self._counts.size).reshape(self._counts.shape)
-                self._wm = max(self._wm, float(spikes.t[-1]))
-            if spikes.end is not None:
-                self._wm = max(self._wm, float(spikes.end))
+                flat = (k - self._next) * self._units + idx
+                self._counts += np.bincount(flat, minlength=self._counts.size).reshape(self._counts.shape)
+            self._wm = max(self._wm, float(spikes.t[-1]))
+        if spikes.end is not None:
+            self._wm = max(self._wm, float(spikes.end))
         return {"y": self._emit(self._complete(self._wm) - self._next, partial=False)}
 
     def _emit(self, n_bins: int, partial: bool) -> Chunk:

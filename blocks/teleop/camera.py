@@ -19,6 +19,7 @@ import numpy as np
 
 from flowtact.block import Example, Port, Source
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import FlowtactError
 from flowtact.params import Config, param
 
 from .hand import FINGERS
@@ -39,7 +40,7 @@ _BACKENDS = {
 }
 
 
-class CameraError(RuntimeError):
+class CameraError(FlowtactError, RuntimeError):
     """A device could not be opened, or stopped delivering frames."""
 
 
@@ -200,7 +201,7 @@ class Camera(Source):
         super().__init__(config, **kw)
         self.sources: list[_Folder | _Capture] = []
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # type: ignore[override]
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         c = self.config
         n = len(c.devices)
         w, h = c.size
@@ -292,7 +293,7 @@ class Camera(Source):
             img = cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
         return img
 
-    def step(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, now: float) -> dict[str, Chunk]:
         c = self.config
         if not self.sources:
             self.open()  # driven offline (run_source) without the runtime's open()

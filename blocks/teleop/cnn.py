@@ -416,7 +416,13 @@ class CnnForce(Block):
     config_cls = CnnForceConfig
     requires = ("torch",)
     inputs = {
-        "x": Port(dtype="uint8", shape=None, units="DN", doc="gray frames, one per sensor: (S, H, W) uint8")
+        "x": Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            require_rate=True,
+            doc="gray frames, one per sensor: (S, H, W) uint8",
+        )
     }
     outputs = {
         "y": Port(dtype="float64", shape=None, units="N", doc="estimated contact force per sensor (S,)")
@@ -442,17 +448,6 @@ class CnnForce(Block):
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         x = inputs["x"]
-        where = f"{self.node} ({self.name})"
-        if x.events or x.rate_hz is None:
-            raise SpecError("x", f"{where}: input 'x' must be a sampled frame stream, got {x.describe()}")
-        if x.dtype != "uint8":
-            raise SpecError("x", f"{where}: input 'x' must be uint8 frames, got {x.dtype}")
-        if len(x.shape) != 3:
-            raise SpecError("x", f"{where}: input 'x' must be frames of shape (sensors, H, W), got {x.shape}")
-        if x.units != "DN":
-            raise SpecError(
-                "x", f"{where}: input 'x' must be camera digital numbers (units 'DN'), got '{x.units}'"
-            )
         self._check_size(self._read_meta(), tuple(x.shape[1:]))
         s = x.shape[0]
         labels = FINGERS if s == len(FINGERS) else None
@@ -507,9 +502,7 @@ class CnnForce(Block):
     def close(self) -> None:
         self._model = None
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None:
-            return {}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
         n = len(x)
         z = np.empty((n, self._n), np.float32)
         torch, model = self._torch, self._model

@@ -43,6 +43,7 @@ from typing import Literal
 import numpy as np
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
     Config,
@@ -83,7 +84,6 @@ __all__ = [
     "phi_from_theta",
 ]
 
-BadData = Literal["raise", "drop", "hold"]
 
 #: Eq. 3.10: |F_FSR| = FSR_SCALE_N · exp(FSR_EXP_PER_ADC · R_FSR), R the 10-bit ADC reading.
 FSR_SCALE_N, FSR_EXP_PER_ADC = 0.6867, 0.0023
@@ -297,35 +297,11 @@ def _rows_error(cfg: Config, name: str, width: int) -> None:
             )
 
 
-def _check_stream(port: str, spec: StreamSpec, shape: tuple[int, ...], units: str, what: str) -> None:
-    if spec.events or spec.rate_hz is None:
-        raise SpecError(port, f"input '{port}' must be a sampled stream, got {spec.describe()}")
-    if spec.dtype != "float64":
-        raise SpecError(port, f"input '{port}' must be float64, got {spec.dtype}")
-    if spec.shape != shape:
-        raise SpecError(port, f"input '{port}' must have shape {shape} ({what}), got {spec.shape}")
-    if spec.units != units:
-        raise SpecError(port, f"input '{port}' must be {what} in '{units}', got '{spec.units}'")
-
-
-def _empty(shape: tuple[int, ...], end: float | None = None) -> Chunk:
-    return Chunk(np.empty(0), np.empty((0, *shape)), end)
-
-
-def _screen(block: Block, x: Chunk, policy: BadData, port: str, last: np.ndarray | None):
-    """The bad-data policy on one input: the cheap whole-chunk test first."""
-    if len(x) and not np.isfinite(np.add.reduce(x.data, axis=None)):
-        return screen_nonfinite(block, x, policy, port, last)
-    if len(x) and policy == "hold":
-        last = x.data[-1].copy()
-    return x, last
-
-
 # -- fsr_force ----------------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class FsrForceConfig(Config):
+class FsrForceConfig(BadDataConfig):
     """Parameters of :class:`FsrForce`."""
 
     scale_n: float = param(FSR_SCALE_N, doc="eq. 3.10 prefactor: |F| = scale_n·exp(exponent_per_adc·R)", gt=0)
@@ -338,9 +314,6 @@ class FsrForceConfig(Config):
     )
     invert: bool = param(
         False, doc="true if pushing the finger closed LOWERS the reading (FSR mounted the other way)"
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite or out-of-range readings: raise, drop them, or hold the last good reading"
     )
 
 
@@ -384,7 +357,11 @@ class FsrForce(Block):
     """
 
     config_cls = FsrForceConfig
-    inputs = {"x": Port(dtype="float64", shape=(3,), units="ADC", doc="raw FSR readings (ADC counts)")}
+    inputs = {
+        "x": Port(
+            dtype="float64", shape=(3,), units="ADC", require_rate=True, doc="raw FSR readings (ADC counts)"
+        )
+    }
     outputs = {"y": Port(dtype="float64", shape=(3,), units="N", doc="signed FSR force per finger")}
     counter_docs = {
         "out_of_range": "samples with a reading outside [0, adc_max] (a garbled serial line): treated as "
@@ -398,9 +375,6 @@ class FsrForce(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' must be connected")
-        _check_stream("x", inputs["x"], (N_FINGERS,), "ADC", "FSR readings per finger")
         return {"y": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=inputs["x"].rate_hz, labels=FINGERS)}
 
     def reset(self) -> None:
@@ -415,9 +389,7 @@ class FsrForce(Block):
     def _force(self, r: np.ndarray) -> np.ndarray:
         return self.config.scale_n * np.exp(self.config.exponent_per_adc * r)
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None:
-            return {"y": _empty((N_FINGERS,))}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
         end = x.end
         if len(x):
             d = x.data
@@ -425,7 +397,7 @@ class FsrForce(Block):
             if out.any():
                 self.count("out_of_range", int(out.reshape(len(x), -1).any(axis=1).sum()))
                 x = Chunk(x.t, np.where(out, np.nan, d), x.end)
-            x, self._last = _screen(self, x, self.config.on_bad_data, "x", self._last)
+            x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
         f = self._force(x.data)
         if self._offset is not None:
             return {"y": Chunk(x.t, self._sign * (f - self._offset), end)}
@@ -439,7 +411,7 @@ class FsrForce(Block):
         if self._seen < k:
             first = self._held[0][0][0] if self._held else end
             wm = None if end is None else (min(end, first) if first is not None else end)
-            return {"y": _empty((N_FINGERS,), wm)}
+            return {"y": Chunk.empty(shape=(N_FINGERS,), end=wm)}
         return {"y": self._release(end)}
 
     def _release(self, end: float | None) -> Chunk:
@@ -469,7 +441,7 @@ class FsrForce(Block):
 
 
 @dataclass(frozen=True)
-class ExoKinematicsConfig(Config):
+class ExoKinematicsConfig(BadDataConfig):
     """Parameters of :class:`ExoKinematics` (geometry rows: thumb, index, middle)."""
 
     finger_mm: tuple[tuple[float, ...], ...] = param(
@@ -494,9 +466,6 @@ class ExoKinematicsConfig(Config):
         doc="servo pivot O relative to the MCP joint (x, y) in mm per finger",
         min_len=3,
         max_len=3,
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite angles: raise, drop the sample, or hold the last good pose"
     )
 
     def check(self) -> None:
@@ -552,7 +521,15 @@ class ExoKinematics(Block):
     """
 
     config_cls = ExoKinematicsConfig
-    inputs = {"phi": Port(dtype="float64", shape=(3, 3), units="rad", doc="exoskeleton joint angles φ1..φ3")}
+    inputs = {
+        "phi": Port(
+            dtype="float64",
+            shape=(3, 3),
+            units="rad",
+            require_rate=True,
+            doc="exoskeleton joint angles φ1..φ3",
+        )
+    }
     outputs = {
         "s_q": Port(dtype="float64", shape=(3, 2), units="mm", doc="attachment point s_Q per finger (FK)"),
         "theta": Port(
@@ -566,11 +543,6 @@ class ExoKinematics(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "phi" not in inputs:
-            raise SpecError("phi", "input 'phi' must be connected")
-        _check_stream(
-            "phi", inputs["phi"], (N_FINGERS, 3), "rad", "exoskeleton angles [φ1, φ2, φ3] per finger"
-        )
         rate = inputs["phi"].rate_hz
         return {
             "s_q": StreamSpec(shape=(N_FINGERS, 2), units="mm", rate_hz=rate),
@@ -580,11 +552,9 @@ class ExoKinematics(Block):
     def reset(self) -> None:
         self._last: np.ndarray | None = None
 
-    def step(self, phi: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
+    def step(self, phi: Chunk) -> dict[str, Chunk]:
         cfg = self.config
-        if phi is None:
-            phi = _empty((N_FINGERS, 3))
-        phi, self._last = _screen(self, phi, cfg.on_bad_data, "phi", self._last)
+        phi, self._last = screen_nonfinite(self, phi, cfg.on_bad_data, "phi", self._last)
         s_q, psi_sum = exo_forward(phi.data, cfg.exo_a_mm, cfg.exo_zeta_rad, cfg.exo_s_a_mm)
         out = {}
         if "s_q" in self.demanded:
@@ -611,7 +581,7 @@ class ExoKinematics(Block):
 
 
 @dataclass(frozen=True)
-class FingertipForceConfig(Config):
+class FingertipForceConfig(BadDataConfig):
     """Parameters of :class:`FingertipForce`."""
 
     exo_a_mm: tuple[tuple[float, ...], ...] = param(
@@ -628,9 +598,6 @@ class FingertipForceConfig(Config):
         doc="equation: eq. 3.9 as printed (a1, [cos α, sin α]); text: as the prose derives it (a3, [−sin α, −cos α])",
     )
     tol_s: float = param(1e-6, doc="largest timestamp difference between paired fsr and phi samples, s", gt=0)
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite samples: raise, drop the instant, or hold the last good value"
-    )
 
     def check(self) -> None:
         _rows_error(self, "exo_a_mm", 3)
@@ -681,8 +648,16 @@ class FingertipForce(Block):
 
     config_cls = FingertipForceConfig
     inputs = {
-        "fsr": Port(dtype="float64", shape=(3,), units="N", doc="signed FSR force per finger"),
-        "phi": Port(dtype="float64", shape=(3, 3), units="rad", doc="exoskeleton joint angles φ1..φ3"),
+        "fsr": Port(
+            dtype="float64", shape=(3,), units="N", require_rate=True, doc="signed FSR force per finger"
+        ),
+        "phi": Port(
+            dtype="float64",
+            shape=(3, 3),
+            units="rad",
+            require_rate=True,
+            doc="exoskeleton joint angles φ1..φ3",
+        ),
     }
     outputs = {
         "f": Port(dtype="float64", shape=(3,), units="N", doc="signed fingertip force per finger"),
@@ -698,11 +673,6 @@ class FingertipForce(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        for p in ("fsr", "phi"):
-            if p not in inputs:
-                raise SpecError(p, f"input '{p}' must be connected")
-        _check_stream("fsr", inputs["fsr"], (N_FINGERS,), "N", "FSR force per finger")
-        _check_stream("phi", inputs["phi"], (N_FINGERS, 3), "rad", "exoskeleton angles per finger")
         rate = inputs["fsr"].rate_hz
         if not math.isclose(inputs["phi"].rate_hz or 0.0, rate or 0.0, rel_tol=1e-9):
             raise SpecError(
@@ -729,10 +699,10 @@ class FingertipForce(Block):
             return None
         return min(v for v in self._wm.values() if v is not None)
 
-    def step(self, **chunks: Chunk) -> dict[str, Chunk]:
+    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
         cfg = self.config
-        end = self._watermark(chunks)
-        t, data = self._align.push(chunks)
+        end = self._watermark(inputs)
+        t, data = self._align.push(inputs)
         if len(t):
             t, data = screen_aligned(self, cfg.on_bad_data, t, data, self._last)
         phi = data["phi"] if len(t) else np.empty((0, N_FINGERS, 3))
@@ -767,7 +737,7 @@ class FingertipForce(Block):
 
 
 @dataclass(frozen=True)
-class GripperCommandConfig(Config):
+class GripperCommandConfig(BadDataConfig):
     """Parameters of :class:`GripperCommand` (one value per finger: thumb, index, middle)."""
 
     open_rad: tuple[float, ...] = param(
@@ -778,9 +748,6 @@ class GripperCommandConfig(Config):
     )
     closed_rad: tuple[float, ...] = param(
         (1.8, 3.2, 3.2), doc="sum of finger angles with the hand fully closed, rad", min_len=3, max_len=3
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite angles: raise, drop the sample, or hold the last good pose"
     )
 
     def check(self) -> None:
@@ -821,16 +788,21 @@ class GripperCommand(Block):
     """
 
     config_cls = GripperCommandConfig
-    inputs = {"x": Port(dtype="float64", shape=(3, 3), units="rad", doc="finger joint angles θ per finger")}
+    inputs = {
+        "x": Port(
+            dtype="float64",
+            shape=(3, 3),
+            units="rad",
+            require_rate=True,
+            doc="finger joint angles θ per finger",
+        )
+    }
     outputs = {
         "y": Port(dtype="float64", shape=(3,), units="1", doc="gripper command per finger, 0 open, 1 closed")
     }
     counter_docs = nonfinite_counter_docs("pose samples on 'x'")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' must be connected")
-        _check_stream("x", inputs["x"], (N_FINGERS, 3), "rad", "finger joint angles per finger")
         return {"y": StreamSpec(shape=(N_FINGERS,), units="1", rate_hz=inputs["x"].rate_hz, labels=FINGERS)}
 
     def reset(self) -> None:
@@ -838,10 +810,8 @@ class GripperCommand(Block):
         self._span = np.asarray(self.config.closed_rad, np.float64) - self._open
         self._last: np.ndarray | None = None
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None:
-            return {"y": _empty((N_FINGERS,))}
-        x, self._last = _screen(self, x, self.config.on_bad_data, "x", self._last)
+    def step(self, x: Chunk) -> dict[str, Chunk]:
+        x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
         d = x.data
         total = d[..., 0] + d[..., 1] + d[..., 2]
         return {"y": Chunk(x.t, np.clip((total - self._open) / self._span, 0.0, 1.0), x.end)}

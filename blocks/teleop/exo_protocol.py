@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from flowtact.errors import FlowtactError
+
 __all__ = [
     "ADC_MAX",
     "DEVICE_MAX_DEV_US",
@@ -38,7 +40,7 @@ SEQ_WRAP = 1 << 16
 # -- line protocol ------------------------------------------------------------------------------
 
 
-class ProtocolError(ValueError):
+class ProtocolError(FlowtactError, ValueError):
     """A line that is not a valid protocol message (bad framing, checksum, field count or range)."""
 
 

@@ -14,7 +14,7 @@ from typing import Literal
 
 import numpy as np
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
+from flowtact import Block, Chunk, Config, Example, Port, StreamSpec, param
 from flowtact.merge import LatestMerger
 
 from .hand import N_FINGERS
@@ -172,8 +172,20 @@ class ForceFeedback(Block):
 
     config_cls = ForceFeedbackConfig
     inputs = {
-        "target": Port(dtype="float64", shape=(3,), units="N", doc="contact force F_T at the TacTips, N"),
-        "finger": Port(dtype="float64", shape=(3,), units="N", doc="signed fingertip force F_f, N (drives)"),
+        "target": Port(
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            require_rate=True,
+            doc="contact force F_T at the TacTips, N",
+        ),
+        "finger": Port(
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            require_rate=True,
+            doc="signed fingertip force F_f, N (drives)",
+        ),
     }
     outputs = {
         "cmd": Port(dtype="float64", shape=(3, 2), units="us", doc="[engage 0/1, deviation µs] per finger")
@@ -199,18 +211,6 @@ class ForceFeedback(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        for p in ("target", "finger"):
-            if p not in inputs:
-                raise SpecError(p, f"input '{p}' must be connected")
-            s = inputs[p]
-            if s.events or s.rate_hz is None:
-                raise SpecError(p, f"input '{p}' must be a sampled stream, got {s.describe()}")
-            if s.dtype != "float64" or s.shape != (N_FINGERS,):
-                raise SpecError(
-                    p, f"input '{p}' must be float64 of shape (3,) (thumb, index, middle), got {s.describe()}"
-                )
-            if s.units != "N":
-                raise SpecError(p, f"input '{p}' must be a force in 'N', got '{s.units}'")
         return {"cmd": StreamSpec(shape=_CMD, units="us", rate_hz=inputs["finger"].rate_hz)}
 
     def reset(self) -> None:
@@ -337,7 +337,7 @@ class ForceFeedback(Block):
             self._wm_finger = max(marks)
         return feed
 
-    def step(self, target: Chunk | None = None, finger: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
+    def step(self, target: Chunk, finger: Chunk) -> dict[str, Chunk]:
         cfg = self.config
         rows: list[np.ndarray] = []
         times: list[float] = []
@@ -366,7 +366,7 @@ class ForceFeedback(Block):
             self._end_out = max(self._end_out, min(nxt))
             end = self._end_out
         if not rows:
-            return Chunk(np.empty(0), np.empty((0, *_CMD)), end)
+            return Chunk.empty(shape=_CMD, end=end)
         return Chunk(np.asarray(times, np.float64), np.stack(rows), end)
 
     def flush(self) -> dict[str, Chunk]:

@@ -8,14 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
-    Config,
     Example,
     Port,
     SpecError,
@@ -39,7 +38,7 @@ DEFAULT_INTERCEPT_N = (17.0, 17.0, 17.0)
 
 
 @dataclass(frozen=True)
-class LinearForceConfig(Config):
+class LinearForceConfig(BadDataConfig):
     """Parameters of :class:`LinearForce`."""
 
     slope_n: tuple[float, ...] = param(
@@ -49,9 +48,6 @@ class LinearForceConfig(Config):
         DEFAULT_INTERCEPT_N, doc="force at SSIM 0 per sensor in N (one per sensor, or one for all)", min_len=1
     )
     clip_negative: bool = param(True, doc="clip negative forces to 0 (a contact force cannot pull)")
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite SSIM samples: raise, drop them, or hold the last good value"
-    )
 
     def check(self) -> None:
         if len(self.slope_n) != len(self.intercept_n) and 1 not in (len(self.slope_n), len(self.intercept_n)):
@@ -97,20 +93,12 @@ class LinearForce(Block):
 
     name = "linear_force"
     config_cls = LinearForceConfig
-    inputs = {"x": Port(dtype="float64", units="1", doc="SSIM per sensor")}
+    inputs = {"x": Port(dtype="float64", units="1", ndim=(0, 1), require_rate=True, doc="SSIM per sensor")}
     outputs = {"y": Port(dtype="float64", units="N", doc="estimated contact force per sensor")}
     counter_docs = nonfinite_counter_docs("SSIM samples on 'x'")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' must be connected")
         x = inputs["x"]
-        if x.events or x.rate_hz is None or x.dtype != "float64" or len(x.shape) > 1:
-            raise SpecError(
-                "x", f"input 'x' must be a float64 stream of shape () or (sensors,), got {x.describe()}"
-            )
-        if x.units != "1":
-            raise SpecError("x", f"input 'x' must be SSIM (units '1'), got '{x.units}'")
         n = x.shape[0] if x.shape else 1
         for field in ("slope_n", "intercept_n"):
             k = len(getattr(self.config, field))
@@ -127,9 +115,7 @@ class LinearForce(Block):
         self._intercept = intercept.reshape(x.shape)
         self._last: np.ndarray | None = None
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None:
-            return {}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
         if len(x):
             x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
         f = self._intercept + self._slope * x.data

@@ -9,17 +9,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
-    Config,
     Example,
     Port,
-    SpecError,
     StreamSpec,
     nonfinite_counter_docs,
     param,
@@ -87,7 +85,7 @@ def grasp_sim_apply(
 
 
 @dataclass(frozen=True)
-class GraspSimConfig(Config):
+class GraspSimConfig(BadDataConfig):
     """Parameters of :class:`GraspSim`."""
 
     object_names: tuple[str, ...] = param(
@@ -110,9 +108,6 @@ class GraspSimConfig(Config):
     period_s: float = param(5.0, doc="time between object swaps (one grasp per period), s", gt=0)
     swap_at_s: float = param(
         0.0, doc="time within each period at which the next object is put in hand, s", ge=0
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite commands: raise, drop them, or hold the last good command"
     )
 
     def check(self) -> None:
@@ -172,7 +167,11 @@ class GraspSim(Block):
     config_cls = GraspSimConfig
     inputs = {
         "grip": Port(
-            dtype="float64", shape=(3,), units="1", doc="gripper command per finger, 0 open, 1 closed"
+            dtype="float64",
+            shape=(3,),
+            units="1",
+            require_rate=True,
+            doc="gripper command per finger, 0 open, 1 closed",
         )
     }
     outputs = {
@@ -185,15 +184,7 @@ class GraspSim(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "grip" not in inputs:
-            raise SpecError("grip", "input 'grip' must be connected")
         g = inputs["grip"]
-        if g.events or g.rate_hz is None:
-            raise SpecError("grip", f"input 'grip' must be a sampled stream, got {g.describe()}")
-        if g.dtype != "float64" or g.shape != (N_FINGERS,):
-            raise SpecError("grip", f"input 'grip' must be float64 of shape (3,), got {g.describe()}")
-        if g.units != "1":
-            raise SpecError("grip", f"input 'grip' must be a command in [0, 1] (units '1'), got '{g.units}'")
         return {
             "force": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=g.rate_hz, labels=FINGERS),
             "object": StreamSpec(shape=(), units="1", rate_hz=g.rate_hz),
@@ -208,14 +199,9 @@ class GraspSim(Block):
         self._contact = np.asarray(cfg.contact, np.float64)
         self._last: np.ndarray | None = None
 
-    def step(self, grip: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
+    def step(self, grip: Chunk) -> dict[str, Chunk]:
         cfg = self.config
-        if grip is None:
-            grip = Chunk(np.empty(0), np.empty((0, N_FINGERS)))
-        if len(grip) and not np.isfinite(np.add.reduce(grip.data, axis=None)):
-            grip, self._last = screen_nonfinite(self, grip, cfg.on_bad_data, "grip", self._last)
-        elif len(grip) and cfg.on_bad_data == "hold":
-            self._last = grip.data[-1].copy()
+        grip, self._last = screen_nonfinite(self, grip, cfg.on_bad_data, "grip", self._last)
         u = grip.data
         outside = (u < 0.0) | (u > 1.0)
         if outside.any():

@@ -58,21 +58,7 @@ TABLE_3_1: dict[str, tuple[float, float, float]] = {
 }
 
 
-# -- shared checks -----------------------------------------------------------------------------------
-
-
-def _check_frames(port: str, spec: StreamSpec) -> tuple[int, int, int]:
-    """(n, H, W) of a uint8 frame stream, or a SpecError naming the port."""
-    if spec.events or spec.rate_hz is None:
-        raise SpecError(port, f"input '{port}' must be a sampled frame stream, got {spec.describe()}")
-    if spec.dtype != "uint8":
-        raise SpecError(port, f"input '{port}' must be uint8 images, got {spec.dtype}")
-    if len(spec.shape) != 3 or min(spec.shape) < 1:
-        raise SpecError(port, f"input '{port}' must have shape (sensors, H, W), got {spec.shape}")
-    if spec.units != "DN":
-        raise SpecError(port, f"input '{port}' must be images in 'DN', got '{spec.units}'")
-    n, h, w = spec.shape
-    return int(n), int(h), int(w)
+# -- shared helpers ----------------------------------------------------------------------------------
 
 
 def _per_sensor(block: Block, field: str, values: Sequence[Any], n: int) -> list[Any]:
@@ -229,13 +215,21 @@ class Crop(Block):
 
     name = "crop"
     config_cls = CropConfig
-    inputs = {"x": Port(dtype="uint8", units="DN", doc="frames (sensors, H, W)")}
-    outputs = {"y": Port(dtype="uint8", units="DN", doc="cropped frames (sensors, height_px, width_px)")}
+    inputs = {
+        "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
+    }
+    outputs = {
+        "y": Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            require_rate=True,
+            doc="cropped frames (sensors, height_px, width_px)",
+        )
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' must be connected")
-        n, h, w = _check_frames("x", inputs["x"])
+        n, h, w = inputs["x"].shape
         c = self.config
         for s, (x0, y0) in enumerate(
             zip(_per_sensor(self, "x0_px", c.x0_px, n), _per_sensor(self, "y0_px", c.y0_px, n), strict=True)
@@ -254,11 +248,9 @@ class Crop(Block):
         self._x0 = _per_sensor(self, "x0_px", c.x0_px, n)
         self._y0 = _per_sensor(self, "y0_px", c.y0_px, n)
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
+    def step(self, x: Chunk) -> dict[str, Chunk]:
         c = self.config
         n = len(self._x0)
-        if x is None:
-            return {}
         out = np.empty((len(x), n, c.height_px, c.width_px), np.uint8)
         for s in range(n):
             x0, y0 = self._x0[s], self._y0[s]
@@ -325,13 +317,14 @@ class AdaptiveThreshold(Block):
     name = "adaptive_threshold"
     config_cls = AdaptiveThresholdConfig
     requires = ("cv2",)
-    inputs = {"x": Port(dtype="uint8", units="DN", doc="frames (sensors, H, W)")}
-    outputs = {"y": Port(dtype="uint8", units="DN", doc="binary images (0 or 255)")}
+    inputs = {
+        "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
+    }
+    outputs = {
+        "y": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="binary images (0 or 255)")
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' must be connected")
-        _check_frames("x", inputs["x"])
         return {"y": inputs["x"].with_(labels=None)}
 
     def reset(self) -> None:
@@ -340,9 +333,7 @@ class AdaptiveThreshold(Block):
         self._cv2 = cv2
         self._block = 2 * self.config.radius_px + 1
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None:
-            return {}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
         cv2, c = self._cv2, self.config
         out = np.empty(x.data.shape, np.uint8)
         for i in range(len(x)):
@@ -508,7 +499,11 @@ class BlobDetect(Block):
     name = "blob_detect"
     config_cls = BlobDetectConfig
     requires = ("cv2",)
-    inputs = {"x": Port(dtype="uint8", units="DN", doc="grayscale frames (sensors, H, W)")}
+    inputs = {
+        "x": Port(
+            dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="grayscale frames (sensors, H, W)"
+        )
+    }
     outputs = {
         "pins": Port(
             dtype="float64", units="px", doc="(sensors, max_pins, 3) rows x, y, diameter; NaN rows unused"
@@ -521,9 +516,7 @@ class BlobDetect(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' must be connected")
-        n, _h, _w = _check_frames("x", inputs["x"])
+        n = inputs["x"].shape[0]
         if self.config.n_sensors() not in (1, n):
             raise SpecError(
                 "x",
@@ -571,9 +564,7 @@ class BlobDetect(Block):
         rows = np.array([(k.pt[0], k.pt[1], k.size) for k in kps], np.float64).reshape(-1, 3)
         return rows[np.lexsort((rows[:, 0], rows[:, 1]))]
 
-    def step(self, x: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is None:
-            return {}
+    def step(self, x: Chunk) -> dict[str, Chunk]:
         m, n = len(x), x.data.shape[1]
         p = self.config.max_pins
         pins = np.full((m, n, p, 3), np.nan)
@@ -694,22 +685,21 @@ class BlobMask(Block):
     name = "blob_mask"
     config_cls = BlobMaskConfig
     inputs = {
-        "x": Port(dtype="uint8", units="DN", doc="frames (sensors, H, W)"),
+        "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)"),
         "pins": Port(
             dtype="float64", units="px", doc="pin rows (x, y, diameter) per sensor, NaN rows ignored"
         ),
     }
-    outputs = {"y": Port(dtype="uint8", units="DN", doc="frames masked to the pins")}
+    outputs = {
+        "y": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames masked to the pins")
+    }
     counter_docs = {
         "unpaired_at_end": "frames or pin rows with no partner on the other input when the stream ended: "
         "not masked ('x' and 'pins' delivered different numbers of samples)",
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        for p in ("x", "pins"):
-            if p not in inputs:
-                raise SpecError(p, f"input '{p}' must be connected")
-        n, _h, _w = _check_frames("x", inputs["x"])
+        n = inputs["x"].shape[0]
         pins = inputs["pins"]
         if pins.events or pins.dtype != "float64" or len(pins.shape) != 3 or pins.shape[2] != 3:
             raise SpecError("pins", f"input 'pins' must be float64 (sensors, pins, 3), got {pins.describe()}")
@@ -729,11 +719,11 @@ class BlobMask(Block):
         self._ends: dict[str, float] = {}
         self._shape = tuple(self.input_specs["x"].shape)
 
-    def step(self, **chunks: Chunk) -> dict[str, Chunk]:
-        for p, c in chunks.items():
-            if c is not None and c.end is not None:
+    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
+        for p, c in inputs.items():
+            if c.end is not None:
                 self._ends[p] = max(self._ends.get(p, -math.inf), c.end)
-        t, data = self._align.push(chunks)
+        t, data = self._align.push(inputs)
         frames = np.ascontiguousarray(data["x"], np.uint8).reshape(len(t), *self._shape)
         pins = np.ascontiguousarray(data["pins"], np.float64)
         out = np.empty(frames.shape, np.uint8)

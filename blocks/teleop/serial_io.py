@@ -377,7 +377,7 @@ class SerialIo(Source):
         return first[5:]
 
     # -- the step -----------------------------------------------------------------------------
-    def step(self, now: float, cmd: Chunk | None = None) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, now: float, cmd: Chunk | None = None) -> dict[str, Chunk]:
         if self.config.port == "sim":
             return self._step_sim(now, cmd)
         if not self._opened:

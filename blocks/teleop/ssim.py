@@ -24,9 +24,9 @@ import numpy as np
 from numba import njit
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
-    Config,
     Example,
     Port,
     SpecError,
@@ -315,7 +315,7 @@ def _mean_reference(frames: list[np.ndarray]) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class SsimConfig(Config):
+class SsimConfig(BadDataConfig):
     """Parameters of :class:`Ssim`."""
 
     precision: Literal["float64", "float32"] = param(
@@ -326,9 +326,6 @@ class SsimConfig(Config):
         1,
         doc="the reference is the rounded mean of this many frames from the start (and after a recapture)",
         ge=1,
-    )
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite recapture samples: raise, drop them, or hold the last good value"
     )
 
 
@@ -396,7 +393,13 @@ class Ssim(Block):
     name = "ssim"
     config_cls = SsimConfig
     inputs = {
-        "x": Port(dtype="uint8", units="DN", doc="frames (n, H, W) uint8, one image per sensor"),
+        "x": Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(2, 3),
+            require_rate=True,
+            doc="frames (n, H, W) uint8, one image per sensor",
+        ),
         "recapture": Port(
             dtype="float64",
             shape=(),
@@ -415,26 +418,11 @@ class Ssim(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "x" not in inputs:
-            raise SpecError("x", "input 'x' (frames) must be connected")
         x = inputs["x"]
-        if x.events or x.rate_hz is None:
-            raise SpecError("x", f"input 'x' must be a sampled frame stream, got {x.describe()}")
-        if x.dtype != "uint8":
-            raise SpecError("x", f"input 'x' must be uint8 images (SSIM with L = 255), got {x.dtype}")
-        if len(x.shape) not in (2, 3) or min(x.shape[-2:], default=0) < WIN:
+        if min(x.shape[-2:]) < WIN:
             raise SpecError(
-                "x", f"input 'x' must have shape (n, H, W) or (H, W) with H, W >= 7; got {x.shape}"
+                "x", f"input 'x' frames must be at least {WIN}×{WIN} pixels (the window); got {x.shape}"
             )
-        if x.units != "DN":
-            raise SpecError("x", f"input 'x' must be images in 'DN' (0..255), got '{x.units}'")
-        if "recapture" in inputs:
-            r = inputs["recapture"]
-            if r.events or r.rate_hz is None or r.dtype != "float64" or r.shape != () or r.units != "1":
-                raise SpecError(
-                    "recapture",
-                    f"input 'recapture' must be a float64 scalar stream in '1', got {r.describe()}",
-                )
         shape = x.shape[:1] if len(x.shape) == 3 else ()
         labels = FINGERS if shape == (len(FINGERS),) else None
         return {"y": StreamSpec(dtype="float64", shape=shape, units="1", rate_hz=x.rate_hz, labels=labels)}
@@ -456,12 +444,12 @@ class Ssim(Block):
         self._x_end: float | None = None
 
     # -- the stream logic ------------------------------------------------------------------------
-    def step(self, x: Chunk | None = None, recapture: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if x is not None and x.end is not None:
+    def step(self, x: Chunk, recapture: Chunk | None = None) -> dict[str, Chunk]:
+        if x.end is not None:
             self._x_end = x.end if self._x_end is None else max(self._x_end, x.end)
         if recapture is not None:
             self._add_recapture(recapture)
-        if x is not None and len(x):
+        if len(x):
             frames = x.data.reshape(len(x), *self._frame_shape)
             t = x.t
         else:

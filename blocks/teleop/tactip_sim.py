@@ -18,9 +18,17 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from flowtact.block import Example, Port, Source, SpecError, nonfinite_counter_docs, screen_nonfinite
+from flowtact.block import (
+    BadDataConfig,
+    Example,
+    Port,
+    Source,
+    SpecError,
+    nonfinite_counter_docs,
+    screen_nonfinite,
+)
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
+from flowtact.params import param
 
 from .hand import FINGERS, N_FINGERS
 
@@ -62,7 +70,7 @@ def _raised_cosine(x: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class TactipSimConfig(Config):
+class TactipSimConfig(BadDataConfig):
     scenario: Literal["taps", "grasp", "rest"] = param(
         "taps",
         doc="force drive without a force input: taps of rising force, soft/firm grasps, or no contact",
@@ -116,9 +124,6 @@ class TactipSimConfig(Config):
     displacement_mm: float = param(0.85, doc="largest radial pin displacement at 5 N (grows as F^0.75)", ge=0)
     noise_dn: float = param(3.0, doc="sensor noise standard deviation in gray levels (DN)", ge=0)
     vignette: float = param(0.6, doc="lens vignetting depth: 0 none, 1 pure cos^4 falloff", ge=0, le=1)
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite samples on the force input: stop, drop them, or hold the last good force"
-    )
     unit_seed: int = param(
         2023,
         doc="which physical TacTips: fixes each sensor's pin layout, lighting and lens (not the noise)",
@@ -642,7 +647,7 @@ class TactipSim(Source):
     }
     counter_docs = nonfinite_counter_docs("force samples on 'force'")
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # type: ignore[override]
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         spec = inputs.get("force")
         if spec is not None:
             if spec.events:
@@ -712,7 +717,7 @@ class TactipSim(Source):
         self.pending_f = self.pending_f[j:]
         return f
 
-    def step(self, now: float, force: Chunk | None = None) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, now: float, force: Chunk | None = None) -> dict[str, Chunk]:
         self.last_now = max(self.last_now, float(now))
         due = self.due(self.last_now, self.config.fps)
         if self.driven:

@@ -8,6 +8,7 @@ graph's force reconstruction and afferent models can be checked against the trut
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
@@ -201,7 +202,7 @@ class AunpSensor(Source):
         "force": Port(shape=(3,), units="N", doc="true force [Fx, Fy, Fz] on the bump, for evaluation"),
     }
 
-    def specs(self, inputs: object) -> dict[str, StreamSpec]:  # type: ignore[override]
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         rate = self.config.rate_hz
         labels = {"r": ("r1", "r2", "r3", "r4"), "force": ("Fx", "Fy", "Fz")}
         return {
@@ -290,7 +291,7 @@ class AunpSensor(Source):
         r[:, 3] = common - sy
         return r
 
-    def step(self, now: float) -> dict[str, Chunk]:  # type: ignore[override]
+    def step(self, now: float) -> dict[str, Chunk]:
         c = self.config
         n = self.due(now, c.rate_hz) - self.i
         n = max(n, 0)

@@ -14,9 +14,9 @@ from typing import Literal
 import numpy as np
 
 from flowtact import (
+    BadDataConfig,
     Block,
     Chunk,
-    Config,
     Example,
     Port,
     SpecError,
@@ -34,25 +34,11 @@ __all__ = ["GaugeForce", "GaugeForceConfig", "ShearAngle", "ShearAngleConfig"]
 _LABELS = ("Fx", "Fy", "Fz")
 
 
-def _check_gauges(port: str, spec: StreamSpec, shape: tuple[int, ...]) -> None:
-    if spec.events or spec.rate_hz is None:
-        raise SpecError(port, f"input '{port}' must be a sampled stream, got {spec.describe()}")
-    if spec.dtype != "float64":
-        raise SpecError(port, f"input '{port}' must be float64, got {spec.dtype}")
-    if spec.shape != shape:
-        raise SpecError(port, f"input '{port}' must have shape {shape}, got {spec.shape}")
-    if spec.units != "1":
-        raise SpecError(
-            port,
-            f"input '{port}' must be relative resistance change ΔR/R (units '1'), got '{spec.units}'",
-        )
-
-
 # -- gauge_force ------------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class GaugeForceConfig(Config):
+class GaugeForceConfig(BadDataConfig):
     """Parameters of :class:`GaugeForce`."""
 
     mode: Literal["general", "reduced"] = param(
@@ -72,9 +58,6 @@ class GaugeForceConfig(Config):
         gt=0,
     )
     tare_samples: int = param(0, doc="subtract the mean force of the first k samples (0 = off)", ge=0)
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite samples: raise, drop the instant, or hold the last good value"
-    )
 
     def check(self) -> None:
         if self.mode == "general":
@@ -138,9 +121,14 @@ class GaugeForce(Block):
 
     config_cls = GaugeForceConfig
     inputs = {
-        "r": Port(dtype="float64", shape=(4,), units="1", doc="ΔR/R of gauges 1..4"),
+        "r": Port(dtype="float64", shape=(4,), units="1", require_rate=True, doc="ΔR/R of gauges 1..4"),
         "ref": Port(
-            dtype="float64", shape=(), units="1", optional=True, doc="reference gauge ΔR/R (temperature)"
+            dtype="float64",
+            shape=(),
+            units="1",
+            optional=True,
+            require_rate=True,
+            doc="reference gauge ΔR/R (temperature)",
         ),
     }
     outputs = {"f": Port(dtype="float64", shape=(3,), units="N", doc="force [Fx, Fy, Fz] in N")}
@@ -156,14 +144,9 @@ class GaugeForce(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "r" not in inputs:
-            raise SpecError("r", "input 'r' must be connected")
         r = inputs["r"]
-        _check_gauges("r", r, (4,))
-        if "ref" in inputs:
-            _check_gauges("ref", inputs["ref"], ())
-            if not math.isclose(inputs["ref"].rate_hz or 0.0, r.rate_hz or 0.0, rel_tol=1e-9):
-                raise SpecError("ref", f"'ref' is {inputs['ref'].rate_hz:g} Hz but 'r' is {r.rate_hz:g} Hz")
+        if "ref" in inputs and not math.isclose(inputs["ref"].rate_hz or 0.0, r.rate_hz or 0.0, rel_tol=1e-9):
+            raise SpecError("ref", f"'ref' is {inputs['ref'].rate_hz:g} Hz but 'r' is {r.rate_hz:g} Hz")
         return {"f": StreamSpec(dtype="float64", shape=(3,), units="N", rate_hz=r.rate_hz, labels=_LABELS)}
 
     def reset(self) -> None:
@@ -190,8 +173,8 @@ class GaugeForce(Block):
             f[:, i] = acc
         return f
 
-    def step(self, **chunks: Chunk) -> dict[str, Chunk]:
-        t, data = self._align.push(chunks)
+    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
+        t, data = self._align.push(inputs)
         if len(t):
             t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
         f = self._force(data)
@@ -208,7 +191,7 @@ class GaugeForce(Block):
         if len(t):
             self._held.append((t, f))
         if self._seen < k:
-            return Chunk(np.empty(0), np.empty((0, 3)))
+            return Chunk.empty(shape=(3,))
         return self._release()
 
     def _release(self) -> Chunk:
@@ -255,12 +238,8 @@ class GaugeForce(Block):
 
 
 @dataclass(frozen=True)
-class ShearAngleConfig(Config):
+class ShearAngleConfig(BadDataConfig):
     """Parameters of :class:`ShearAngle`."""
-
-    on_bad_data: Literal["raise", "drop", "hold"] = param(
-        "raise", doc="non-finite samples: raise, drop them, or hold the last good value"
-    )
 
 
 class ShearAngle(Block):
@@ -293,22 +272,19 @@ class ShearAngle(Block):
     """
 
     config_cls = ShearAngleConfig
-    inputs = {"r": Port(dtype="float64", shape=(4,), units="1", doc="ΔR/R of gauges 1..4")}
+    inputs = {"r": Port(dtype="float64", shape=(4,), units="1", require_rate=True, doc="ΔR/R of gauges 1..4")}
     outputs = {"theta": Port(dtype="float64", shape=(), units="rad", doc="shear angle in radians")}
     counter_docs = nonfinite_counter_docs("gauge samples")
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        if "r" not in inputs:
-            raise SpecError("r", "input 'r' must be connected")
-        _check_gauges("r", inputs["r"], (4,))
         return {"theta": StreamSpec(dtype="float64", shape=(), units="rad", rate_hz=inputs["r"].rate_hz)}
 
     def reset(self) -> None:
         self._last: np.ndarray | None = None
 
-    def step(self, r: Chunk | None = None, **_: Chunk) -> dict[str, Chunk]:
-        if r is None or len(r) == 0:
-            return {"theta": Chunk(np.empty(0), np.empty(0))}
+    def step(self, r: Chunk) -> dict[str, Chunk]:
+        if len(r) == 0:
+            return {"theta": Chunk.empty()}
         if not np.isfinite(np.add.reduce(r.data, axis=None)):
             r, self._last = screen_nonfinite(self, r, self.config.on_bad_data, "r", self._last)
         elif self.config.on_bad_data == "hold":

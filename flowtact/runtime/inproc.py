@@ -20,6 +20,7 @@ import numpy as np
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
+from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
 
 __all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk", "explain_counters"]
@@ -33,7 +34,7 @@ class Sink(Protocol):
     def maybe_flush(self) -> None: ...
 
 
-class NodeError(RuntimeError):
+class NodeError(FlowtactError, RuntimeError):
     """A block raised while stepping: names the node, its block and the graph time."""
 
     def __init__(self, node: str, block: str, now: float, cause: BaseException) -> None:

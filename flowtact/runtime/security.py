@@ -48,6 +48,8 @@ from zmq.auth.thread import ThreadAuthenticator
 from zmq.utils import z85
 from zmq.utils.monitor import recv_monitor_message
 
+from flowtact.errors import FlowtactError
+
 __all__ = [
     "ENV_VAR",
     "PUBLIC_FILE",
@@ -82,7 +84,7 @@ _SAME_KEYS = "both hosts must use the same `flowtact keys` directory"
 _MAX_REFUSED = 100
 
 
-class SecurityError(RuntimeError):
+class SecurityError(FlowtactError, RuntimeError):
     """CURVE keys are missing or malformed, or a peer was refused (or refused us)."""
 
 

@@ -41,6 +41,7 @@ import msgpack
 import zmq
 
 from flowtact.compile import Plan
+from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
@@ -66,7 +67,7 @@ IDLE_CPU = 0.05
 """A worker without progress that uses less than this share of a core is not working: it has stalled."""
 
 
-class WorkerFailed(RuntimeError):
+class WorkerFailed(FlowtactError, RuntimeError):
     """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause."""
 
 

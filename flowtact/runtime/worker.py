@@ -667,7 +667,7 @@ class Worker:
                 end = Chunk.empty(self.out_specs[n][ob.port])
                 self._send_lossless(ob.sock, ob.id, ob.seq, k, end, flags=END)  # type: ignore[arg-type]
         if self.rec is not None:
-            self._send_lossless(self.rec, -1, 0, k, Chunk(np.empty(0), np.empty(0)), flags=END)
+            self._send_lossless(self.rec, -1, 0, k, Chunk.empty(), flags=END)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
         self._send("done", **self._stats(), counters=counters)
 

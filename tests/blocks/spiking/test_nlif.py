@@ -101,11 +101,11 @@ def test_specs_reject_bad_inputs():
         (good.with_(units="N"), "units"),
         (good.with_(shape=(4,)), "shape"),
         (good.with_(rate_hz=None), "rate"),
-        (good.with_(dtype="int64"), "float"),
-        (StreamSpec(dtype="int64", events=True, n_units=3), "sampled"),
+        (good.with_(dtype="int64"), "float64"),
+        (StreamSpec(dtype="int64", events=True, n_units=3), "sample stream"),
     ]:
         with pytest.raises(SpecError, match=words) as e:
-            blk.specs({"x": bad})
+            blk.bind({"x": bad})  # the declared port and the block's own rules, on every path
         assert e.value.port == "x"
     with pytest.raises(SpecError, match="euler is unstable"):
         Nlif(integrator="euler", tau_s=0.0004).specs({"x": good})

@@ -271,7 +271,9 @@ def test_infinite_drive_spikes_and_recovers_with_the_va_ub_form():
 
 
 def test_state_is_float64_and_time_comes_from_an_integer_clock():
-    out = run_offline(Nlif(n=2, integrator="exp_interp"), x=np.full(100, 1.3).astype(np.float32))
+    with pytest.raises(SpecError, match=r"input 'x' \(drive.*\) expects dtype float64 but gets float32"):
+        run_offline(Nlif(n=2), x=np.full(100, 1.3).astype(np.float32))  # refused offline as in a graph
+    out = run_offline(Nlif(n=2, integrator="exp_interp"), x=np.full(100, 1.3))
     assert out["v"].data.dtype == np.float64
     assert out["spikes"].t.dtype == np.float64
     # long runs: spike stamps are input timestamps (i / rate), no accumulated float clock

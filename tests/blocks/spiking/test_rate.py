@@ -96,7 +96,7 @@ def test_late_events_are_counted_and_ignored():
 
 def test_spec_and_config_errors():
     with pytest.raises(SpecError, match="event stream"):
-        Rate().specs({"spikes": StreamSpec(rate_hz=1000.0)})
+        Rate().bind({"spikes": StreamSpec(rate_hz=1000.0)})
     with pytest.raises(SpecError, match="n_units"):
         Rate().specs({"spikes": StreamSpec(dtype="int64", events=True)})
     spec = Rate(bin_s=0.05).specs({"spikes": StreamSpec(dtype="int64", events=True, n_units=3)})["y"]

@@ -1,0 +1,13 @@
+"""The one base of every error flowtact raises on purpose: ``except FlowtactError`` catches them all.
+
+Each public error also keeps the built-in base that says what kind of mistake it is (a bad value
+is a ``ValueError``, an unknown name a ``LookupError``, a failed run a ``RuntimeError``).
+"""
+
+from __future__ import annotations
+
+__all__ = ["FlowtactError"]
+
+
+class FlowtactError(Exception):
+    """Base class of flowtact's errors: bad configs, graphs, streams, data, devices and runs."""
