@@ -173,7 +173,7 @@ class Lowpass(Block):
     """
 
     config_cls = LowpassConfig
-    inputs = {"x": Port(dtype="float64", doc="signal, any shape")}
+    inputs = {"x": Port(dtype="float64", require_rate=True, doc="signal, any shape")}
     outputs = {"y": Port(dtype="float64", doc="low-passed signal, same shape and units")}
     counter_docs = {
         "nonincreasing_t": "samples stamped at or before the previous one: they did not move the filter "
@@ -183,10 +183,6 @@ class Lowpass(Block):
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         x = inputs["x"]
-        if x.events or x.rate_hz is None:
-            raise SpecError("x", f"input 'x' must be a sampled stream with a rate, got {x.describe()}")
-        if x.dtype != "float64":
-            raise SpecError("x", f"input 'x' must be float64, got {x.dtype}")
         if self.config.cutoff_hz >= 0.5 * x.rate_hz:
             raise SpecError(
                 "x",

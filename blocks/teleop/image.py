@@ -687,7 +687,11 @@ class BlobMask(Block):
     inputs = {
         "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)"),
         "pins": Port(
-            dtype="float64", units="px", doc="pin rows (x, y, diameter) per sensor, NaN rows ignored"
+            dtype="float64",
+            units="px",
+            ndim=(3,),
+            require_rate=True,
+            doc="pin rows (x, y, diameter) per sensor, NaN rows ignored",
         ),
     }
     outputs = {
@@ -701,8 +705,10 @@ class BlobMask(Block):
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         n = inputs["x"].shape[0]
         pins = inputs["pins"]
-        if pins.events or pins.dtype != "float64" or len(pins.shape) != 3 or pins.shape[2] != 3:
-            raise SpecError("pins", f"input 'pins' must be float64 (sensors, pins, 3), got {pins.describe()}")
+        if pins.shape[2] != 3:
+            raise SpecError(
+                "pins", f"input 'pins' must be rows (x, y, diameter): (sensors, pins, 3); got {pins.shape}"
+            )
         if pins.shape[0] != n:
             raise SpecError("pins", f"'pins' has {pins.shape[0]} sensors but the frames have {n}")
         if pins.units != "px":

@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source, SpecError
+from flowtact.block import Example, Port, Source
 from flowtact.blocks.devices.clocksync import ClockSync
 from flowtact.blocks.teleop.exo_protocol import (
     DEVICE_MAX_DEV_US,
@@ -254,14 +254,6 @@ class SerialIo(Source):
     # -- compile time -------------------------------------------------------------------------
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         c = self.config
-        cmd = inputs.get("cmd")
-        if cmd is not None:
-            if cmd.events or cmd.shape != (N_FINGERS, 2):
-                raise SpecError(
-                    "cmd", f"{self.node}: cmd must be (3, 2) samples [engage, µs]; got {cmd.describe()}"
-                )
-            if cmd.units != "us":
-                raise SpecError("cmd", f"{self.node}: cmd must be in 'us' (µs of PWM); got '{cmd.units}'")
         rate = c.rate_hz
         return {
             "angles": StreamSpec("float64", (N_FINGERS, 3), "rad", rate),
