@@ -8,17 +8,15 @@ sample *n* of every input, whatever the chunk boundaries. :class:`Aligner` does 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from typing import Literal
 
 import numpy as np
 
-from flowtact.block import Block, screen_nonfinite
+from flowtact.block import BadDataPolicy, Block, screen_nonfinite
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
 
 __all__ = ["Aligner", "MisalignedError", "screen_aligned"]
 
-BadData = Literal["raise", "drop", "hold"]
 
 
 class MisalignedError(FlowtactError, ValueError):
@@ -78,7 +76,7 @@ class Aligner:
 
 def screen_aligned(
     block: Block,
-    policy: BadData,
+    policy: BadDataPolicy,
     t: np.ndarray,
     data: dict[str, np.ndarray],
     last: dict[str, np.ndarray | None],
