@@ -29,8 +29,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
 
-from flowtact.blocks.spiking._lif_kernels import NOISE_INTERNAL, NOISE_OFF, lif_grid, lif_interp
-from flowtact.blocks.spiking.nlif import TILE, Nlif
+from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.chunk import Chunk, StreamSpec
 
 INTEGRATORS = ("exp", "euler", "exp_interp")
@@ -87,22 +86,11 @@ def throughput(
         spikes[0] = sum(len(blk(x=c)["spikes"]) for c in chunks)
 
     def run_kernel(blk: Nlif) -> None:  # the same kernel calls on the block's prepared state
-        noise = NOISE_INTERNAL if sigma > 0 else NOISE_OFF
-        no_v = np.zeros((0, n))
         u2 = [np.ascontiguousarray(c.data).reshape(-1, 1) for c in chunks]
-        hint = 4096
-        if integrator == "exp_interp":
-            first = u2[0][0]
-            for uc in u2:
-                s, *_ = lif_interp(first, uc, blk._dt, blk._coef, blk._v, blk._rl, blk._ref_s, blk._ring, 0,
-                                   blk._h, noise, blk._rng_state, blk._no_xi, blk._work, no_v, TILE, hint)  # fmt: skip
-                hint = max(4096, len(s) + len(s) // 4)
-                first = uc[-1]
-        else:
-            for uc in u2:
-                s, *_ = lif_grid(uc, blk._coef, blk._v, blk._refc, blk._n_clamp, blk._ring, 0, blk._h, noise,
-                                 blk._rng_state, blk._no_xi, blk._work, no_v, TILE, hint)  # fmt: skip
-                hint = max(4096, len(s) + len(s) // 4)
+        first = u2[0][0]
+        for uc in u2:
+            blk.integrate(uc, first)
+            first = uc[-1]
 
     for _ in range(3):  # compile, then warm up (the first timed runs of a process are slower)
         run_block(setup())
