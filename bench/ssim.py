@@ -6,8 +6,8 @@
     pinned, median of repeats) for the thesis's cropped 90×240 frames and full 240×320 frames:
     flowtact float64 (the default), flowtact float32, and scikit-image's
     ``structural_similarity(win_size=7, gaussian_weights=False, data_range=255)`` — the oracle,
-    the baseline measured in the same run. Frames: synthetic TacTip images (30 Gaussian pins on
-    dark skin, vignetting, noise σ 3 DN) at 8 deformation levels, as in ../shared/NUMERICS.md §2.
+    the baseline measured in the same run. Frames: emulated TacTip images (``tactip_sim``'s renderer:
+    30 pins on dark skin, vignetting, noise σ 3 DN) at 8 contact forces, as in ../shared/NUMERICS.md §2.
     flowtact is timed both batched (all frames in one kernel call) and one frame per call.
     Also the largest |flowtact − skimage| on those frames, and pass/fail against issue 4's bars
     (float64: ≥ 5 000 frames/s at 90×240, ≥ 1 500 at 240×320).
@@ -32,11 +32,12 @@ import numpy as np  # noqa: E402
 from skimage.metrics import structural_similarity  # noqa: E402  (bench-only baseline)
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
-from flowtact.blocks.teleop.image import synthetic_tactip  # noqa: E402
+from flowtact.blocks.teleop.image import centre_crop  # noqa: E402
 from flowtact.blocks.teleop.ssim import Ssim, SsimReference  # noqa: E402
+from flowtact.blocks.teleop.tactip_sim import pressed_frames  # noqa: E402
 
 RATE = 40.0
-LEVELS = (0.0, 1.5, 3.0, 4.5, 6.0, 8.0, 10.0, 13.0)
+LEVELS_N = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
 SIZES = {"90x240": (90, 240), "240x320": (240, 320)}
 #: Issue 4: SSIM >= 5 000 frames/s per core on 90×240 crops and >= 1 500 on full 240×320 frames.
 BARS_FPS = {"90x240": 5000.0, "240x320": 1500.0}
@@ -52,13 +53,11 @@ def _median_time(fn, repeats: int) -> float:
 
 
 def tactip_frames(size: str, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Reference (H, W) and one frame per deformation level (8, H, W), uint8."""
-    rng = np.random.default_rng(seed)
-    ref, _ = synthetic_tactip(rng)
-    frames = np.stack([synthetic_tactip(rng, press_px=p)[0] for p in LEVELS])
+    """Reference (H, W) and one frame per contact force (8, H, W), uint8."""
+    images = pressed_frames([0.0, *LEVELS_N], seed)[:, 0]
     if size == "90x240":
-        return ref[75:165, 40:280].copy(), np.ascontiguousarray(frames[:, 75:165, 40:280])
-    return ref, frames
+        images = np.ascontiguousarray(centre_crop(images))
+    return images[0], images[1:]
 
 
 def skimage_ssim(ref: np.ndarray, cur: np.ndarray) -> float:

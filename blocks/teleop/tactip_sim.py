@@ -10,7 +10,7 @@ trained and scored against the truth. :func:`render` draws frames without a grap
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Literal
@@ -34,6 +34,7 @@ __all__ = [
     "TactipSimConfig",
     "pin_layout",
     "pins_px",
+    "pressed_frames",
     "render",
     "render_reference",
     "scenario_contacts",
@@ -47,14 +48,12 @@ PX_PER_MM = 7.0
 PIN_PITCH_MM = 3.0
 ROW_PITCH_MM = 3.4
 PIN_RADIUS_MM = 0.7
+#: Width of a pin tip's soft (logistic) edge.
 PIN_EDGE_PX = 0.6
 #: Tangential skin displacement per newton of shear at the contact centre.
 SHEAR_MM_PER_N = 0.3
 MASK64 = (1 << 64) - 1
 GOLDEN = 0x9E3779B97F4A7C15
-#: Irwin–Hall(4) of 16-bit fields: mean and standard deviation of the sum.
-IH_MEAN = 2.0 * 65535.0
-IH_SD = math.sqrt(4.0 * (65536.0**2 - 1.0) / 12.0)
 
 
 def _raised_cosine(x: np.ndarray) -> np.ndarray:
@@ -338,7 +337,7 @@ def _render_kernel(out, background, vig, xy, radius, bright, keys, noise_dn, buf
                 py = xy[k, s, p, 1]
                 rad = radius[k, s, p]
                 amp = bright[k, s, p]
-                reach = rad + 6.0 * 0.6 + 1.0
+                reach = rad + 6.0 * PIN_EDGE_PX + 1.0
                 x0 = max(int(np.floor(px - reach)), 0)
                 x1 = min(int(np.ceil(px + reach)), w - 1)
                 y0 = max(int(np.floor(py - reach)), 0)
@@ -349,7 +348,7 @@ def _render_kernel(out, background, vig, xy, radius, bright, keys, noise_dn, buf
                         dx = x - px
                         d = np.sqrt(dx * dx + dy * dy)
                         q = min(d, rad) / rad
-                        edge = 1.0 / (1.0 + np.exp((d - rad) / 0.6))
+                        edge = 1.0 / (1.0 + np.exp((d - rad) / PIN_EDGE_PX))
                         buf[y, x] += amp * (1.0 - 0.3 * q * q) * edge * vig[s, y, x]
             key = keys[k, s]
             for y in range(h):
@@ -357,6 +356,7 @@ def _render_kernel(out, background, vig, xy, radius, bright, keys, noise_dn, buf
                     i = np.uint64(y * w + x + 1)
                     hsh = _mix64(key + i * gold)
                     tot = (hsh & m16) + ((hsh >> s16) & m16) + ((hsh >> s32) & m16) + (hsh >> s48)
+                    # a sum of four 16-bit fields (Irwin–Hall): mean 131070, sd ≈ 37837.2268
                     z = (np.float64(tot) - 131070.0) / 37837.2268
                     v = np.floor(buf[y, x] + noise_dn * z + 0.5)
                     if v < 0.0:
@@ -377,14 +377,14 @@ def _render_numpy(out, background, vig, xy, radius, bright, keys, noise_dn) -> N
             for p in range(xy.shape[2]):
                 px, py = xy[k, s, p]
                 rad, amp = radius[k, s, p], bright[k, s, p]
-                reach = rad + 6.0 * 0.6 + 1.0
+                reach = rad + 6.0 * PIN_EDGE_PX + 1.0
                 x0, x1 = max(math.floor(px - reach), 0), min(math.ceil(px + reach), w - 1)
                 y0, y1 = max(math.floor(py - reach), 0), min(math.ceil(py + reach), h - 1)
                 yy, xx = np.mgrid[y0 : y1 + 1, x0 : x1 + 1]
                 dx, dy = xx - px, yy - py
                 d = np.sqrt(dx * dx + dy * dy)
                 q = np.minimum(d, rad) / rad
-                edge = 1.0 / (1.0 + np.exp((d - rad) / 0.6))
+                edge = 1.0 / (1.0 + np.exp((d - rad) / PIN_EDGE_PX))
                 buf[y0 : y1 + 1, x0 : x1 + 1] += (
                     amp * (1.0 - 0.3 * q * q) * edge * vig[s, y0 : y1 + 1, x0 : x1 + 1]
                 )
@@ -441,6 +441,23 @@ def render(
     else:
         _render_numpy(out, u.background, u.vig, xy, radius, bright, keys, float(c.noise_dn))
     return out
+
+
+def pressed_frames(
+    forces_n: np.ndarray | Sequence[float],
+    seed: int = 1,
+    params: TactipSimConfig | Mapping[str, Any] | None = None,
+) -> np.ndarray:
+    """Frames uint8 (n, 3, 240, 320) of the three TacTips pressed at the pin-array centre.
+
+    ``forces_n``: the normal force of each frame in N, (n,) for every sensor or (n, 3) per sensor;
+    frame ``i``'s noise comes from ``(seed, i)``. The test, example and bench images of the image,
+    SSIM and CNN blocks.
+    """
+    f = np.asarray(forces_n, np.float64)
+    n = len(f)
+    f = np.broadcast_to(f.reshape(n, -1), (n, N_FINGERS))
+    return render(f, np.zeros((n, N_FINGERS, 2)), np.arange(n), seed, params)
 
 
 def render_reference(
