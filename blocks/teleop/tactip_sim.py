@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from flowtact.block import Example, Port, Source, SpecError, nonfinite_counter_docs, screen_nonfinite
+from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
 
@@ -54,10 +55,6 @@ PIN_EDGE_PX = 0.6
 SHEAR_MM_PER_N = 0.3
 MASK64 = (1 << 64) - 1
 GOLDEN = 0x9E3779B97F4A7C15
-
-
-def _raised_cosine(x: np.ndarray) -> np.ndarray:
-    return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -498,7 +495,7 @@ def scenario_contacts(
         k = np.maximum(np.floor((t - c.onset_s) / c.tap_period_s), 0.0).astype(np.int64)
         u = t - c.onset_s - k * c.tap_period_s
         third = c.tap_s / 3.0
-        shape = _raised_cosine(u / third) - _raised_cosine((u - 2.0 * third) / third)
+        shape = raised_cosine(u / third) - raised_cosine((u - 2.0 * third) / third)
         shape = np.where(t < c.onset_s, 0.0, shape)
         level = k % c.levels
         group = k // c.levels
@@ -521,7 +518,7 @@ def scenario_contacts(
         firm = (k % 2) == 1
         rise = np.where(firm, c.firm_rise_s, c.soft_rise_s)
         top = np.where(firm, c.firm_force_n, c.soft_force_n)
-        shape = _raised_cosine(u / rise) - _raised_cosine((u - rise - c.hold_s) / c.release_s)
+        shape = raised_cosine(u / rise) - raised_cosine((u - rise - c.hold_s) / c.release_s)
         shape = np.where(t < c.onset_s, 0.0, shape)
         kk = k[:, None]
         share = np.array([1.0, 0.6, 0.5])[None, :]  # the thumb opposes the two fingers
