@@ -22,29 +22,17 @@ import argparse
 import json
 import math
 import os
-import statistics
-import time
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
+from _timing import median_time
 
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.chunk import Chunk, StreamSpec
 
 INTEGRATORS = ("exp", "euler", "exp_interp")
 TAU = 0.01
-
-
-def median_time(fn, repeats: int, setup=None) -> float:  # type: ignore[no-untyped-def]
-    """Median wall time of ``fn(state)`` over repeats; ``setup()`` (untimed) builds the state."""
-    times = []
-    for _ in range(repeats):
-        state = setup() if setup else None
-        t0 = time.perf_counter()
-        fn(state) if setup else fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def drive(n_t: int, rate: float) -> np.ndarray:

@@ -26,9 +26,9 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MK
 import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
-import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+from _timing import median_time  # noqa: E402
 from skimage.metrics import structural_similarity  # noqa: E402  (bench-only baseline)
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
@@ -41,15 +41,6 @@ LEVELS_N = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
 SIZES = {"90x240": (90, 240), "240x320": (240, 320)}
 #: Issue 4: SSIM >= 5 000 frames/s per core on 90×240 crops and >= 1 500 on full 240×320 frames.
 BARS_FPS = {"90x240": 5000.0, "240x320": 1500.0}
-
-
-def _median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def tactip_frames(size: str, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -80,14 +71,14 @@ def kernel(quick: bool) -> list[dict]:
             got = r.compare(frames[:, None])[:, 0]
             row[f"err_{precision}"] = float(np.max(np.abs(got - want)))
             r.compare(batch[:1])  # warm-up (numba compile / cache load)
-            row[f"fps_{precision}"] = len(batch) / _median_time(lambda r=r, b=batch: r.compare(b), repeats)
+            row[f"fps_{precision}"] = len(batch) / median_time(lambda r=r, b=batch: r.compare(b), repeats)
             singles = [batch[i : i + 1] for i in range(len(batch))]
 
             def one_by_one(r=r, singles=singles) -> None:
                 for s in singles:
                     r.compare(s)
 
-            row[f"fps_{precision}_per_call"] = len(batch) / _median_time(one_by_one, repeats)
+            row[f"fps_{precision}_per_call"] = len(batch) / median_time(one_by_one, repeats)
         n_sk = len(frames) * (1 if quick else 2)
 
         def run_skimage(frames=frames, ref=ref, n_sk=n_sk) -> None:
@@ -95,7 +86,7 @@ def kernel(quick: bool) -> list[dict]:
                 skimage_ssim(ref, frames[i % len(frames)])
 
         run_skimage()
-        row["fps_skimage"] = n_sk / _median_time(run_skimage, max(3, repeats // 3))
+        row["fps_skimage"] = n_sk / median_time(run_skimage, max(3, repeats // 3))
         row["ratio_float64"] = row["fps_float64"] / row["fps_skimage"]
         row["ratio_float32"] = row["fps_float32"] / row["fps_skimage"]
         row["bar_fps"] = BARS_FPS[size]
@@ -150,7 +141,7 @@ def block(quick: bool) -> list[dict]:
                         b(x=c)
 
                 run()
-                sps = n / _median_time(run, repeats)
+                sps = n / median_time(run, repeats)
                 rows.append(
                     {
                         "size": size,

@@ -354,6 +354,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(f"flowtact: unknown benchmark '{args.name}'{did_you_mean(args.name, scripts)}", file=sys.stderr)
         return EXIT_GRAPH_ERROR
     sys.argv = [str(scripts[args.name]), *args.args]
+    sys.path.insert(0, str(folder))  # as `python bench/NAME.py` does: the benchmarks share bench/_*.py
     runpy.run_path(str(scripts[args.name]), run_name="__main__")
     return 0
 
