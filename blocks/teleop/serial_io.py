@@ -296,7 +296,6 @@ class SerialIo(Source):
         self._mono0 = self._now0 = 0.0
         self._next_retry = -math.inf
         self._down_since: float | None = None
-        self._hello: Hello | None = None
         if c.port == "sim":
             # the device model only for this in-process mode: the host side speaks the protocol alone
             from flowtact.blocks.teleop.exo_device import ExoDevice, ExoParams
@@ -553,7 +552,6 @@ class SerialIo(Source):
         if isinstance(msg, DataPacket):
             self._packet(msg, arrival, after)
         elif isinstance(msg, Hello):
-            self._hello = msg
             self.count("hellos")
             if msg.version != PROTOCOL_VERSION:
                 self._say(
