@@ -44,7 +44,7 @@ class Src(Source):
     config_cls = SrcConfig
     outputs = {"y": Port(doc="zeros")}
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002
         return {"y": StreamSpec(shape=(self.config.channels,), rate_hz=self.config.rate_hz)}
 
     def reset(self):
@@ -118,7 +118,7 @@ def bench_overhead(chunk: int, n_nodes: int, n_ticks: int, repeats: int) -> dict
 class Ones(Src):
     """Ones at rate_hz, one value per sample: a constant drive for the NLIF population."""
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002
         return {"y": StreamSpec(shape=(), rate_hz=self.config.rate_hz)}
 
     def step(self, now):

@@ -191,7 +191,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     live = LiveView(enabled=not quiet and not args.inproc)
     progress = _Progress(not quiet and not live.enabled)
 
-    def on_term(signum: int, frame: Any) -> None:
+    def on_term(_signum: int, _frame: Any) -> None:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_term)

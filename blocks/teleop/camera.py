@@ -200,7 +200,7 @@ class Camera(Source):
         super().__init__(config, **kw)
         self.sources: list[_Folder | _Capture] = []
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # type: ignore[override]
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # type: ignore[override]  # noqa: ARG002
         c = self.config
         n = len(c.devices)
         w, h = c.size

@@ -387,15 +387,16 @@ class BlobDetectConfig(Config):
                     f"values here and {n} in another list",
                 )
         for lo, hi in (("min_threshold_dn", "max_threshold_dn"), ("min_area_px2", "max_area_px2")):
-            a = self._expand(lo, n)
-            b = self._expand(hi, n)
+            a = self.per_sensor(lo, n)
+            b = self.per_sensor(hi, n)
             for s in range(n):
                 if not a[s] < b[s]:
                     raise self.error(
                         hi, f"must exceed {lo} for every sensor; sensor {s} has {a[s]:g} >= {b[s]:g}"
                     )
 
-    def _expand(self, field: str, n: int) -> tuple[float, ...]:
+    def per_sensor(self, field: str, n: int) -> tuple[float, ...]:
+        """The per-sensor list ``field`` for ``n`` sensors (a single value serves every sensor)."""
         v = getattr(self, field)
         return v * n if len(v) == 1 else v
 
@@ -491,24 +492,24 @@ class BlobDetect(Block):
         self._detectors = []
         for s in range(n):
             p = cv2.SimpleBlobDetector_Params()
-            p.minThreshold = float(c._expand("min_threshold_dn", n)[s])
-            p.maxThreshold = float(c._expand("max_threshold_dn", n)[s])
+            p.minThreshold = float(c.per_sensor("min_threshold_dn", n)[s])
+            p.maxThreshold = float(c.per_sensor("max_threshold_dn", n)[s])
             p.thresholdStep = float(c.threshold_step_dn)
             p.minDistBetweenBlobs = float(c.min_dist_between_blobs_px)
             p.minRepeatability = int(c.min_repeatability)
             p.filterByColor = True
             p.blobColor = 255 if c.blob_color == "bright" else 0
             p.filterByArea = True
-            p.minArea = float(c._expand("min_area_px2", n)[s])
-            p.maxArea = float(c._expand("max_area_px2", n)[s])
+            p.minArea = float(c.per_sensor("min_area_px2", n)[s])
+            p.maxArea = float(c.per_sensor("max_area_px2", n)[s])
             p.filterByCircularity = True
-            p.minCircularity = float(c._expand("min_circularity", n)[s])
+            p.minCircularity = float(c.per_sensor("min_circularity", n)[s])
             p.maxCircularity = 1e30  # OpenCV's default upper bounds: no limit
             p.filterByInertia = True
-            p.minInertiaRatio = float(c._expand("min_inertia_ratio", n)[s])
+            p.minInertiaRatio = float(c.per_sensor("min_inertia_ratio", n)[s])
             p.maxInertiaRatio = 1e30
             p.filterByConvexity = True
-            p.minConvexity = float(c._expand("min_convexity", n)[s])
+            p.minConvexity = float(c.per_sensor("min_convexity", n)[s])
             p.maxConvexity = 1e30
             self._detectors.append(cv2.SimpleBlobDetector_create(p))
 

@@ -481,7 +481,7 @@ class SerialIo(Source):
     def _drop_port(self) -> None:
         ser, self._ser = self._ser, None
         if ser is not None:
-            with contextlib.suppress(Exception):  # the device is gone; closing may fail too
+            with contextlib.suppress(OSError):  # the device is gone; closing may fail too
                 ser.close()
 
     def _lost_port(self, err: BaseException) -> None:
@@ -513,7 +513,7 @@ class SerialIo(Source):
                     n = 0
             else:
                 n = self._ser.write(bytes(self._out)) or 0
-        except Exception as e:  # SerialException, OSError: the device vanished
+        except OSError as e:  # the device vanished (pyserial's SerialException is an OSError)
             self._lost_port(e)
             return False
         del self._out[:n]
@@ -523,7 +523,7 @@ class SerialIo(Source):
         start = time.monotonic()
         try:
             data = self._ser.read(65536)
-        except Exception as e:  # SerialException, OSError: the device vanished
+        except OSError as e:  # the device vanished (pyserial's SerialException is an OSError)
             self._lost_port(e)
             return
         arrival = time.monotonic()

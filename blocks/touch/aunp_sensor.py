@@ -197,7 +197,7 @@ class AunpSensor(Source):
         "force": Port(shape=(3,), units="N", doc="true force [Fx, Fy, Fz] on the bump, for evaluation"),
     }
 
-    def specs(self, inputs: object) -> dict[str, StreamSpec]:  # type: ignore[override]
+    def specs(self, inputs: object) -> dict[str, StreamSpec]:  # type: ignore[override]  # noqa: ARG002
         rate = self.config.rate_hz
         labels = {"r": ("r1", "r2", "r3", "r4"), "force": ("Fx", "Fy", "Fz")}
         return {

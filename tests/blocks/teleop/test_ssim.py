@@ -12,8 +12,8 @@ from skimage.metrics import structural_similarity
 import flowtact.blocks.teleop.ssim as ssim_module
 from flowtact import BadDataError, Chunk, SpecError, StreamSpec, concat
 from flowtact.blocks.teleop.hand import FINGERS
-from flowtact.blocks.teleop.tactip_sim import pressed_frames
 from flowtact.blocks.teleop.ssim import Ssim, SsimReference, ssim_exact_numpy, ssim_frames
+from flowtact.blocks.teleop.tactip_sim import pressed_frames
 from flowtact.testing import run_offline
 
 RATE = 40.0
