@@ -132,14 +132,6 @@ def parse_duration(value: Any) -> float | None:
     return seconds if seconds > 0 else None
 
 
-def _unknown(keys: Any, allowed: tuple[str, ...], where: str, y: Located, path: tuple[Any, ...]) -> list:
-    return [
-        GraphError(y.key_loc(*path, k), f"{where}: unknown key '{k}'{did_you_mean(str(k), allowed)}")
-        for k in keys
-        if k not in allowed
-    ]
-
-
 def parse_deployment(doc: dict[str, Any], y: Located, node_docs: dict[str, Any]) -> Deployment:
     """Read ``processes:``, ``network:`` and ``deadlines:``; append problems to ``y.errors``."""
     return Deployment(
@@ -179,7 +171,7 @@ def _parse_process(name: Any, pdoc: Any, y: Located) -> ProcessDef | None:
     if not isinstance(pdoc, dict):
         y.errors.append(GraphError(y.loc("processes", name), f"{where} must be a mapping"))
         return None
-    y.errors.extend(_unknown(pdoc, PROCESS_KEYS, where, y, ("processes", name)))
+    y.errors.extend(y.unknown_keys(pdoc, PROCESS_KEYS, where, "processes", name))
     restart = pdoc.get("restart", "never")
     if restart not in RESTARTS:
         y.errors.append(
@@ -230,7 +222,7 @@ def _parse_network(doc: dict[str, Any], y: Located) -> Network:
     if not isinstance(net, dict):
         y.errors.append(GraphError(y.loc("network"), "'network' must be a mapping (listen, port, keys)"))
         net = {}
-    y.errors.extend(_unknown(net, NETWORK_KEYS, "network", y, ("network",)))
+    y.errors.extend(y.unknown_keys(net, NETWORK_KEYS, "network", "network"))
     port = net.get("port", 5550)
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port < 65536:
         y.errors.append(GraphError(y.loc("network", "port"), f"network: port must be 0..65535; got {port!r}"))
@@ -256,7 +248,7 @@ def _parse_deadline(i: int, d: Any, y: Located, node_docs: dict[str, Any]) -> De
     if not isinstance(d, dict):
         y.errors.append(GraphError(loc, "a deadline is a mapping like {from: sensor, to: stim, budget: 4ms}"))
         return None
-    y.errors.extend(_unknown(d, DEADLINE_KEYS, "deadline", y, ("deadlines", i)))
+    y.errors.extend(y.unknown_keys(d, DEADLINE_KEYS, "deadline", "deadlines", i))
     ends = []
     for key in ("from", "to"):
         node = d.get(key)

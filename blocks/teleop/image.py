@@ -313,6 +313,18 @@ def _t31(key: str) -> tuple[float, ...]:
     return tuple(TABLE_3_1[key])
 
 
+#: The fields of :class:`BlobDetectConfig` that take one value per sensor (or one for all).
+_PER_SENSOR = (
+    "min_threshold_dn",
+    "max_threshold_dn",
+    "min_area_px2",
+    "max_area_px2",
+    "min_circularity",
+    "min_inertia_ratio",
+    "min_convexity",
+)
+
+
 @dataclass(frozen=True)
 class BlobDetectConfig(Config):
     """Parameters of :class:`BlobDetect` (per-sensor tuples default to White 2023, Table 3.1)."""
@@ -369,17 +381,8 @@ class BlobDetectConfig(Config):
     max_pins: int = param(30, doc="rows of the pins output (the TacTip's 30 pins)", ge=1)
 
     def check(self) -> None:
-        per = [
-            "min_threshold_dn",
-            "max_threshold_dn",
-            "min_area_px2",
-            "max_area_px2",
-            "min_circularity",
-            "min_inertia_ratio",
-            "min_convexity",
-        ]
-        n = next((len(getattr(self, f)) for f in per if len(getattr(self, f)) > 1), 1)
-        for f in per:
+        n = next((len(getattr(self, f)) for f in _PER_SENSOR if len(getattr(self, f)) > 1), 1)
+        for f in _PER_SENSOR:
             if len(getattr(self, f)) not in (1, n):
                 raise self.error(
                     f,
@@ -402,15 +405,7 @@ class BlobDetectConfig(Config):
 
     def n_sensors(self) -> int:
         """Sensors the per-sensor lists describe (1 if every list has a single value)."""
-        return max(
-            len(self.min_threshold_dn),
-            len(self.max_threshold_dn),
-            len(self.min_area_px2),
-            len(self.max_area_px2),
-            len(self.min_circularity),
-            len(self.min_inertia_ratio),
-            len(self.min_convexity),
-        )
+        return max(len(getattr(self, f)) for f in _PER_SENSOR)
 
 
 class BlobDetect(Block):
