@@ -4,7 +4,8 @@
 middle; 320×240 gray at 40 FPS) while a scenario (taps of rising force, grasps of a soft and a
 firm object, rest) or an upstream gripper simulator presses on each fingertip, and emits the true
 contact force next to the frames so that force estimators (SSIM + linear fit, CNN) can be
-trained and scored against the truth. :func:`render` draws frames without a graph.
+trained and scored against the truth. :func:`render` draws frames without a graph (and
+:func:`pressed_frames` those of a press at the centre: the image blocks' examples and tests).
 """
 
 from __future__ import annotations
