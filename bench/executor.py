@@ -15,15 +15,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
+from _timing import median_time
 
 from flowtact import Block, Chunk, Config, Example, Port, Source, StreamSpec, param
 from flowtact.compile import compile_graph
@@ -45,7 +44,7 @@ class Src(Source):
     config_cls = SrcConfig
     outputs = {"y": Port(doc="zeros")}
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002 — a source: its outputs come from its config
         return {"y": StreamSpec(shape=(self.config.channels,), rate_hz=self.config.rate_hz)}
 
     def reset(self):
@@ -71,15 +70,6 @@ class Pass(Block):
 
     def step(self, x):
         return {"y": x}
-
-
-def median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def chain_graph(n_nodes: int) -> str:
@@ -128,7 +118,7 @@ def bench_overhead(chunk: int, n_nodes: int, n_ticks: int, repeats: int) -> dict
 class Ones(Src):
     """Ones at rate_hz, one value per sample: a constant drive for the NLIF population."""
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002 — a source: its outputs come from its config
         return {"y": StreamSpec(shape=(), rate_hz=self.config.rate_hz)}
 
     def step(self, now):

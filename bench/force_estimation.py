@@ -39,6 +39,7 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MK
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import itertools  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import tempfile  # noqa: E402
@@ -47,6 +48,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
+from _timing import median_time  # noqa: E402
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
 from flowtact.blocks.teleop.cnn import ARCHS, CnnForce, Preprocess, build_model, save_checkpoint  # noqa: E402
@@ -105,15 +107,12 @@ def time_block(checkpoint: Path, frames: np.ndarray, repeats: int) -> float:
     """Median seconds of one ``cnn_force`` call on one full (3, 240, 320) frame stack."""
     block = CnnForce(checkpoint=str(checkpoint))
     block.bind({"x": StreamSpec("uint8", frames.shape[1:], "DN", 40.0)})
-    times = []
-    for r in range(repeats + 3):
-        i = r % len(frames)
-        chunk = Chunk(np.array([i / 40.0]), frames[i : i + 1], end=(i + 1) / 40.0)
-        t0 = time.perf_counter()
-        block(x=chunk)
-        if r >= 3:  # warm-up calls excluded
-            times.append(time.perf_counter() - t0)
-    return float(np.median(times))
+    chunks = itertools.cycle(
+        [Chunk(np.array([i / 40.0]), frames[i : i + 1], end=(i + 1) / 40.0) for i in range(len(frames))]
+    )
+    for _ in range(3):  # warm-up calls, not timed
+        block(x=next(chunks))
+    return median_time(lambda: block(x=next(chunks)), repeats)
 
 
 def untrained_checkpoint(arch: str, downsample: int, tmp: Path) -> Path:

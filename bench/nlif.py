@@ -22,30 +22,17 @@ import argparse
 import json
 import math
 import os
-import statistics
-import time
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
+from _timing import median_time
 
-from flowtact.blocks.spiking._lif_kernels import NOISE_INTERNAL, NOISE_OFF, lif_grid, lif_interp
-from flowtact.blocks.spiking.nlif import TILE, Nlif
+from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.chunk import Chunk, StreamSpec
 
 INTEGRATORS = ("exp", "euler", "exp_interp")
 TAU = 0.01
-
-
-def median_time(fn, repeats: int, setup=None) -> float:  # type: ignore[no-untyped-def]
-    """Median wall time of ``fn(state)`` over repeats; ``setup()`` (untimed) builds the state."""
-    times = []
-    for _ in range(repeats):
-        state = setup() if setup else None
-        t0 = time.perf_counter()
-        fn(state) if setup else fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def drive(n_t: int, rate: float) -> np.ndarray:
@@ -87,22 +74,11 @@ def throughput(
         spikes[0] = sum(len(blk(x=c)["spikes"]) for c in chunks)
 
     def run_kernel(blk: Nlif) -> None:  # the same kernel calls on the block's prepared state
-        noise = NOISE_INTERNAL if sigma > 0 else NOISE_OFF
-        no_v = np.zeros((0, n))
         u2 = [np.ascontiguousarray(c.data).reshape(-1, 1) for c in chunks]
-        hint = 4096
-        if integrator == "exp_interp":
-            first = u2[0][0]
-            for uc in u2:
-                s, *_ = lif_interp(first, uc, blk._dt, blk._coef, blk._v, blk._rl, blk._ref_s, blk._ring, 0,
-                                   blk._h, noise, blk._rng_state, blk._no_xi, blk._work, no_v, TILE, hint)  # fmt: skip
-                hint = max(4096, len(s) + len(s) // 4)
-                first = uc[-1]
-        else:
-            for uc in u2:
-                s, *_ = lif_grid(uc, blk._coef, blk._v, blk._refc, blk._n_clamp, blk._ring, 0, blk._h, noise,
-                                 blk._rng_state, blk._no_xi, blk._work, no_v, TILE, hint)  # fmt: skip
-                hint = max(4096, len(s) + len(s) // 4)
+        first = u2[0][0]
+        for uc in u2:
+            blk.integrate(uc, first)
+            first = uc[-1]
 
     for _ in range(3):  # compile, then warm up (the first timed runs of a process are slower)
         run_block(setup())

@@ -24,9 +24,9 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
-import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+from _timing import median_time  # noqa: E402
 from scipy import signal  # noqa: E402  (bench-only baseline)
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
@@ -38,15 +38,6 @@ BAR_SAMPLES_PER_S = 4e7  # brief: >= 4e7 samples/s at chunk 1000 through __call_
 
 
 # -- (1) throughput ---------------------------------------------------------------------------------
-
-
-def _median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def throughput(quick: bool) -> list[dict]:
@@ -71,7 +62,7 @@ def throughput(quick: bool) -> list[dict]:
                         block(x=c)
 
                 run()  # warm-up (numba compile / cache load)
-                row[f"block_{mode}"] = n / _median_time(run, repeats)
+                row[f"block_{mode}"] = n / median_time(run, repeats)
             b = signal.savgol_coeffs(5, 4, deriv=1, delta=1 / RATE, pos=4, use="conv")
             datas = [c.data for c in chunks]
 
@@ -81,7 +72,7 @@ def throughput(quick: bool) -> list[dict]:
                     _, zi = signal.lfilter(b, [1.0], d, axis=0, zi=zi)
 
             run_lfilter()
-            row["lfilter_zi"] = n / _median_time(run_lfilter, repeats)
+            row["lfilter_zi"] = n / median_time(run_lfilter, repeats)
             row["ratio_causal"] = row["block_causal"] / row["lfilter_zi"]
             row["ratio_centred"] = row["block_centred"] / row["lfilter_zi"]
             rows.append(row)

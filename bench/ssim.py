@@ -6,8 +6,8 @@
     pinned, median of repeats) for the thesis's cropped 90×240 frames and full 240×320 frames:
     flowtact float64 (the default), flowtact float32, and scikit-image's
     ``structural_similarity(win_size=7, gaussian_weights=False, data_range=255)`` — the oracle,
-    the baseline measured in the same run. Frames: synthetic TacTip images (30 Gaussian pins on
-    dark skin, vignetting, noise σ 3 DN) at 8 deformation levels, as in ../shared/NUMERICS.md §2.
+    the baseline measured in the same run. Frames: emulated TacTip images (``tactip_sim``'s renderer:
+    30 pins on dark skin, vignetting, noise σ 3 DN) at 8 contact forces, as in ../shared/NUMERICS.md §2.
     flowtact is timed both batched (all frames in one kernel call) and one frame per call.
     Also the largest |flowtact − skimage| on those frames, and pass/fail against issue 4's bars
     (float64: ≥ 5 000 frames/s at 90×240, ≥ 1 500 at 240×320).
@@ -26,39 +26,29 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MK
 import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
-import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+from _timing import median_time  # noqa: E402
 from skimage.metrics import structural_similarity  # noqa: E402  (bench-only baseline)
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
-from flowtact.blocks.teleop.image import synthetic_tactip  # noqa: E402
+from flowtact.blocks.teleop.image import centre_crop  # noqa: E402
 from flowtact.blocks.teleop.ssim import Ssim, SsimReference  # noqa: E402
+from flowtact.blocks.teleop.tactip_sim import pressed_frames  # noqa: E402
 
 RATE = 40.0
-LEVELS = (0.0, 1.5, 3.0, 4.5, 6.0, 8.0, 10.0, 13.0)
+LEVELS_N = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
 SIZES = {"90x240": (90, 240), "240x320": (240, 320)}
 #: Issue 4: SSIM >= 5 000 frames/s per core on 90×240 crops and >= 1 500 on full 240×320 frames.
 BARS_FPS = {"90x240": 5000.0, "240x320": 1500.0}
 
 
-def _median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
-
-
 def tactip_frames(size: str, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Reference (H, W) and one frame per deformation level (8, H, W), uint8."""
-    rng = np.random.default_rng(seed)
-    ref, _ = synthetic_tactip(rng)
-    frames = np.stack([synthetic_tactip(rng, press_px=p)[0] for p in LEVELS])
+    """Reference (H, W) and one frame per contact force (8, H, W), uint8."""
+    images = pressed_frames([0.0, *LEVELS_N], seed)[:, 0]
     if size == "90x240":
-        return ref[75:165, 40:280].copy(), np.ascontiguousarray(frames[:, 75:165, 40:280])
-    return ref, frames
+        images = np.ascontiguousarray(centre_crop(images))
+    return images[0], images[1:]
 
 
 def skimage_ssim(ref: np.ndarray, cur: np.ndarray) -> float:
@@ -81,14 +71,14 @@ def kernel(quick: bool) -> list[dict]:
             got = r.compare(frames[:, None])[:, 0]
             row[f"err_{precision}"] = float(np.max(np.abs(got - want)))
             r.compare(batch[:1])  # warm-up (numba compile / cache load)
-            row[f"fps_{precision}"] = len(batch) / _median_time(lambda r=r, b=batch: r.compare(b), repeats)
+            row[f"fps_{precision}"] = len(batch) / median_time(lambda r=r, b=batch: r.compare(b), repeats)
             singles = [batch[i : i + 1] for i in range(len(batch))]
 
             def one_by_one(r=r, singles=singles) -> None:
                 for s in singles:
                     r.compare(s)
 
-            row[f"fps_{precision}_per_call"] = len(batch) / _median_time(one_by_one, repeats)
+            row[f"fps_{precision}_per_call"] = len(batch) / median_time(one_by_one, repeats)
         n_sk = len(frames) * (1 if quick else 2)
 
         def run_skimage(frames=frames, ref=ref, n_sk=n_sk) -> None:
@@ -96,7 +86,7 @@ def kernel(quick: bool) -> list[dict]:
                 skimage_ssim(ref, frames[i % len(frames)])
 
         run_skimage()
-        row["fps_skimage"] = n_sk / _median_time(run_skimage, max(3, repeats // 3))
+        row["fps_skimage"] = n_sk / median_time(run_skimage, max(3, repeats // 3))
         row["ratio_float64"] = row["fps_float64"] / row["fps_skimage"]
         row["ratio_float32"] = row["fps_float32"] / row["fps_skimage"]
         row["bar_fps"] = BARS_FPS[size]
@@ -151,7 +141,7 @@ def block(quick: bool) -> list[dict]:
                         b(x=c)
 
                 run()
-                sps = n / _median_time(run, repeats)
+                sps = n / median_time(run, repeats)
                 rows.append(
                     {
                         "size": size,

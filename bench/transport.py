@@ -434,54 +434,20 @@ def ratios_and_targets(res: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+_LAT_HEAD = f"   {'case':<34} {'p50 µs':>7} {'p99 µs':>7} {'max µs':>7} {'loss %':>6}  CPU % of one core"
+_THR_HEAD = f"   {'case':<34} {'deliv msg/s':>11} {'sent msg/s':>11} {'MB/s':>9} {'loss %':>6} {'p50 ms':>8}"
+
+
 def print_report(res: dict[str, Any]) -> None:
-    head = f"   {'case':<34} {'p50 µs':>7} {'p99 µs':>7} {'max µs':>7} {'loss %':>6}  CPU % of one core"
-    thead = f"   {'case':<34} {'deliv msg/s':>11} {'sent msg/s':>11} {'MB/s':>9} {'loss %':>6} {'p50 ms':>8}"
+    """Print every section the run measured, then the ratios and the targets."""
     if "raw" in res:
-        r = res["raw"]
-        print("\na. raw pyzmq + flowtact framing (ipc PUSH/PULL, HWM 1000, blocking)")
-        print(head + " (per process)")
-        print(_lat_row("small @ 1 kHz (2 hops)", r["small_1khz"]))
-        print(_lat_row("image @ 40 Hz (2 hops)", r["image_40hz"]))
-        print(_lat_row("floor: small @ 1 kHz, 1 hop", r["floor_small_1khz"]))
-        print(thead + " (p50 latency under load)")
-        print(_thr_row("small, flat out", r["small_flat"]))
-        print(_thr_row("image, flat out", r["image_flat"]))
+        _print_raw(res["raw"])
     if "chain" in res:
-        c = res["chain"]
-        print(
-            "\nb. flowtact chain.yaml at 1 kHz, real time, 3 processes (sensor+force | savgol | drive+nlif)"
-        )
-        for s, lat in c["hop_latency_us"].items():
-            print(
-                f"   {s:<40} p50 {_f(lat.get('p50')):>6} µs  p99 {_f(lat.get('p99')):>6} µs  max {_f(lat.get('max')):>6} µs"
-            )
-        cpu = "  ".join(f"{n} {_f(v, '.1f')}" for n, v in c["cpu_pct"].items())
-        print(f"   dropped {c['dropped']}, CPU % of one core per process: {cpu}")
+        _print_chain(res["chain"])
     if "fast" in res:
-        print("\nc. flowtact --fast (lossless), source -> stage -> sink, 3 processes")
-        for payload, f in res["fast"].items():
-            print(
-                f"   {payload:<6} {f['samples_s']:>11,.0f} samples/s  {f['bytes_s'] / 1e6:>9,.1f} MB/s  "
-                f"({f['delivered']:,} in {f['wall_s']:.2f} s wall, dropped {f['dropped']}; "
-                f"start-up free: {_f(f['marginal_samples_s'], ',.0f')}/s)"
-            )
+        _print_fast(res["fast"])
     if "peers" in res:
-        print("\nd. peers (same pipeline; CPU = whole process tree)")
-        print(head)
-        for name, p in res["peers"].items():
-            if "skipped" in p:
-                print(f"   {name}: skipped ({p['skipped']})")
-                continue
-            v = ", ".join(f"{k} {x}" for k, x in p.get("versions", {}).items())
-            print(f"   {name} ({v})")
-            if "latency_us" in p.get("small_1khz", {}):
-                print(_lat_row(f"{name} small @ 1 kHz", p["small_1khz"]))
-        print(thead)
-        for name, p in res["peers"].items():
-            for key in ("small_flat", "image_flat"):
-                if "throughput" in p.get(key, {}):
-                    print(_thr_row(f"{name} {key.replace('_flat', '')}, flat out", p[key]))
+        _print_peers(res["peers"])
     rt = res["ratios_targets"]
     if rt["ratios"]:
         print("\nratios flowtact / raw")
@@ -490,25 +456,79 @@ def print_report(res: dict[str, Any]) -> None:
     if rt["targets"]:
         print("\ntargets (issue 3)")
         for k, v in rt["targets"].items():
-            key, val = next((key, x) for key, x in v.items() if key.startswith("value"))
-            if val is None:
-                shown = "-"
-            elif key == "value_bytes_s":
-                shown = f"{val / 1e6:,.1f} MB/s"
-            else:
-                unit = {"value_us": " µs", "value_pct": " %", "value_msg_s": " msg/s"}[key]
-                shown = (f"{val:,.0f}" if abs(val) >= 100 else f"{val:.1f}") + unit
-            extra = ""
-            if "bound_us" in v:
-                peers = ", ".join(f"{n} {x:.0f}" for n, x in v["peers_p99_us"].items()) or "not run"
-                extra = f" (bound {v['bound_us']:.0f} µs; peers' p99: {peers})"
-            elif "raw_bytes_s" in v:
-                extra = f" (raw {v['raw_bytes_s'] / 1e6:,.1f} MB/s)"
-            print(f"   {'PASS' if v['pass'] else 'FAIL'}  {k}: {shown}{extra}")
+            print(_target_row(k, v))
     if rt["targets"] and "raw" in res and "chain" in res:
         print(
             "   (flowtact's latencies are the runtime's own figures; the raw and peer ones drop the first 0.5 s)"
         )
+
+
+def _print_raw(r: dict[str, Any]) -> None:
+    print("\na. raw pyzmq + flowtact framing (ipc PUSH/PULL, HWM 1000, blocking)")
+    print(_LAT_HEAD + " (per process)")
+    print(_lat_row("small @ 1 kHz (2 hops)", r["small_1khz"]))
+    print(_lat_row("image @ 40 Hz (2 hops)", r["image_40hz"]))
+    print(_lat_row("floor: small @ 1 kHz, 1 hop", r["floor_small_1khz"]))
+    print(_THR_HEAD + " (p50 latency under load)")
+    print(_thr_row("small, flat out", r["small_flat"]))
+    print(_thr_row("image, flat out", r["image_flat"]))
+
+
+def _print_chain(c: dict[str, Any]) -> None:
+    print("\nb. flowtact chain.yaml at 1 kHz, real time, 3 processes (sensor+force | savgol | drive+nlif)")
+    for s, lat in c["hop_latency_us"].items():
+        print(
+            f"   {s:<40} p50 {_f(lat.get('p50')):>6} µs  p99 {_f(lat.get('p99')):>6} µs  max {_f(lat.get('max')):>6} µs"
+        )
+    cpu = "  ".join(f"{n} {_f(v, '.1f')}" for n, v in c["cpu_pct"].items())
+    print(f"   dropped {c['dropped']}, CPU % of one core per process: {cpu}")
+
+
+def _print_fast(fast: dict[str, Any]) -> None:
+    print("\nc. flowtact --fast (lossless), source -> stage -> sink, 3 processes")
+    for payload, f in fast.items():
+        print(
+            f"   {payload:<6} {f['samples_s']:>11,.0f} samples/s  {f['bytes_s'] / 1e6:>9,.1f} MB/s  "
+            f"({f['delivered']:,} in {f['wall_s']:.2f} s wall, dropped {f['dropped']}; "
+            f"start-up free: {_f(f['marginal_samples_s'], ',.0f')}/s)"
+        )
+
+
+def _print_peers(peers: dict[str, Any]) -> None:
+    print("\nd. peers (same pipeline; CPU = whole process tree)")
+    print(_LAT_HEAD)
+    for name, p in peers.items():
+        if "skipped" in p:
+            print(f"   {name}: skipped ({p['skipped']})")
+            continue
+        v = ", ".join(f"{k} {x}" for k, x in p.get("versions", {}).items())
+        print(f"   {name} ({v})")
+        if "latency_us" in p.get("small_1khz", {}):
+            print(_lat_row(f"{name} small @ 1 kHz", p["small_1khz"]))
+    print(_THR_HEAD)
+    for name, p in peers.items():
+        for key in ("small_flat", "image_flat"):
+            if "throughput" in p.get(key, {}):
+                print(_thr_row(f"{name} {key.replace('_flat', '')}, flat out", p[key]))
+
+
+def _target_row(name: str, target: dict[str, Any]) -> str:
+    """``PASS``/``FAIL``, the target, its measured value with units and what it is compared with."""
+    key, val = next((key, x) for key, x in target.items() if key.startswith("value"))
+    if val is None:
+        shown = "-"
+    elif key == "value_bytes_s":
+        shown = f"{val / 1e6:,.1f} MB/s"
+    else:
+        unit = {"value_us": " µs", "value_pct": " %", "value_msg_s": " msg/s"}[key]
+        shown = (f"{val:,.0f}" if abs(val) >= 100 else f"{val:.1f}") + unit
+    extra = ""
+    if "bound_us" in target:
+        peers = ", ".join(f"{n} {x:.0f}" for n, x in target["peers_p99_us"].items()) or "not run"
+        extra = f" (bound {target['bound_us']:.0f} µs; peers' p99: {peers})"
+    elif "raw_bytes_s" in target:
+        extra = f" (raw {target['raw_bytes_s'] / 1e6:,.1f} MB/s)"
+    return f"   {'PASS' if target['pass'] else 'FAIL'}  {name}: {shown}{extra}"
 
 
 def main() -> int:

@@ -51,7 +51,7 @@ class BenchSource(Source):
     config_cls = BenchSourceConfig
     outputs = {"y": Port(dtype=None, doc="the payload: 4 float64 (small) or a 240x320 uint8 frame (image)")}
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002 — a source: its outputs come from its config
         dtype, shape = PAYLOADS[self.config.payload]
         return {"y": StreamSpec(dtype=dtype, shape=shape, rate_hz=self.config.rate_hz)}
 

@@ -18,7 +18,6 @@ from flowtact.errors import FlowtactError
 __all__ = ["Aligner", "MisalignedError", "screen_aligned"]
 
 
-
 class MisalignedError(FlowtactError, ValueError):
     """Samples that should describe the same instant carry different timestamps."""
 

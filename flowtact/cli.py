@@ -191,7 +191,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     live = LiveView(enabled=not quiet and not args.inproc)
     progress = _Progress(not quiet and not live.enabled)
 
-    def on_term(signum: int, frame: Any) -> None:
+    def on_term(_signum: int, _frame: Any) -> None:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_term)
@@ -354,6 +354,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         print(f"flowtact: unknown benchmark '{args.name}'{did_you_mean(args.name, scripts)}", file=sys.stderr)
         return EXIT_GRAPH_ERROR
     sys.argv = [str(scripts[args.name]), *args.args]
+    sys.path.insert(0, str(folder))  # as `python bench/NAME.py` does: the benchmarks share bench/_*.py
     runpy.run_path(str(scripts[args.name]), run_name="__main__")
     return 0
 

@@ -126,53 +126,109 @@ def compile_graph(graph: Graph) -> Plan:
         incoming[e.dst].append(e)
 
     blocks = {n: graph.nodes[n].make() for n in order}
+    specs, broken, delayed = _stream_specs(graph, order, blocks, incoming, errors)
+    _check_delayed_inputs(graph, delayed, broken, blocks, incoming, specs, errors)
+    if errors:
+        raise GraphErrors(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
+
+    active, demanded, needed, active_edges, notes = _propagate_demand(graph, order, blocks, incoming)
+    return Plan(
+        graph=graph,
+        order=active,
+        specs=specs,
+        demanded=demanded,
+        needed=needed,
+        active_edges=active_edges,
+        pruned=[n for n in order if n not in active],
+        seeds=_node_seeds(graph),
+        record=[(n, p) for n, p, _ in graph.record],
+        notes=notes,
+    )
+
+
+def _stream_specs(
+    graph: Graph,
+    order: list[str],
+    blocks: Mapping[str, Block],
+    incoming: Mapping[str, list[Edge]],
+    errors: list[GraphError],
+) -> tuple[dict[Stream, StreamSpec], set[str], list[str]]:
+    """Every output's spec, node by node in order, with the nodes that failed (or sit downstream of
+    a failure) and the nodes with an input fed back through a delay, in order."""
     specs: dict[Stream, StreamSpec] = {}
     broken: set[str] = set()
-    delayed: dict[str, None] = {}  # nodes with an input fed back through a delay (ordered set)
+    delayed: dict[str, None] = {}  # an ordered set
     for n in order:
-        node = graph.nodes[n]
-        cls = node.cls
-        connected = {e.dst_port for e in incoming[n]}
-        for pname, port in cls.inputs.items():
-            if not port.optional and pname not in connected:
-                errors.append(
-                    GraphError(
-                        node.loc,
-                        f"node '{n}': required input '{pname}' is not connected",
-                        f"add an edge 'some_node.port -> {n}.{pname}'",
-                    )
-                )
-                broken.add(n)
-        inputs: dict[str, StreamSpec] = {}
-        for e in incoming[n]:
-            src = (e.src, e.src_port)
-            if e.src in broken:
-                broken.add(n)
-                continue
-            if src not in specs:  # fed through a delay by a node later in the order
-                delayed[n] = None
-                continue
-            port = cls.inputs[e.dst_port]
-            why = port.mismatch(specs[src])
-            if why:
-                what = f": {port.doc}" if port.doc else ""
-                errors.append(
-                    GraphError(e.loc, f"{e}: input '{e.dst_port}' of '{n}' ({cls.name}{what}) {why}")
-                )
-                broken.add(n)
-            inputs[e.dst_port] = specs[src]
+        inputs = _node_inputs(graph, n, incoming[n], specs, broken, delayed, errors)
         if n in broken:
             continue
         try:
             out = blocks[n].specs(inputs)
         except SpecError as err:
-            loc = next((e.loc for e in incoming[n] if e.dst_port == err.port), node.loc)
-            errors.append(GraphError(loc, f"node '{n}' ({cls.name}): {err}"))
+            loc = next((e.loc for e in incoming[n] if e.dst_port == err.port), graph.nodes[n].loc)
+            errors.append(GraphError(loc, f"node '{n}' ({graph.nodes[n].cls.name}): {err}"))
             broken.add(n)
             continue
         for port, spec in out.items():
             specs[(n, port)] = spec
-    for n in delayed:  # now that the loop's upstream is known, check the delayed inputs too
+    return specs, broken, list(delayed)
+
+
+def _node_inputs(
+    graph: Graph,
+    n: str,
+    edges: list[Edge],
+    specs: Mapping[Stream, StreamSpec],
+    broken: set[str],
+    delayed: dict[str, None],
+    errors: list[GraphError],
+) -> dict[str, StreamSpec]:
+    """The specs arriving at node ``n``'s inputs. Marks ``n`` broken for a missing or mismatched
+    input or a broken upstream node, and delayed for an input fed by a node later in the order."""
+    node = graph.nodes[n]
+    cls = node.cls
+    connected = {e.dst_port for e in edges}
+    for pname, port in cls.inputs.items():
+        if not port.optional and pname not in connected:
+            errors.append(
+                GraphError(
+                    node.loc,
+                    f"node '{n}': required input '{pname}' is not connected",
+                    f"add an edge 'some_node.port -> {n}.{pname}'",
+                )
+            )
+            broken.add(n)
+    inputs: dict[str, StreamSpec] = {}
+    for e in edges:
+        src = (e.src, e.src_port)
+        if e.src in broken:
+            broken.add(n)
+            continue
+        if src not in specs:  # fed through a delay by a node later in the order
+            delayed[n] = None
+            continue
+        port = cls.inputs[e.dst_port]
+        why = port.mismatch(specs[src])
+        if why:
+            what = f": {port.doc}" if port.doc else ""
+            errors.append(GraphError(e.loc, f"{e}: input '{e.dst_port}' of '{n}' ({cls.name}{what}) {why}"))
+            broken.add(n)
+        inputs[e.dst_port] = specs[src]
+    return inputs
+
+
+def _check_delayed_inputs(
+    graph: Graph,
+    delayed: list[str],
+    broken: set[str],
+    blocks: Mapping[str, Block],
+    incoming: Mapping[str, list[Edge]],
+    specs: Mapping[Stream, StreamSpec],
+    errors: list[GraphError],
+) -> None:
+    """Ask the nodes fed back through a delay for their specs again, now that the loop's upstream
+    is known: their outputs must not depend on the delayed input."""
+    for n in delayed:
         if n in broken:
             continue
         inputs = {e.dst_port: specs[(e.src, e.src_port)] for e in incoming[n] if (e.src, e.src_port) in specs}
@@ -189,26 +245,14 @@ def compile_graph(graph: Graph) -> Plan:
                     "declare the fed-back stream (dtype, shape, units, rate_hz) in the delay block's parameters",
                 )
             )
-    if errors:
-        raise GraphErrors(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
 
-    active, demanded, needed, active_edges, notes = _propagate_demand(graph, order, blocks, incoming)
-    seeds = {
+
+def _node_seeds(graph: Graph) -> dict[str, int]:
+    """Each node's seed: its own, else derived from the graph's seed and its name."""
+    return {
         n: graph.nodes[n].seed if graph.nodes[n].seed is not None else node_seed(graph.seed, n)
         for n in graph.nodes
     }
-    return Plan(
-        graph=graph,
-        order=active,
-        specs=specs,
-        demanded=demanded,
-        needed=needed,
-        active_edges=active_edges,
-        pruned=[n for n in order if n not in active],
-        seeds=seeds,
-        record=[(n, p) for n, p, _ in graph.record],
-        notes=notes,
-    )
 
 
 def _propagate_demand(

@@ -132,120 +132,142 @@ def parse_duration(value: Any) -> float | None:
     return seconds if seconds > 0 else None
 
 
-def _unknown(keys: Any, allowed: tuple[str, ...], where: str, y: Located, path: tuple[Any, ...]) -> list:
-    return [
-        GraphError(y.key_loc(*path, k), f"{where}: unknown key '{k}'{did_you_mean(str(k), allowed)}")
-        for k in keys
-        if k not in allowed
-    ]
-
-
 def parse_deployment(doc: dict[str, Any], y: Located, node_docs: dict[str, Any]) -> Deployment:
     """Read ``processes:``, ``network:`` and ``deadlines:``; append problems to ``y.errors``."""
-    errors: list[GraphError] = y.errors
-    dep = Deployment()
+    return Deployment(
+        processes=_parse_processes(doc, y, node_docs),
+        network=_parse_network(doc, y),
+        deadlines=_parse_deadlines(doc, y, node_docs),
+    )
+
+
+def _parse_processes(doc: dict[str, Any], y: Located, node_docs: dict[str, Any]) -> dict[str, ProcessDef]:
+    """The ``processes:`` groups that hold nodes; a group no node names is an error."""
     used = {n.get("process") for n in node_docs.values() if isinstance(n, dict)}
     raw = doc.get("processes") or {}
     if not isinstance(raw, dict):
-        errors.append(GraphError(y.loc("processes"), "'processes' must map a process name to its settings"))
+        y.errors.append(GraphError(y.loc("processes"), "'processes' must map a process name to its settings"))
         raw = {}
+    out: dict[str, ProcessDef] = {}
     for name, pdoc in raw.items():
-        where = f"process '{name}'"
         if name not in used:
-            errors.append(
+            y.errors.append(
                 GraphError(
                     y.key_loc("processes", name),
-                    f"{where} has no nodes{did_you_mean(str(name), [u for u in used if u])}",
+                    f"process '{name}' has no nodes{did_you_mean(str(name), [u for u in used if u])}",
                     "place nodes in it with `process: NAME` on each node",
                 )
             )
             continue
-        pdoc = pdoc or {}
-        if not isinstance(pdoc, dict):
-            errors.append(GraphError(y.loc("processes", name), f"{where} must be a mapping"))
-            continue
-        errors.extend(_unknown(pdoc, PROCESS_KEYS, where, y, ("processes", name)))
-        restart = pdoc.get("restart", "never")
-        if restart not in RESTARTS:
-            errors.append(
-                GraphError(
-                    y.loc("processes", name, "restart"),
-                    f"{where}: restart must be one of {', '.join(RESTARTS)}; got {restart!r}",
-                )
-            )
-            restart = "never"
-        max_restarts = pdoc.get("max_restarts", 3)
-        if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
-            errors.append(
-                GraphError(
-                    y.loc("processes", name, "max_restarts"), f"{where}: max_restarts must be an integer >= 0"
-                )
-            )
-            max_restarts = 3
-        host = pdoc.get("host")
-        if host is not None and not (isinstance(host, str) and host):
-            errors.append(GraphError(y.loc("processes", name, "host"), f"{where}: host must be an address"))
-            host = None
-        windows: dict[str, float | None] = {}
-        for key in ("stall_s", "startup_s", "stop_grace_s"):
-            if key not in pdoc:
-                continue
-            seconds = parse_duration(pdoc[key])
-            if seconds is None or not math.isfinite(seconds):
-                errors.append(
-                    GraphError(
-                        y.loc("processes", name, key),
-                        f"{where}: {key} must be a positive duration such as 1 or 500ms; got {pdoc[key]!r}",
-                    )
-                )
-                continue
-            windows[key] = seconds
-        dep.processes[str(name)] = ProcessDef(str(name), restart, max_restarts, host, **windows)  # type: ignore[arg-type]
+        process = _parse_process(name, pdoc or {}, y)
+        if process is not None:
+            out[str(name)] = process
+    return out
 
+
+def _parse_process(name: Any, pdoc: Any, y: Located) -> ProcessDef | None:
+    """One group's supervision settings (defaults for what is missing or malformed); None if not a mapping."""
+    where = f"process '{name}'"
+    if not isinstance(pdoc, dict):
+        y.errors.append(GraphError(y.loc("processes", name), f"{where} must be a mapping"))
+        return None
+    y.errors.extend(y.unknown_keys(pdoc, PROCESS_KEYS, where, "processes", name))
+    restart = pdoc.get("restart", "never")
+    if restart not in RESTARTS:
+        y.errors.append(
+            GraphError(
+                y.loc("processes", name, "restart"),
+                f"{where}: restart must be one of {', '.join(RESTARTS)}; got {restart!r}",
+            )
+        )
+        restart = "never"
+    max_restarts = pdoc.get("max_restarts", 3)
+    if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
+        y.errors.append(
+            GraphError(
+                y.loc("processes", name, "max_restarts"), f"{where}: max_restarts must be an integer >= 0"
+            )
+        )
+        max_restarts = 3
+    host = pdoc.get("host")
+    if host is not None and not (isinstance(host, str) and host):
+        y.errors.append(GraphError(y.loc("processes", name, "host"), f"{where}: host must be an address"))
+        host = None
+    windows = _process_windows(name, pdoc, y)
+    return ProcessDef(str(name), restart, max_restarts, host, **windows)  # type: ignore[arg-type]
+
+
+def _process_windows(name: Any, pdoc: dict[str, Any], y: Located) -> dict[str, float]:
+    """The group's ``stall_s``, ``startup_s`` and ``stop_grace_s`` that are given and valid, in seconds."""
+    windows: dict[str, float] = {}
+    for key in ("stall_s", "startup_s", "stop_grace_s"):
+        if key not in pdoc:
+            continue
+        seconds = parse_duration(pdoc[key])
+        if seconds is None or not math.isfinite(seconds):
+            y.errors.append(
+                GraphError(
+                    y.loc("processes", name, key),
+                    f"process '{name}': {key} must be a positive duration such as 1 or 500ms; got {pdoc[key]!r}",
+                )
+            )
+            continue
+        windows[key] = seconds
+    return windows
+
+
+def _parse_network(doc: dict[str, Any], y: Located) -> Network:
+    """``network:`` (listen address, port, CURVE keys directory), defaults for what is missing or bad."""
     net = doc.get("network") or {}
     if not isinstance(net, dict):
-        errors.append(GraphError(y.loc("network"), "'network' must be a mapping (listen, port, keys)"))
+        y.errors.append(GraphError(y.loc("network"), "'network' must be a mapping (listen, port, keys)"))
         net = {}
-    errors.extend(_unknown(net, NETWORK_KEYS, "network", y, ("network",)))
+    y.errors.extend(y.unknown_keys(net, NETWORK_KEYS, "network", "network"))
     port = net.get("port", 5550)
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port < 65536:
-        errors.append(GraphError(y.loc("network", "port"), f"network: port must be 0..65535; got {port!r}"))
+        y.errors.append(GraphError(y.loc("network", "port"), f"network: port must be 0..65535; got {port!r}"))
         port = 5550
     listen = net.get("listen", "127.0.0.1")
     keys = net.get("keys")
-    dep.network = Network(str(listen), port, str(keys) if keys is not None else None)
+    return Network(str(listen), port, str(keys) if keys is not None else None)
 
-    raw_dl = doc.get("deadlines") or []
-    if not isinstance(raw_dl, list):
-        errors.append(GraphError(y.loc("deadlines"), "'deadlines' must be a list of {from, to, budget}"))
-        raw_dl = []
-    for i, d in enumerate(raw_dl):
-        loc = y.loc("deadlines", i)
-        if not isinstance(d, dict):
-            errors.append(
-                GraphError(loc, "a deadline is a mapping like {from: sensor, to: stim, budget: 4ms}")
-            )
-            continue
-        errors.extend(_unknown(d, DEADLINE_KEYS, "deadline", y, ("deadlines", i)))
-        ends = []
-        for key in ("from", "to"):
-            node = d.get(key)
-            if node not in node_docs:
-                errors.append(
-                    GraphError(
-                        y.loc("deadlines", i, key),
-                        f"deadline '{key}': unknown node {node!r}{did_you_mean(str(node), map(str, node_docs))}",
-                    )
-                )
-            ends.append(node)
-        budget = parse_duration(d.get("budget"))
-        if budget is None:
-            errors.append(
+
+def _parse_deadlines(doc: dict[str, Any], y: Located, node_docs: dict[str, Any]) -> list[Deadline]:
+    """The valid entries of ``deadlines:``."""
+    raw = doc.get("deadlines") or []
+    if not isinstance(raw, list):
+        y.errors.append(GraphError(y.loc("deadlines"), "'deadlines' must be a list of {from, to, budget}"))
+        raw = []
+    deadlines = (_parse_deadline(i, d, y, node_docs) for i, d in enumerate(raw))
+    return [d for d in deadlines if d is not None]
+
+
+def _parse_deadline(i: int, d: Any, y: Located, node_docs: dict[str, Any]) -> Deadline | None:
+    """Deadline ``i``: two known nodes and a positive budget, or None (the problems go to ``y.errors``)."""
+    loc = y.loc("deadlines", i)
+    if not isinstance(d, dict):
+        y.errors.append(GraphError(loc, "a deadline is a mapping like {from: sensor, to: stim, budget: 4ms}"))
+        return None
+    y.errors.extend(y.unknown_keys(d, DEADLINE_KEYS, "deadline", "deadlines", i))
+    ends = []
+    for key in ("from", "to"):
+        node = d.get(key)
+        if node not in node_docs:
+            y.errors.append(
                 GraphError(
-                    y.loc("deadlines", i, "budget"),
-                    f"deadline budget must be a positive duration such as 4ms or 500us; got {d.get('budget')!r}",
+                    y.loc("deadlines", i, key),
+                    f"deadline '{key}': unknown node {node!r}{did_you_mean(str(node), map(str, node_docs))}",
                 )
             )
-        if all(e in node_docs for e in ends) and budget is not None:
-            dep.deadlines.append(Deadline(str(ends[0]), str(ends[1]), budget, loc))
-    return dep
+        ends.append(node)
+    budget = parse_duration(d.get("budget"))
+    if budget is None:
+        y.errors.append(
+            GraphError(
+                y.loc("deadlines", i, "budget"),
+                f"deadline budget must be a positive duration such as 4ms or 500us; got {d.get('budget')!r}",
+            )
+        )
+    if all(e in node_docs for e in ends) and budget is not None:
+        return Deadline(str(ends[0]), str(ends[1]), budget, loc)
+    return None

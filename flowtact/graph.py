@@ -348,14 +348,7 @@ def _node(
             )
         )
         return None
-    for key in ndoc:
-        if key not in NODE_KEYS:
-            errors.append(
-                GraphError(
-                    y.key_loc("nodes", name, key),
-                    f"node '{name}': unknown key '{key}'{did_you_mean(str(key), NODE_KEYS)}",
-                )
-            )
+    errors.extend(y.unknown_keys(ndoc, NODE_KEYS, f"node '{name}'", "nodes", name))
     block_name = ndoc.get("block")
     if not isinstance(block_name, str):
         errors.append(
@@ -473,14 +466,7 @@ def _edges(
     for i, item in enumerate(raw):
         loc = y.loc("edges", i)
         if isinstance(item, dict):
-            for key in item:
-                if key not in EDGE_KEYS:
-                    errors.append(
-                        GraphError(
-                            y.key_loc("edges", i, key),
-                            f"unknown edge key '{key}'{did_you_mean(str(key), EDGE_KEYS)}",
-                        )
-                    )
+            errors.extend(y.unknown_keys(item, EDGE_KEYS, "edge", "edges", i))
             policy, queue = _edge_flow(item, y, i, errors)
             item = f"{item.get('from')} -> {item.get('to')}"
         else:

@@ -6,13 +6,10 @@ node's seed, versions), from which ``flowtact run out.h5`` re-creates the run ex
 
 from __future__ import annotations
 
-import contextlib
 import datetime as _dt
 import json
-import platform
 import sys
 from collections.abc import Callable, Iterable, Mapping
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +23,6 @@ from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
 
 __all__ = ["load_plan", "provenance", "resolved_graph", "run_plan", "versions"]
-
-VERSIONED = ("numpy", "numba", "h5py", "pyzmq", "msgpack", "pyyaml", "scipy", "matplotlib")
 
 
 def load_plan(
@@ -102,16 +97,10 @@ def resolved_graph(plan: Plan) -> dict[str, Any]:
 
 
 def versions() -> dict[str, str]:
-    """Python, flowtact and dependency versions."""
-    out = {
-        "python": platform.python_version(),
-        "flowtact": flowtact.__version__,
-        "platform": platform.platform(),
-    }
-    for dist in VERSIONED:
-        with contextlib.suppress(PackageNotFoundError):
-            out[dist] = version(dist)
-    return out
+    """Python, flowtact, HDF5 and dependency versions (:func:`flowtact.record.package_versions`)."""
+    from flowtact.record import package_versions
+
+    return {**package_versions(), "flowtact": flowtact.__version__}
 
 
 def provenance(plan: Plan, argv: list[str] | None = None) -> dict[str, Any]:

@@ -7,13 +7,14 @@ them and raise one :class:`GraphErrors`. :class:`Located` keeps, beside the plai
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import yaml
 
 from flowtact.errors import FlowtactError
+from flowtact.params import did_you_mean
 
 __all__ = ["GraphError", "GraphErrors", "Loc", "Located"]
 
@@ -69,6 +70,17 @@ class Located:
     def key_loc(self, *keys: Any) -> Loc:
         """Location of the mapping key that introduces ``keys``."""
         return self.key_locs.get(keys, self.loc(*keys))
+
+    def unknown_keys(
+        self, mapping: Iterable[Any], allowed: Sequence[str], where: str, *keys: Any
+    ) -> list[GraphError]:
+        """An error at each key of ``mapping`` (the mapping at ``keys``) that is not ``allowed``,
+        suggesting the closest allowed one; ``where`` names the mapping in the message."""
+        return [
+            GraphError(self.key_loc(*keys, k), f"{where}: unknown key '{k}'{did_you_mean(str(k), allowed)}")
+            for k in mapping
+            if k not in allowed
+        ]
 
     def convert(self, node: yaml.Node, keys: tuple[Any, ...] = ()) -> Any:
         mark = node.start_mark

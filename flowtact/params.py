@@ -245,71 +245,92 @@ def _describe(v: Any) -> str:
 
 def _coerce(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
     """Check ``v`` against the type ``hint`` and ``rules``; return the frozen value."""
-
-    given = v
-
-    def fail(expect: str, type_error: bool = True) -> ConfigError:
-        return ConfigError(owner, name, f"must be {expect}; got {_describe(given)}", type_error=type_error)
-
     origin = get_origin(hint)
     if origin in (typing.Union, types.UnionType):
-        args = get_args(hint)
-        if v is None and type(None) in args:
-            return None
-        errors = []
-        for a in (a for a in args if a is not type(None)):
-            try:
-                return _coerce(v, a, rules, owner, name)
-            except ConfigError as e:
-                errors.append(e)
-        rule_errors = [e for e in errors if not e.type_error]
-        if len(errors) == 1 or rule_errors:
-            raise (rule_errors or errors)[0]  # the branch whose type matched explains best
-        raise fail(_type_name(hint))
+        return _coerce_union(v, hint, rules, owner, name)
     if origin is Literal:
-        options = get_args(hint)
-        if v not in options or isinstance(v, bool) != any(isinstance(o, bool) for o in options):
-            hint_text = did_you_mean(v, map(str, options)) if isinstance(v, str) else ""
-            raise ConfigError(
-                owner,
-                name,
-                f"must be one of {', '.join(map(repr, options))}; got {_describe(v)}{hint_text}",
-                type_error=not isinstance(v, type(options[0])),
-            )
-        return v
+        return _coerce_literal(v, hint, owner, name)
     if origin is tuple:
-        item = get_args(hint)[0]
-        if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
-            raise fail(f"a list of {_type_name(item)}")
-        if rules.min_len is not None and len(v) < rules.min_len:
-            raise fail(f"a list of at least {rules.min_len} items", type_error=False)
-        if rules.max_len is not None and len(v) > rules.max_len:
-            raise fail(f"a list of at most {rules.max_len} items", type_error=False)
-        item_rules = dataclasses.replace(rules, min_len=None, max_len=None)
-        return tuple(_coerce(x, item, item_rules, owner, name) for x in v)
+        return _coerce_list(v, hint, rules, owner, name)
+    if hint is Any:
+        return _freeze(v)
+    return _coerce_scalar(v, hint, rules, owner, name)
+
+
+def _must_be(owner: str, name: str, expect: str, given: Any, type_error: bool = True) -> ConfigError:
+    """The error for a value ``given`` that is not ``expect``."""
+    return ConfigError(owner, name, f"must be {expect}; got {_describe(given)}", type_error=type_error)
+
+
+def _coerce_union(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
+    """``v`` as the first member type of ``hint`` that accepts it (None when the union allows it)."""
+    args = get_args(hint)
+    if v is None and type(None) in args:
+        return None
+    errors = []
+    for a in (a for a in args if a is not type(None)):
+        try:
+            return _coerce(v, a, rules, owner, name)
+        except ConfigError as e:
+            errors.append(e)
+    rule_errors = [e for e in errors if not e.type_error]
+    if len(errors) == 1 or rule_errors:
+        raise (rule_errors or errors)[0]  # the branch whose type matched explains best
+    raise _must_be(owner, name, _type_name(hint), v)
+
+
+def _coerce_literal(v: Any, hint: Any, owner: str, name: str) -> Any:
+    """``v`` if it is one of the ``Literal``'s options (``True`` is not ``1`` here)."""
+    options = get_args(hint)
+    if v not in options or isinstance(v, bool) != any(isinstance(o, bool) for o in options):
+        hint_text = did_you_mean(v, map(str, options)) if isinstance(v, str) else ""
+        raise ConfigError(
+            owner,
+            name,
+            f"must be one of {', '.join(map(repr, options))}; got {_describe(v)}{hint_text}",
+            type_error=not isinstance(v, type(options[0])),
+        )
+    return v
+
+
+def _coerce_list(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> tuple[Any, ...]:
+    """A list of the item type as a tuple: its length within ``min_len``/``max_len``, the other
+    rules applied to every item."""
+    item = get_args(hint)[0]
+    if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple)):
+        raise _must_be(owner, name, f"a list of {_type_name(item)}", v)
+    if rules.min_len is not None and len(v) < rules.min_len:
+        raise _must_be(owner, name, f"a list of at least {rules.min_len} items", v, type_error=False)
+    if rules.max_len is not None and len(v) > rules.max_len:
+        raise _must_be(owner, name, f"a list of at most {rules.max_len} items", v, type_error=False)
+    item_rules = dataclasses.replace(rules, min_len=None, max_len=None)
+    return tuple(_coerce(x, item, item_rules, owner, name) for x in v)
+
+
+def _coerce_scalar(v: Any, hint: Any, rules: Rules, owner: str, name: str) -> Any:
+    """A bool, an int, a finite float (ints accepted) or a str, within ``rules``."""
+    given = v
     if hint is bool:
         if not isinstance(v, bool):
-            raise fail("true or false")
+            raise _must_be(owner, name, "true or false", given)
         return v
     if hint is int:
         if isinstance(v, bool) or not isinstance(v, int):
-            raise fail("an integer")
+            raise _must_be(owner, name, "an integer", given)
     elif hint is float:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise fail("a number")
+            raise _must_be(owner, name, "a number", given)
         v = float(v)
         if not math.isfinite(v):
-            raise fail("a finite number", type_error=False)
+            raise _must_be(owner, name, "a finite number", given, type_error=False)
     elif hint is str:
         if not isinstance(v, str):
-            raise fail("a string")
-    elif hint is Any:
-        return _freeze(v)
+            raise _must_be(owner, name, "a string", given)
     else:
         raise TypeError(f"{owner}: field '{name}' has an unsupported type {hint!r}")
     broken = rules.violation(v)
     if broken:
-        raise fail(broken, type_error=False)
+        raise _must_be(owner, name, broken, given, type_error=False)
     return v
 
 

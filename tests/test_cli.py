@@ -102,7 +102,7 @@ def test_blocks_catalogue_and_one_block(capsys):
     assert "did you mean 'savgol'" in capsys.readouterr().err
 
 
-def test_graph_drawing(tmp_path, capsys):
+def test_graph_drawing(tmp_path):
     for suffix in (".dot", ".svg", ".png"):
         out = tmp_path / f"touch{suffix}"
         assert main(["graph", TOUCH, "-o", str(out)]) == 0
@@ -111,7 +111,7 @@ def test_graph_drawing(tmp_path, capsys):
     assert '"ddforce" [label="ddforce\\n(savgol)", style="rounded,dashed"' in dot
 
 
-def test_plot(touch_h5, tmp_path, capsys):
+def test_plot(touch_h5, tmp_path):
     out = tmp_path / "fig.png"
     assert main(["plot", str(touch_h5), "-o", str(out)]) == 0
     assert out.stat().st_size > 10_000

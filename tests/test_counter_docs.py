@@ -79,57 +79,87 @@ def _is_counters(node: ast.AST, me: str) -> bool:
     return isinstance(node, ast.Attribute) and node.attr == "counters" and _is(node.value, me)
 
 
+@dataclass(frozen=True)
+class _Scope:
+    """What a scan of one function knows: the block's name there, the module, the source place and
+    each AST node's parent."""
+
+    me: str
+    module: ModuleType
+    where: str
+    parents: Mapping[ast.AST, ast.AST]
+
+
 def _scan(fn: ast.AST, me: str, module: ModuleType, where: str, out: Counted) -> None:
     """Counters kept on the block named ``me`` inside function ``fn``."""
     parents = {child: node for node in ast.walk(fn) for child in ast.iter_child_nodes(node)}
-
-    def names(expr: ast.AST | None) -> None:
-        if isinstance(expr, ast.Constant) and isinstance(expr.value, str):
-            out.names.add(expr.value)
-        elif isinstance(expr, ast.IfExp):
-            names(expr.body)
-            names(expr.orelse)
-        elif isinstance(expr, ast.Name) and (found := _loop_values(expr, parents, module)) is not None:
-            out.names.update(found)
-        else:
-            text = ast.unparse(expr) if expr is not None else "?"
-            out.unreadable.append(f"{where}:{getattr(expr, 'lineno', '?')}: counter name `{text}`")
-
+    scope = _Scope(me, module, where, parents)
     for node in ast.walk(fn):
         if isinstance(node, ast.Call):
-            f = node.func
-            if isinstance(f, ast.Attribute) and f.attr == "count" and _is(f.value, me):
-                kw = [k.value for k in node.keywords if k.arg == "what"]
-                names(node.args[0] if node.args else kw[0] if kw else None)
-                continue
-            if isinstance(f, ast.Attribute) and _is_counters(f.value, me):
-                if f.attr in ("setdefault", "__setitem__") and node.args:
-                    names(node.args[0])
-                elif f.attr == "update" and node.args and isinstance(node.args[0], ast.Dict):
-                    for key in node.args[0].keys:
-                        names(key)
-                elif f.attr not in ("get", "items", "keys", "values", "copy", "__getitem__", "__contains__"):
-                    out.unreadable.append(f"{where}:{node.lineno}: `{ast.unparse(node)}`")
-                continue
-            passed = [(i, None) for i, a in enumerate(node.args) if _is(a, me)]
-            passed += [(None, k.arg) for k in node.keywords if _is(k.value, me)]
-            for pos, kw in passed:
-                _follow(node, pos, kw, me, module, where, out)
+            _scan_call(node, scope, out)
         elif isinstance(node, ast.Assign | ast.AugAssign | ast.AnnAssign):
-            targets = list(node.targets) if isinstance(node, ast.Assign) else [node.target]
-            while targets:
-                t = targets.pop()
-                if isinstance(t, ast.Tuple | ast.List):
-                    targets += t.elts
-                elif isinstance(t, ast.Subscript) and _is_counters(t.value, me):
-                    names(t.slice)
-                elif _is_counters(t, me):
-                    value = node.value
-                    if isinstance(value, ast.Dict) and all(k is not None for k in value.keys):
-                        for key in value.keys:
-                            names(key)
-                    else:
-                        out.unreadable.append(f"{where}:{node.lineno}: `{ast.unparse(node)}`")
+            _scan_assign(node, scope, out)
+
+
+def _counter_name(expr: ast.AST | None, scope: _Scope, out: Counted) -> None:
+    """The counter name(s) ``expr`` stands for, or an unreadable place."""
+    if isinstance(expr, ast.Constant) and isinstance(expr.value, str):
+        out.names.add(expr.value)
+    elif isinstance(expr, ast.IfExp):
+        _counter_name(expr.body, scope, out)
+        _counter_name(expr.orelse, scope, out)
+    elif (
+        isinstance(expr, ast.Name) and (found := _loop_values(expr, scope.parents, scope.module)) is not None
+    ):
+        out.names.update(found)
+    else:
+        text = ast.unparse(expr) if expr is not None else "?"
+        out.unreadable.append(f"{scope.where}:{getattr(expr, 'lineno', '?')}: counter name `{text}`")
+
+
+def _scan_call(node: ast.Call, scope: _Scope, out: Counted) -> None:
+    """``block.count(name)``, a method of ``block.counters``, or the block passed to a function."""
+    f = node.func
+    if isinstance(f, ast.Attribute) and f.attr == "count" and _is(f.value, scope.me):
+        kw = [k.value for k in node.keywords if k.arg == "what"]
+        _counter_name(node.args[0] if node.args else kw[0] if kw else None, scope, out)
+        return
+    if isinstance(f, ast.Attribute) and _is_counters(f.value, scope.me):
+        _scan_counters_method(node, f.attr, scope, out)
+        return
+    passed = [(i, None) for i, a in enumerate(node.args) if _is(a, scope.me)]
+    passed += [(None, k.arg) for k in node.keywords if _is(k.value, scope.me)]
+    for pos, kw in passed:
+        _follow(node, pos, kw, scope.me, scope.module, scope.where, out)
+
+
+def _scan_counters_method(node: ast.Call, method: str, scope: _Scope, out: Counted) -> None:
+    """``block.counters.<method>(...)``: the names it writes; reading methods write none."""
+    if method in ("setdefault", "__setitem__") and node.args:
+        _counter_name(node.args[0], scope, out)
+    elif method == "update" and node.args and isinstance(node.args[0], ast.Dict):
+        for key in node.args[0].keys:
+            _counter_name(key, scope, out)
+    elif method not in ("get", "items", "keys", "values", "copy", "__getitem__", "__contains__"):
+        out.unreadable.append(f"{scope.where}:{node.lineno}: `{ast.unparse(node)}`")
+
+
+def _scan_assign(node: ast.Assign | ast.AugAssign | ast.AnnAssign, scope: _Scope, out: Counted) -> None:
+    """Writes to ``block.counters[name]`` and ``block.counters = {...}`` (also inside tuple targets)."""
+    targets = list(node.targets) if isinstance(node, ast.Assign) else [node.target]
+    while targets:
+        t = targets.pop()
+        if isinstance(t, ast.Tuple | ast.List):
+            targets += t.elts
+        elif isinstance(t, ast.Subscript) and _is_counters(t.value, scope.me):
+            _counter_name(t.slice, scope, out)
+        elif _is_counters(t, scope.me):
+            value = node.value
+            if isinstance(value, ast.Dict) and all(k is not None for k in value.keys):
+                for key in value.keys:
+                    _counter_name(key, scope, out)
+            else:
+                out.unreadable.append(f"{scope.where}:{node.lineno}: `{ast.unparse(node)}`")
 
 
 _POSITIONAL, _POSITIONAL_OR_KEYWORD = (

@@ -201,7 +201,7 @@ def test_a_failing_block_is_named():
     # a and b are the same stream here; break the block by feeding it a mismatched shape on purpose
     plan = compile_graph(load(text))
     ex = InprocExecutor(plan, fast=True, tick_s=0.5)
-    ex.blocks["add"].step = lambda a, b=None, fb=None: 1 / 0
+    ex.blocks["add"].step = lambda *_args, **_kwargs: 1 / 0
     with pytest.raises(NodeError, match=r"node 'add' \(add\) failed at t=0.500 s: ZeroDivisionError"):
         ex.run(1.0)
 

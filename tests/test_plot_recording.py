@@ -99,7 +99,7 @@ def test_incomplete_recording_is_flagged(tmp_path):
     rec.write("x.y", Chunk(np.arange(50) / 100.0, np.arange(50.0)))
     rec.flush()  # never closed, as after a kill
     fig = recording_figure(path)
-    assert "incomplete" in fig._suptitle.get_text()
+    assert "incomplete" in fig.get_suptitle()
     rec.close()
 
 

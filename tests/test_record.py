@@ -213,7 +213,7 @@ def test_overwrites_and_cleans_stale_sidecars(tmp_path):
 
 
 def test_without_hard_links(tmp_path, monkeypatch):
-    def no_link(*a, **k):
+    def no_link(*_args, **_kwargs):
         raise OSError("hard links not supported")
 
     monkeypatch.setattr(os, "link", no_link)

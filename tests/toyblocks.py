@@ -25,7 +25,7 @@ class Ramp(Source):
     config_cls = RampConfig
     outputs = {"y": Port(doc="the ramp"), "z": Port(doc="the ramp negated")}
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002 — a source: its outputs come from its config
         c = self.config
         spec = StreamSpec(shape=(c.channels,), units=c.units, rate_hz=c.rate_hz)
         return {"y": spec, "z": spec}
@@ -104,7 +104,7 @@ class Add(Block):
     def reset(self):
         self.held = {p: [] for p in self.inputs}
 
-    def step(self, a, b=None, fb=None):
+    def step(self, a, b=None, fb=None):  # noqa: ARG002 — step takes every input port; this toy ignores fb
         if b is None:
             return {"y": a}
         return {"y": Chunk(a.t, a.data + self.config.wb * b.data)}
@@ -165,7 +165,7 @@ class Frames(Source):
     config_cls = FramesConfig
     outputs = {"y": Port(doc="frames")}
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002 — a source: its outputs come from its config
         c = self.config
         return {"y": StreamSpec(dtype="uint8", shape=(c.size, c.size), units="1", rate_hz=c.rate_hz)}
 
@@ -218,7 +218,7 @@ class SlowSink(Block):
     outputs = {}
     sink = True
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002 — a source: its outputs come from its config
         return {}
 
     def reset(self):
@@ -250,7 +250,7 @@ class Plant(Source):
     inputs = {"u": Port(shape=(), units="1", delay=True, optional=True, doc="command fed back")}
     outputs = {"y": Port(shape=(), units="1", doc="the plant's output")}
 
-    def specs(self, inputs):
+    def specs(self, inputs):  # noqa: ARG002 — a source: its outputs come from its config
         return {"y": StreamSpec(units="1", rate_hz=self.config.rate_hz)}
 
     def reset(self):

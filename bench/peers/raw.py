@@ -65,7 +65,7 @@ def _socket(ctx: zmq.Context, kind: int) -> zmq.Socket:
     return sock
 
 
-def _source(cfg: dict[str, Any], results: Any, go: Any, stop: Any) -> None:
+def _source(cfg: dict[str, Any], results: Any, stop: Any, go: Any) -> None:
     ctx = zmq.Context()
     out = _socket(ctx, zmq.PUSH)
     out.connect(cfg["out"])
@@ -110,7 +110,7 @@ def _source(cfg: dict[str, Any], results: Any, go: Any, stop: Any) -> None:
     ctx.term()
 
 
-def _stage(cfg: dict[str, Any], results: Any, go: Any, stop: Any) -> None:
+def _stage(cfg: dict[str, Any], results: Any, stop: Any) -> None:
     ctx = zmq.Context()
     inp, out = _socket(ctx, zmq.PULL), _socket(ctx, zmq.PUSH)
     inp.bind(cfg["in"])
@@ -130,7 +130,7 @@ def _stage(cfg: dict[str, Any], results: Any, go: Any, stop: Any) -> None:
     ctx.term()
 
 
-def _sink(cfg: dict[str, Any], results: Any, go: Any, stop: Any) -> None:
+def _sink(cfg: dict[str, Any], results: Any, stop: Any) -> None:
     ctx = zmq.Context()
     inp = _socket(ctx, zmq.PULL)
     inp.bind(cfg["in"])
@@ -209,12 +209,15 @@ def run_pipeline(
     with tempfile.TemporaryDirectory(prefix="ftbench-") as tmp:
         eps = [f"ipc://{Path(tmp) / f'hop{i}'}" for i in range(stages + 1)]
         base = {"payload": payload, "seconds": seconds, "rate_hz": rate_hz}
-        roles = [("sink", _sink, {"in": eps[-1], "staged": stages == 1})]
-        roles += [("stage", _stage, {"in": eps[i], "out": eps[i + 1]}) for i in range(stages)]
-        roles += [("source", _source, {"out": eps[0]})]
+        # (role, process body, its config, its extra arguments): only the source waits for `go`
+        roles = [("sink", _sink, {"in": eps[-1], "staged": stages == 1}, ())]
+        roles += [("stage", _stage, {"in": eps[i], "out": eps[i + 1]}, ()) for i in range(stages)]
+        roles += [("source", _source, {"out": eps[0]}, (go,))]
         procs = [
-            ctx.Process(target=fn, args=({**base, **c}, results, go, stop), name=f"raw-{role}", daemon=True)
-            for role, fn, c in roles
+            ctx.Process(
+                target=fn, args=({**base, **c}, results, stop, *extra), name=f"raw-{role}", daemon=True
+            )
+            for role, fn, c, extra in roles
         ]
         got: dict[str, Any] = {}
         pids: dict[str, int] = {}

@@ -269,8 +269,7 @@ class ClockSync:
         self._push_bin(d, u)
         if d >= self._next_update:
             self._update(d)
-        stamp = self.offset_s + self.slope * d + self.band_s / 2.0
-        return min(stamp, u)
+        return min(self.to_host(d), u)
 
     def _push_min(self, d: float, u: float) -> None:
         v = u - (self.slope + self.age_penalty) * d

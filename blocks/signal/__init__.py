@@ -9,4 +9,7 @@ delay        delay            one-tick delay: closes a feedback loop
 lowpass      lowpass          first-order low-pass on the samples' own time stamps
 replay       replay           plays a recording (.h5/.npz/.csv) back as a source
 ============ ================ ==========================================================
+
+Helper module: ``shapes`` (the raised-cosine smooth step that scenario sources build force
+profiles from).
 """

@@ -78,43 +78,9 @@ def lowpass_apply(
     return y, prev_t, started, bad
 
 
-def lowpass_apply_python(
-    t: np.ndarray,
-    x: np.ndarray,
-    state: np.ndarray,
-    prev_t: float,
-    started: bool,
-    w: float,
-    alpha_nominal: float,
-    use_t: bool,
-    init_first: bool,
-) -> tuple[np.ndarray, float, bool, int]:
-    """Plain-Python twin of :func:`lowpass_apply` (the same operations in the same order)."""
-    n, nc = x.shape
-    y = np.empty((n, nc))
-    bad = 0
-    for i in range(n):
-        if not started:
-            started = True
-            prev_t = float(t[i])
-            for c in range(nc):
-                xi = float(x[i, c])
-                state[c] = xi if init_first else float(state[c]) + alpha_nominal * (xi - float(state[c]))
-        else:
-            a = alpha_nominal
-            if use_t:
-                dt = float(t[i]) - prev_t
-                if dt > 0.0:
-                    a = -math.expm1(-w * dt)
-                    prev_t = float(t[i])
-                else:
-                    a, bad = 0.0, bad + 1
-            else:
-                prev_t = float(t[i])
-            for c in range(nc):
-                state[c] = float(state[c]) + a * (float(x[i, c]) - float(state[c]))
-        y[i] = state
-    return y, prev_t, started, bad
+#: The plain-Python form of :func:`lowpass_apply` (the same source, run by the interpreter): the
+#: test reference for the compiled kernel.
+lowpass_apply_python = lowpass_apply.py_func
 
 
 @dataclass(frozen=True)

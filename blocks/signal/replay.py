@@ -142,7 +142,7 @@ class Replay(Source):
         self._src: _Source | None = None
 
     # -- compile time ------------------------------------------------------------------------
-    def specs(self, inputs: Any) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Any) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
         """The output spec, read from the file header."""
         self.close()
         self._src = self._inspect()

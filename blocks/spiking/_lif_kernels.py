@@ -40,6 +40,9 @@ plain-numpy twins, which step one sample at a time):
 
 The threshold/reset loop lives in a separate (not inlined) function so that the spike buffers are
 plain arguments there: a buffer that may be reallocated inside the hot loop costs 3× in numba.
+Both kernels share their buffers, execution order, noise and ring-slot helpers; inside the per-step
+loops only scalar helpers are inlined (numba adds an atomic reference-count pair per step for each
+array an inlined helper takes there, measured 2–3× at N = 24), so those loops are written out.
 """
 
 from __future__ import annotations
@@ -159,24 +162,6 @@ def _zig_slow(s: np.ndarray, idx: int, rabs: np.uint64, x: float) -> tuple[bool,
 
 
 @njit(cache=True)
-def _normal(state: np.ndarray) -> float:
-    while True:
-        r = _next_u64(state)
-        idx = np.intp(r & np.uint64(0xFF))
-        r >>= np.uint64(8)
-        sign = r & np.uint64(1)
-        rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
-        x = float(rabs) * ZIG_W[idx]
-        if sign:
-            x = -x
-        if rabs < ZIG_K[idx]:
-            return x
-        ok, y = _zig_slow(state, idx, rabs, x)
-        if ok:
-            return y
-
-
-@njit(cache=True)
 def fill_normal(state: np.ndarray, out: np.ndarray) -> None:
     """Fill ``out`` (1-D float64) with standard normals, advancing the xoshiro256++ ``state``."""
     for k in range(out.shape[0]):
@@ -277,17 +262,31 @@ def interp_coefficients(tau_s: np.ndarray, sigma: np.ndarray, dt_s: float) -> np
 
 
 @njit(cache=True)
-def _grow_i(a: np.ndarray, need: int) -> np.ndarray:
+def _grow(a: np.ndarray, need: int) -> np.ndarray:
+    """``a`` copied into a new buffer of at least ``need`` and at least twice its entries."""
     out = np.empty(max(2 * a.shape[0], need), a.dtype)
     out[: a.shape[0]] = a
     return out
+
+
+@njit(cache=True, inline="always")
+def _spike_buffers(n_t, n, cap_hint, with_offsets):  # type: ignore[no-untyped-def]
+    """Empty (steps, offsets, neurons) spike buffers for about ``cap_hint`` spikes.
+
+    The offsets buffer (crossing times inside a step) stays empty unless ``with_offsets``.
+    """
+    cap = max(16, min(n_t * n, cap_hint))
+    spk_step = np.empty(cap, np.int64)
+    spk_off = np.empty(cap if with_offsets else 0)
+    return spk_step, spk_off, np.empty_like(spk_step)
 
 
 @njit(cache=True)
-def _grow_f(a: np.ndarray, need: int) -> np.ndarray:
-    out = np.empty(max(2 * a.shape[0], need), a.dtype)
-    out[: a.shape[0]] = a
-    return out
+def _grown(spk_step, spk_off, spk_idx, need):  # type: ignore[no-untyped-def]
+    """The spike buffers copied into ones of at least ``need`` entries (offsets only if used)."""
+    if spk_off.shape[0] > 0:
+        spk_off = _grow(spk_off, need)
+    return _grow(spk_step, need), spk_off, _grow(spk_idx, need)
 
 
 @njit(cache=True)
@@ -321,6 +320,15 @@ def _sort_by_step(steps: np.ndarray, idx: np.ndarray, off: np.ndarray, i0: int, 
         off[:] = o2
 
 
+@njit(cache=True, inline="always")
+def _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t):  # type: ignore[no-untyped-def]
+    """The ``n_spk`` spikes of a neuron-major run (neuron by neuron), sorted by step then neuron."""
+    spk_step, spk_off, spk_idx = spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]
+    if n > 1:
+        _sort_by_step(spk_step, spk_idx, spk_off, 0, n_t)
+    return spk_step, spk_off, spk_idx
+
+
 @njit(cache=True)
 def order_within_steps(steps: np.ndarray, off: np.ndarray) -> np.ndarray:
     """Permutation putting spikes sorted by (step, neuron) into (step, offset, neuron) order.
@@ -339,6 +347,75 @@ def order_within_steps(steps: np.ndarray, off: np.ndarray) -> np.ndarray:
             perm[j0:j1] = j0 + np.argsort(off[j0:j1], kind="mergesort")
         j0 = j1
     return perm
+
+
+# -- execution order and the pieces of a step both kernels share -------------------------------
+
+
+@njit(cache=True, inline="always")
+def _neuron_major(n, noise_mode):  # type: ignore[no-untyped-def]
+    """Whether a population runs neuron by neuron (small, and not drawing a shared noise stream)."""
+    return n <= SCALAR_N and (noise_mode != NOISE_INTERNAL or n == 1)
+
+
+@njit(cache=True, inline="always")
+def _one_neuron_noise(noise_mode, rng, xi_ext, n_t):  # type: ignore[no-untyped-def]
+    """(normals, mode) for a neuron-major run: a single neuron's internal draws are made in one
+    fast batch (the same stream) and then read like external normals."""
+    if noise_mode == NOISE_INTERNAL:
+        xi_flat = np.empty(n_t)
+        fill_normal(rng, xi_flat)
+        return xi_flat.reshape((n_t, 1)), NOISE_EXTERNAL
+    return xi_ext, noise_mode
+
+
+@njit(cache=True, inline="always")
+def _tiling(n, n_t, tile, noise_mode):  # type: ignore[no-untyped-def]
+    """(neurons per tile, steps per time block); the sequential noise generator forces one tile."""
+    if noise_mode == NOISE_INTERNAL or tile < 1 or tile >= n:
+        return n, max(n_t, 1)
+    return tile, TIME_BLOCK
+
+
+@njit(cache=True, inline="always")
+def _ring_slot(pos, step, n_lags):  # type: ignore[no-untyped-def]
+    """The post-spike ring slot of ``step`` steps after slot ``pos`` (0 without a ring)."""
+    return (pos + step) % n_lags if n_lags > 0 else 0
+
+
+@njit(cache=True, inline="always")
+def _next_slot(p, n_lags):  # type: ignore[no-untyped-def]
+    """The ring slot after ``p`` (unchanged without a ring)."""
+    if n_lags > 0:
+        p += 1
+        if p == n_lags:
+            p = 0
+    return p
+
+
+# The helpers below that take arrays are called, not inlined, from the tiled step loops: an
+# array argument of an inlined helper costs an atomic reference-count pair per step there.
+
+
+@njit(cache=True)
+def _add_history(ring, p, h_table, spk_idx, spk_off, j0, j1, dt):  # type: ignore[no-untyped-def]
+    """The post-spike current of spikes ``j0 … j1−1``, fired in the step of ring slot ``p``, into
+    the ring; their offsets (if recorded) place them inside the step of length ``dt``."""
+    timed = spk_off.shape[0] > 0
+    for j in range(j0, j1):
+        ring_add(ring, p, spk_idx[j], h_table, spk_off[j] / dt if timed else 0.0)
+
+
+@njit(cache=True)
+def _draw_noise(noise_mode, rng, xi_ext, i, k0, out):  # type: ignore[no-untyped-def]
+    """Step ``i``'s standard normals for the tile starting at neuron ``k0``, from the internal
+    generator or the external array."""
+    if noise_mode == NOISE_INTERNAL:
+        fill_normal(rng, out)
+    else:
+        xe = xi_ext[i, k0 : k0 + out.shape[0]]
+        for k in range(out.shape[0]):
+            out[k] = xe[k]
 
 
 # -- grid kernel (exp / euler) -----------------------------------------------------------------
@@ -364,26 +441,11 @@ def _grid_threshold(v, refc, n_clamp, k0, i, spk_step, spk_idx, n_spk):  # type:
 
 
 @njit(cache=True)
-def _grid_threshold_h(v, refc, n_clamp, k0, i, spk_step, spk_idx, n_spk, ring, p, h_table):  # type: ignore[no-untyped-def]
-    """:func:`_grid_threshold` plus the post-spike current of every spike (ring buffer)."""
-    for k in range(v.shape[0]):
-        if v[k] > 1.0:
-            v[k] = 0.0
-            refc[k] = n_clamp
-            spk_step[n_spk] = i
-            spk_idx[n_spk] = k0 + k
-            n_spk += 1
-            ring_add(ring, p, k0 + k, h_table, 0.0)
-        elif refc[k] > 0:
-            refc[k] -= 1
-    return n_spk
-
-
-@njit(cache=True)
 def _grid_neuron(
-    u, k, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, spk_step, spk_idx, n_spk
+    u, k, coef, v, refc, n_clamp, ring, pos, h_table, noisy, xi, v_out, spk_step, spk_idx, n_spk
 ):  # type: ignore[no-untyped-def]
-    """All steps of neuron ``k`` with its state in registers (neuron-major path for small N)."""
+    """All steps of neuron ``k`` with its state in registers (neuron-major path for small N);
+    ``noisy``: add the normals ``xi[:, k]``."""
     n_t, n_in = u.shape
     n_lags = ring.shape[0]
     want_v = v_out.shape[0] > 0
@@ -399,12 +461,7 @@ def _grid_neuron(
         if want_v:
             v_out[i, k] = vk
         d = min(max(drv, -DRIVE_MAX), DRIVE_MAX)
-        if noise_mode == 0:
-            vn = vk * a + d * b
-        elif noise_mode == 1:
-            vn = vk * a + d * b + s * _normal(rng)
-        else:
-            vn = vk * a + d * b + s * xi_ext[i, k]
+        vn = vk * a + d * b + s * xi[i, k] if noisy else vk * a + d * b
         vk = vn if rk == 0 else 0.0
         if vk > 1.0:
             vk = 0.0
@@ -416,12 +473,106 @@ def _grid_neuron(
                 ring_add(ring, p, k, h_table, 0.0)
         elif rk > 0:
             rk -= 1
-        if n_lags > 0:
-            p += 1
-            if p == n_lags:
-                p = 0
+        p = _next_slot(p, n_lags)
     v[k], refc[k] = vk, rk
     return n_spk, p
+
+
+@njit(cache=True)
+def _grid_by_neuron(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs):  # type: ignore[no-untyped-def]
+    """The neuron-major grid run: each neuron runs the whole chunk with its state in registers."""
+    n_t, n = u.shape[0], v.shape[0]
+    xi, noise_mode = _one_neuron_noise(noise_mode, rng, xi_ext, n_t)
+    spk_step, spk_off, spk_idx = bufs
+    n_spk, pos_end = 0, pos
+    for k in range(n):
+        if n_spk + n_t > spk_step.shape[0]:
+            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + n_t)
+        n_spk, pos_end = _grid_neuron(
+            u, k, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode != NOISE_OFF, xi, v_out,
+            spk_step, spk_idx, n_spk,
+        )  # fmt: skip
+    return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), pos_end
+
+
+@njit(cache=True)
+def _grid_tile_steps(
+    u, ib, ie, k0, k1, coef, v, refc, n_clamp, ring, p, h_table, noise_mode, rng, xi_ext, work, v_out,
+    spk_step, spk_off, spk_idx, n_spk,
+):  # fmt: skip  # type: ignore[no-untyped-def]
+    """Steps ``ib … ie−1`` of the neurons ``k0 … k1−1`` (ring slot ``p`` at step ``ib``); returns
+    the spike buffers (grown if needed), the spike count and the ring slot after the last step.
+
+    One loop with the step written out: numba would add an atomic reference-count pair per step for
+    every array handed to an inlined helper here, and a called one costs ~20 ns per step.
+    """
+    n_in = u.shape[1]
+    n_lags = ring.shape[0]
+    want_v = v_out.shape[0] > 0
+    m = k1 - k0
+    # views of this tile: every inner loop runs over 0 … m−1
+    vt, rt = v[k0:k1], refc[k0:k1]
+    a, b, s = coef[0, k0:k1], coef[1, k0:k1], coef[2, k0:k1]
+    vl, g = coef[3, k0:k1], coef[4, k0:k1]
+    drv, xr = work[0, k0:k1], work[1, k0:k1]
+    for i in range(ib, ie):
+        if n_in == 1:
+            ui = u[i, 0]
+            for k in range(m):
+                drv[k] = vl[k] + g[k] * ui
+        else:
+            for k in range(m):
+                drv[k] = vl[k] + g[k] * u[i, k0 + k]
+        if n_lags > 0:
+            rr = ring[p, k0:k1]
+            for k in range(m):
+                drv[k] += rr[k]
+                rr[k] = 0.0
+        if want_v:
+            vo = v_out[i, k0:k1]
+            for k in range(m):
+                vo[k] = vt[k]
+        if noise_mode == NOISE_OFF:
+            for k in range(m):
+                d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
+                vn = vt[k] * a[k] + d * b[k]
+                vt[k] = vn if rt[k] == 0 else 0.0
+        else:
+            _draw_noise(noise_mode, rng, xi_ext, i, k0, xr)
+            for k in range(m):
+                d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
+                vn = vt[k] * a[k] + d * b[k] + s[k] * xr[k]
+                vt[k] = vn if rt[k] == 0 else 0.0
+        if n_spk + m > spk_step.shape[0]:
+            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + m)
+        n0 = n_spk
+        n_spk = _grid_threshold(vt, rt, n_clamp, k0, i, spk_step, spk_idx, n_spk)
+        if n_lags > 0 and n_spk > n0:
+            _add_history(ring, p, h_table, spk_idx, spk_off, n0, n_spk, 1.0)
+        p = _next_slot(p, n_lags)
+    return spk_step, spk_off, spk_idx, n_spk, p
+
+
+@njit(cache=True)
+def _grid_by_tile(
+    u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile, bufs
+):  # type: ignore[no-untyped-def]
+    """The step-major grid run over neuron tiles that stay in cache for a block of steps."""
+    n_t, n = u.shape[0], v.shape[0]
+    spk_step, spk_off, spk_idx = bufs
+    n_spk, pos_end = 0, pos
+    tile, t_block = _tiling(n, n_t, tile, noise_mode)
+    for ib in range(0, n_t, t_block):
+        ie = min(ib + t_block, n_t)
+        nb0 = n_spk
+        for k0 in range(0, n, tile):
+            spk_step, spk_off, spk_idx, n_spk, pos_end = _grid_tile_steps(
+                u, ib, ie, k0, min(k0 + tile, n), coef, v, refc, n_clamp, ring, _ring_slot(pos, ib, ring.shape[0]),
+                h_table, noise_mode, rng, xi_ext, work, v_out, spk_step, spk_off, spk_idx, n_spk,
+            )  # fmt: skip
+        if tile < n:
+            _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], spk_off[nb0:n_spk], ib, ie - ib)
+    return (spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]), pos_end
 
 
 @njit(cache=True)
@@ -447,120 +598,31 @@ def lif_grid(
     Spikes come sorted by step, then neuron. Neurons are processed in tiles that stay in cache
     for the whole chunk; the internal noise generator is sequential, so it forces one tile.
     """
-    n_t, n_in = u.shape
-    n = v.shape[0]
+    bufs = _spike_buffers(u.shape[0], v.shape[0], cap_hint, False)
+    if _neuron_major(v.shape[0], noise_mode):
+        spikes, pos_end = _grid_by_neuron(
+            u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs
+        )
+    else:
+        spikes, pos_end = _grid_by_tile(
+            u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile, bufs
+        )
+    return spikes[0], spikes[2], pos_end
+
+
+def _ring_add_py(ring: np.ndarray, pos: int, k: int, h_table: np.ndarray, frac: float) -> None:
+    """Numpy twin of :func:`ring_add` (the same sums, element by element)."""
     n_lags = ring.shape[0]
-    want_v = v_out.shape[0] > 0
-    spk_step = np.empty(max(16, min(n_t * n, cap_hint)), np.int64)
-    spk_idx = np.empty_like(spk_step)
-    n_spk = 0
-    pos_end = pos
-    if n <= SCALAR_N and (noise_mode != 1 or n == 1):
-        # neuron-major: each neuron runs the whole chunk with its state in registers
-        if noise_mode == 1:  # n == 1: the same draws, made in one fast batch
-            xi_flat = np.empty(n_t)
-            fill_normal(rng, xi_flat)
-            xi_ext = xi_flat.reshape((n_t, 1))
-            noise_mode = 2
-        for k in range(n):
-            if n_spk + n_t > spk_step.shape[0]:
-                spk_step = _grow_i(spk_step, n_spk + n_t)
-                spk_idx = _grow_i(spk_idx, n_spk + n_t)
-            n_spk, pos_end = _grid_neuron(
-                u,
-                k,
-                coef,
-                v,
-                refc,
-                n_clamp,
-                ring,
-                pos,
-                h_table,
-                noise_mode,
-                rng,
-                xi_ext,
-                v_out,
-                spk_step,
-                spk_idx,
-                n_spk,
-            )
-        spk_step = spk_step[:n_spk]
-        spk_idx = spk_idx[:n_spk]
-        if n > 1:
-            _sort_by_step(spk_step, spk_idx, np.empty(0), 0, n_t)
-        return spk_step, spk_idx, pos_end
-    if noise_mode == 1 or tile < 1 or tile >= n:
-        tile = n
-    t_block = max(n_t, 1) if tile == n else TIME_BLOCK
-    for ib in range(0, n_t, t_block):
-        ie = min(ib + t_block, n_t)
-        nb0 = n_spk
-        for k0 in range(0, n, tile):
-            k1 = min(k0 + tile, n)
-            m = k1 - k0
-            # views of this tile: every inner loop runs over 0 … m−1
-            vt, rt = v[k0:k1], refc[k0:k1]
-            a, b, s = coef[0, k0:k1], coef[1, k0:k1], coef[2, k0:k1]
-            vl, g = coef[3, k0:k1], coef[4, k0:k1]
-            drv, xr = work[0, k0:k1], work[1, k0:k1]
-            p = (pos + ib) % n_lags if n_lags > 0 else 0
-            for i in range(ib, ie):
-                if n_in == 1:
-                    ui = u[i, 0]
-                    for k in range(m):
-                        drv[k] = vl[k] + g[k] * ui
-                else:
-                    ur = u[i, k0:k1]
-                    for k in range(m):
-                        drv[k] = vl[k] + g[k] * ur[k]
-                if n_lags > 0:
-                    rr = ring[p, k0:k1]
-                    for k in range(m):
-                        drv[k] += rr[k]
-                        rr[k] = 0.0
-                if want_v:
-                    vo = v_out[i, k0:k1]
-                    for k in range(m):
-                        vo[k] = vt[k]
-                if noise_mode == 0:
-                    for k in range(m):
-                        d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
-                        vn = vt[k] * a[k] + d * b[k]
-                        vt[k] = vn if rt[k] == 0 else 0.0
-                else:
-                    if noise_mode == 1:
-                        fill_normal(rng, xr)
-                    else:
-                        xe = xi_ext[i, k0:k1]
-                        for k in range(m):
-                            xr[k] = xe[k]
-                    for k in range(m):
-                        d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
-                        vn = vt[k] * a[k] + d * b[k] + s[k] * xr[k]
-                        vt[k] = vn if rt[k] == 0 else 0.0
-                if n_spk + m > spk_step.shape[0]:
-                    spk_step = _grow_i(spk_step, n_spk + m)
-                    spk_idx = _grow_i(spk_idx, n_spk + m)
-                if n_lags > 0:
-                    n_spk = _grid_threshold_h(
-                        vt, rt, n_clamp, k0, i, spk_step, spk_idx, n_spk, ring, p, h_table
-                    )
-                else:
-                    n_spk = _grid_threshold(vt, rt, n_clamp, k0, i, spk_step, spk_idx, n_spk)
-                if n_lags > 0:
-                    p += 1
-                    if p == n_lags:
-                        p = 0
-            pos_end = p
-        if tile < n:
-            _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], np.empty(0), ib, ie - ib)
-    return spk_step[:n_spk], spk_idx[:n_spk], pos_end
+    lags = (pos + np.arange(1, n_lags + 1)) % n_lags
+    if frac == 0.0:
+        ring[lags, k] += h_table[1:]
+    else:
+        ring[lags, k] += (1.0 - frac) * h_table[1:] + frac * h_table[:-1]
 
 
-def lif_grid_py(
-    u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile=0, cap_hint=0
-):  # type: ignore[no-untyped-def]
-    """Plain-numpy twin of :func:`lif_grid` (same arguments and results; one step at a time)."""
+def lif_grid_py(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out):  # type: ignore[no-untyped-def]
+    """Plain-numpy twin of :func:`lif_grid`: the same arguments but the scratch and tuning ones
+    (``work``, ``tile``, ``cap_hint``), the same results; one step at a time."""
     n_t = u.shape[0]
     n_lags = ring.shape[0]
     a, b, s, vl, g = coef
@@ -575,7 +637,7 @@ def lif_grid_py(
         d = np.clip(drv, -DRIVE_MAX, DRIVE_MAX)
         vn = v * a + d * b
         if noise_mode:
-            xi = work[1]
+            xi = np.empty(v.shape[0])
             if noise_mode == 1:
                 fill_normal_py(rng, xi)
             else:
@@ -589,9 +651,8 @@ def lif_grid_py(
         steps += [i] * len(fired)
         idx += fired.tolist()
         if n_lags > 0:
-            lags = (pos + np.arange(1, n_lags + 1)) % n_lags
             for k in fired:
-                ring[lags, k] += h_table[1:]
+                _ring_add_py(ring, pos, k, h_table, 0.0)
             pos = (pos + 1) % n_lags
     return np.array(steps, np.int64), np.array(idx, np.int64), pos
 
@@ -615,54 +676,52 @@ def _segment(
     return out
 
 
+@njit(cache=True, inline="always")
+def _interp_cross(v0, v1, r, dt, ref_s, d0, d1, tau, sig, xi):  # type: ignore[no-untyped-def]
+    """One neuron's step from ``v0`` (``v1``: the free solution at the step end): refractoriness,
+    crossing interpolation and exact restart.
+
+    Returns (v at the step end, refractory time left, fired, crossing offset inside the step).
+    """
+    s0 = 0.0
+    if r > 0.0:
+        if r >= dt:
+            return 0.0, r - dt, False, 0.0
+        s0, r, v0 = r, 0.0, 0.0
+        v1 = _segment(0.0, s0, dt, d0, d1, tau, sig, xi)
+    if v0 > 1.0:
+        ts = s0
+    elif v1 > 1.0:
+        ts = min(s0 + (1.0 - v0) / (v1 - v0) * (dt - s0), dt)
+    else:
+        return v1, r, False, 0.0
+    sr = ts + ref_s
+    if sr < dt:
+        return _segment(0.0, sr, dt, d0, d1, tau, sig, xi), r, True, ts
+    return 0.0, sr - dt, True, ts
+
+
 @njit(cache=True)
-def _interp_threshold(
-    v, vn, rl, dt, ref_s, d0, d1, tau, sig, xr, k0, i, spk_step, spk_off, spk_idx, n_spk, ring, p, h_table
-):  # type: ignore[no-untyped-def]
-    """Refractoriness, crossing interpolation and exact restart on one tile (views; ``k0`` its
-    first neuron) at step ``i``; returns the new spike count."""
-    has_h = ring.shape[0] > 0
+def _interp_threshold(v, vn, rl, dt, ref_s, d0, d1, tau, sig, xr, k0, i, spk_step, spk_off, spk_idx, n_spk):  # type: ignore[no-untyped-def]
+    """:func:`_interp_cross` on one tile (views; ``k0`` its first neuron) at step ``i``, recording
+    the spikes; returns the new spike count."""
     for k in range(v.shape[0]):
-        v0 = v[k]
-        v1 = vn[k]
-        s0 = 0.0
-        r = rl[k]
-        if r > 0.0:
-            if r >= dt:
-                rl[k] = r - dt
-                v[k] = 0.0
-                continue
-            rl[k] = 0.0
-            s0 = r
-            v0 = 0.0
-            v1 = _segment(0.0, r, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
-        if v0 > 1.0:
-            ts = s0
-        elif v1 > 1.0:
-            ts = s0 + (1.0 - v0) / (v1 - v0) * (dt - s0)
-            ts = min(ts, dt)
-        else:
-            v[k] = v1
-            continue
-        spk_step[n_spk] = i
-        spk_off[n_spk] = ts
-        spk_idx[n_spk] = k0 + k
-        n_spk += 1
-        if has_h:
-            ring_add(ring, p, k0 + k, h_table, ts / dt)
-        sr = ts + ref_s
-        if sr < dt:
-            v[k] = _segment(0.0, sr, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
-        else:
-            v[k] = 0.0
-            rl[k] = sr - dt
+        v[k], rl[k], fired, ts = _interp_cross(
+            v[k], vn[k], rl[k], dt, ref_s, d0[k], d1[k], tau[k], sig[k], xr[k]
+        )
+        if fired:
+            spk_step[n_spk] = i
+            spk_off[n_spk] = ts
+            spk_idx[n_spk] = k0 + k
+            n_spk += 1
     return n_spk
 
 
 @njit(cache=True)
-def _interp_neuron(u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, xi_ext, v_out,
+def _interp_neuron(u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noisy, xi, v_out,
                    spk_step, spk_off, spk_idx, n_spk):  # fmt: skip  # type: ignore[no-untyped-def]
-    """All steps of neuron ``k`` with its state in registers (neuron-major path for small N)."""
+    """All steps of neuron ``k`` with its state in registers (neuron-major path for small N);
+    ``noisy``: add the normals ``xi[:, k]``."""
     n_t, n_in = u.shape
     n_lags = ring.shape[0]
     want_v = v_out.shape[0] > 0
@@ -683,53 +742,136 @@ def _interp_neuron(u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, no
             ring[p, k] = 0.0
         d0 = min(max(d0, -DRIVE_MAX), DRIVE_MAX)
         d1c = min(max(d1, -DRIVE_MAX), DRIVE_MAX)
-        xr = xi_ext[i, k] if noise_mode != 0 else 0.0
+        xr = xi[i, k] if noisy else 0.0
         v1 = vk * a + d0 * b + (d1c - d0) * e
-        if noise_mode != 0:
+        if noisy:
             v1 = v1 + s * xr
-        v0 = vk
-        s0 = 0.0
-        skip = False
-        if r > 0.0:
-            if r >= dt:
-                r = r - dt
-                vk = 0.0
-                skip = True
-            else:
-                s0 = r
-                r = 0.0
-                v0 = 0.0
-                v1 = _segment(0.0, s0, dt, d0, d1c, tau, sig, xr)
-        if not skip:
-            fire = True
-            if v0 > 1.0:
-                ts = s0
-            elif v1 > 1.0:
-                ts = min(s0 + (1.0 - v0) / (v1 - v0) * (dt - s0), dt)
-            else:
-                vk = v1
-                fire = False
-            if fire:
-                spk_step[n_spk] = i
-                spk_off[n_spk] = ts
-                spk_idx[n_spk] = k
-                n_spk += 1
-                if n_lags > 0:
-                    ring_add(ring, p, k, h_table, ts / dt)
-                sr = ts + ref_s
-                if sr < dt:
-                    vk = _segment(0.0, sr, dt, d0, d1c, tau, sig, xr)
-                else:
-                    vk = 0.0
-                    r = sr - dt
+        vk, r, fired, ts = _interp_cross(vk, v1, r, dt, ref_s, d0, d1c, tau, sig, xr)
+        if fired:
+            spk_step[n_spk] = i
+            spk_off[n_spk] = ts
+            spk_idx[n_spk] = k
+            n_spk += 1
+            if n_lags > 0:
+                ring_add(ring, p, k, h_table, ts / dt)
         if want_v:
             v_out[i, k] = vk
-        if n_lags > 0:
-            p += 1
-            if p == n_lags:
-                p = 0
+        p = _next_slot(p, n_lags)
     v[k], rl[k] = vk, r
     return n_spk, p
+
+
+@njit(cache=True)
+def _interp_by_neuron(
+    u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs
+):  # type: ignore[no-untyped-def]
+    """The neuron-major interpolating run: each neuron runs the whole chunk in registers."""
+    n_t, n = u.shape[0], v.shape[0]
+    xi, noise_mode = _one_neuron_noise(noise_mode, rng, xi_ext, n_t)
+    spk_step, spk_off, spk_idx = bufs
+    n_spk, pos_end = 0, pos
+    for k in range(n):
+        if n_spk + n_t > spk_step.shape[0]:
+            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + n_t)
+        n_spk, pos_end = _interp_neuron(
+            u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode != NOISE_OFF, xi, v_out,
+            spk_step, spk_off, spk_idx, n_spk,
+        )  # fmt: skip
+    return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), pos_end
+
+
+@njit(cache=True)
+def _interp_tile_steps(  # noqa: C901 — one hot loop; see the docstring
+    u_first, u, ib, ie, k0, k1, dt, coef, v, rl, ref_s, ring, p, h_table, noise_mode, rng, xi_ext, work, v_out,
+    spk_step, spk_off, spk_idx, n_spk,
+):  # fmt: skip  # type: ignore[no-untyped-def]
+    """Steps ``ib … ie−1`` of the neurons ``k0 … k1−1`` (ring slot ``p`` at step ``ib``); returns
+    the spike buffers (grown if needed), the spike count and the ring slot after the last step.
+
+    One loop with the step written out, as in :func:`_grid_tile_steps`: its branches cannot move to
+    helpers without a per-step cost.
+    """
+    n_in = u.shape[1]
+    n_lags = ring.shape[0]
+    want_v = v_out.shape[0] > 0
+    m = k1 - k0
+    vt, rlt = v[k0:k1], rl[k0:k1]
+    a, b, e, s = coef[0, k0:k1], coef[1, k0:k1], coef[2, k0:k1], coef[3, k0:k1]
+    tau, sig, vl, g = coef[4, k0:k1], coef[5, k0:k1], coef[6, k0:k1], coef[7, k0:k1]
+    d0, d1, vn, xr = work[0, k0:k1], work[1, k0:k1], work[2, k0:k1], work[3, k0:k1]
+    for i in range(ib, ie):
+        if n_in == 1:
+            ua = u_first[0] if i == 0 else u[i - 1, 0]
+            ub = u[i, 0]
+            for k in range(m):
+                d0[k] = vl[k] + g[k] * ua
+                d1[k] = vl[k] + g[k] * ub
+        else:
+            ura = u_first[k0:k1] if i == 0 else u[i - 1, k0:k1]
+            for k in range(m):
+                d0[k] = vl[k] + g[k] * ura[k]
+                d1[k] = vl[k] + g[k] * u[i, k0 + k]
+        if n_lags > 0:
+            rr = ring[p, k0:k1]
+            for k in range(m):
+                d0[k] += rr[k]
+                d1[k] += rr[k]
+                rr[k] = 0.0
+        for k in range(m):
+            d0[k] = min(max(d0[k], -DRIVE_MAX), DRIVE_MAX)
+            d1[k] = min(max(d1[k], -DRIVE_MAX), DRIVE_MAX)
+        if noise_mode == NOISE_OFF:
+            for k in range(m):
+                xr[k] = 0.0
+                vn[k] = vt[k] * a[k] + d0[k] * b[k] + (d1[k] - d0[k]) * e[k]
+        else:
+            _draw_noise(noise_mode, rng, xi_ext, i, k0, xr)
+            for k in range(m):
+                vn[k] = vt[k] * a[k] + d0[k] * b[k] + (d1[k] - d0[k]) * e[k] + s[k] * xr[k]
+        if n_spk + m > spk_step.shape[0]:
+            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + m)
+        special = False  # any crossing or refractory neuron in the tile at this step?
+        for k in range(m):
+            special |= (vn[k] > 1.0) | (vt[k] > 1.0) | (rlt[k] > 0.0)
+        if special:
+            n0 = n_spk
+            n_spk = _interp_threshold(
+                vt, vn, rlt, dt, ref_s, d0, d1, tau, sig, xr, k0, i, spk_step, spk_off, spk_idx, n_spk
+            )
+            if n_lags > 0 and n_spk > n0:
+                _add_history(ring, p, h_table, spk_idx, spk_off, n0, n_spk, dt)
+        else:
+            for k in range(m):
+                vt[k] = vn[k]
+        if want_v:
+            vo = v_out[i, k0:k1]
+            for k in range(m):
+                vo[k] = vt[k]
+        p = _next_slot(p, n_lags)
+    return spk_step, spk_off, spk_idx, n_spk, p
+
+
+@njit(cache=True)
+def _interp_by_tile(
+    u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile, bufs
+):  # type: ignore[no-untyped-def]
+    """The step-major interpolating run over neuron tiles that stay in cache for a block of steps."""
+    n_t, n = u.shape[0], v.shape[0]
+    spk_step, spk_off, spk_idx = bufs
+    n_spk, pos_end = 0, pos
+    tile, t_block = _tiling(n, n_t, tile, noise_mode)
+    for ib in range(0, n_t, t_block):
+        ie = min(ib + t_block, n_t)
+        nb0 = n_spk
+        for k0 in range(0, n, tile):
+            spk_step, spk_off, spk_idx, n_spk, pos_end = _interp_tile_steps(
+                u_first, u, ib, ie, k0, min(k0 + tile, n), dt, coef, v, rl, ref_s, ring,
+                _ring_slot(pos, ib, ring.shape[0]), h_table, noise_mode, rng, xi_ext, work, v_out,
+                spk_step, spk_off, spk_idx, n_spk,
+            )  # fmt: skip
+        if tile < n:
+            _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], spk_off[nb0:n_spk], ib, ie - ib)
+    return (spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]), pos_end
 
 
 @njit(cache=True)
@@ -757,148 +899,28 @@ def lif_interp(
     Returns (spike steps, offsets of the crossings inside their steps in s, neurons, ring pos),
     sorted by step then neuron (not by crossing time inside a step).
     """
-    n_t, n_in = u.shape
-    n = v.shape[0]
-    n_lags = ring.shape[0]
-    want_v = v_out.shape[0] > 0
-    spk_step = np.empty(max(16, min(n_t * n, cap_hint)), np.int64)
-    spk_idx = np.empty_like(spk_step)
-    spk_off = np.empty(spk_step.shape[0])
-    n_spk = 0
-    pos_end = pos
-    if n <= SCALAR_N and (noise_mode != 1 or n == 1):
-        if noise_mode == 1:  # n == 1: the same draws, made in one fast batch
-            xi_flat = np.empty(n_t)
-            fill_normal(rng, xi_flat)
-            xi_ext = xi_flat.reshape((n_t, 1))
-            noise_mode = 2
-        for k in range(n):
-            if n_spk + n_t > spk_step.shape[0]:
-                spk_step = _grow_i(spk_step, n_spk + n_t)
-                spk_idx = _grow_i(spk_idx, n_spk + n_t)
-                spk_off = _grow_f(spk_off, n_spk + n_t)
-            n_spk, pos_end = _interp_neuron(
-                u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, xi_ext, v_out,
-                spk_step, spk_off, spk_idx, n_spk,
-            )  # fmt: skip
-        spk_step, spk_off, spk_idx = spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]
-        if n > 1:
-            _sort_by_step(spk_step, spk_idx, spk_off, 0, n_t)
-        return spk_step, spk_off, spk_idx, pos_end
-    if noise_mode == 1 or tile < 1 or tile >= n:
-        tile = n
-    t_block = max(n_t, 1) if tile == n else TIME_BLOCK
-    for ib in range(0, n_t, t_block):
-        ie = min(ib + t_block, n_t)
-        nb0 = n_spk
-        for k0 in range(0, n, tile):
-            k1 = min(k0 + tile, n)
-            m = k1 - k0
-            vt, rlt = v[k0:k1], rl[k0:k1]
-            a, b, e, s = coef[0, k0:k1], coef[1, k0:k1], coef[2, k0:k1], coef[3, k0:k1]
-            tau, sig, vl, g = coef[4, k0:k1], coef[5, k0:k1], coef[6, k0:k1], coef[7, k0:k1]
-            d0, d1, vn, xr = work[0, k0:k1], work[1, k0:k1], work[2, k0:k1], work[3, k0:k1]
-            p = (pos + ib) % n_lags if n_lags > 0 else 0
-            for i in range(ib, ie):
-                if n_in == 1:
-                    ua = u_first[0] if i == 0 else u[i - 1, 0]
-                    ub = u[i, 0]
-                    for k in range(m):
-                        d0[k] = vl[k] + g[k] * ua
-                        d1[k] = vl[k] + g[k] * ub
-                else:
-                    ura = u_first[k0:k1] if i == 0 else u[i - 1, k0:k1]
-                    urb = u[i, k0:k1]
-                    for k in range(m):
-                        d0[k] = vl[k] + g[k] * ura[k]
-                        d1[k] = vl[k] + g[k] * urb[k]
-                if n_lags > 0:
-                    rr = ring[p, k0:k1]
-                    for k in range(m):
-                        d0[k] += rr[k]
-                        d1[k] += rr[k]
-                        rr[k] = 0.0
-                for k in range(m):
-                    d0[k] = min(max(d0[k], -DRIVE_MAX), DRIVE_MAX)
-                    d1[k] = min(max(d1[k], -DRIVE_MAX), DRIVE_MAX)
-                if noise_mode == 0:
-                    for k in range(m):
-                        xr[k] = 0.0
-                        vn[k] = vt[k] * a[k] + d0[k] * b[k] + (d1[k] - d0[k]) * e[k]
-                else:
-                    if noise_mode == 1:
-                        fill_normal(rng, xr)
-                    else:
-                        xe = xi_ext[i, k0:k1]
-                        for k in range(m):
-                            xr[k] = xe[k]
-                    for k in range(m):
-                        vn[k] = vt[k] * a[k] + d0[k] * b[k] + (d1[k] - d0[k]) * e[k] + s[k] * xr[k]
-                if n_spk + m > spk_step.shape[0]:
-                    spk_step = _grow_i(spk_step, n_spk + m)
-                    spk_idx = _grow_i(spk_idx, n_spk + m)
-                    spk_off = _grow_f(spk_off, n_spk + m)
-                special = False  # any crossing or refractory neuron in the tile at this step?
-                for k in range(m):
-                    special |= (vn[k] > 1.0) | (vt[k] > 1.0) | (rlt[k] > 0.0)
-                if special:
-                    n_spk = _interp_threshold(
-                        vt, vn, rlt, dt, ref_s, d0, d1, tau, sig, xr, k0, i, spk_step, spk_off, spk_idx, n_spk,
-                        ring, p, h_table,
-                    )  # fmt: skip
-                else:
-                    for k in range(m):
-                        vt[k] = vn[k]
-                if want_v:
-                    vo = v_out[i, k0:k1]
-                    for k in range(m):
-                        vo[k] = vt[k]
-                if n_lags > 0:
-                    p += 1
-                    if p == n_lags:
-                        p = 0
-            pos_end = p
-        if tile < n:
-            _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], spk_off[nb0:n_spk], ib, ie - ib)
-    return spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk], pos_end
+    bufs = _spike_buffers(u.shape[0], v.shape[0], cap_hint, True)
+    if _neuron_major(v.shape[0], noise_mode):
+        spikes, pos_end = _interp_by_neuron(
+            u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs
+        )
+    else:
+        spikes, pos_end = _interp_by_tile(
+            u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile,
+            bufs,
+        )  # fmt: skip
+    return spikes[0], spikes[1], spikes[2], pos_end
 
 
-def _segment_py(v0, s0, dt, d0, d1, tau, sig, xi):  # type: ignore[no-untyped-def]
-    h = dt - s0
-    x = h / tau
-    ah = math.exp(-x)
-    bh = -math.expm1(-x)
-    slope = (d1 - d0) / dt
-    out = v0 * ah + (d0 + slope * s0) * bh + slope * (h - tau * bh)
-    if sig > 0.0:
-        out += sig * math.sqrt(tau / 2.0 * -math.expm1(-2.0 * x)) * xi
-    return out
-
-
-def lif_interp_py(
-    u_first,
-    u,
-    dt,
-    coef,
-    v,
-    rl,
-    ref_s,
-    ring,
-    pos,
-    h_table,
-    noise_mode,
-    rng,
-    xi_ext,
-    work,
-    v_out,
-    tile=0,
-    cap_hint=0,
-):  # type: ignore[no-untyped-def]
-    """Plain-numpy twin of :func:`lif_interp` (same arguments and results; one step at a time)."""
+def lif_interp_py(u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, v_out):  # type: ignore[no-untyped-def]
+    """Plain-numpy twin of :func:`lif_interp`: the same arguments but the scratch and tuning ones
+    (``work``, ``tile``, ``cap_hint``), the same results; one step at a time. Each neuron's
+    crossing and restart is the kernel's own scalar code (``_interp_cross``) run as Python."""
     n_t = u.shape[0]
     n = v.shape[0]
     n_lags = ring.shape[0]
     a, b, e, s, tau, sig, vl, g = coef
+    cross = _interp_cross.py_func
     steps, offs, idx = [], [], []
     for i in range(n_t):
         ua = u_first if i == 0 else u[i - 1]
@@ -919,35 +941,13 @@ def lif_interp_py(
         if noise_mode:
             vn = vn + s * xr
         for k in range(n):
-            v0, v1, s0, r = v[k], vn[k], 0.0, rl[k]
-            if r > 0.0:
-                if r >= dt:
-                    rl[k] = r - dt
-                    v[k] = 0.0
-                    continue
-                rl[k] = 0.0
-                s0, v0 = r, 0.0
-                v1 = _segment_py(0.0, r, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
-            if v0 > 1.0:
-                ts = s0
-            elif v1 > 1.0:
-                ts = min(s0 + (1.0 - v0) / (v1 - v0) * (dt - s0), dt)
-            else:
-                v[k] = v1
-                continue
-            steps.append(i)
-            offs.append(ts)
-            idx.append(k)
-            if n_lags > 0:
-                frac = ts / dt
-                for j in range(1, n_lags + 1):
-                    ring[(pos + j) % n_lags, k] += (1.0 - frac) * h_table[j] + frac * h_table[j - 1]
-            sr = ts + ref_s
-            if sr < dt:
-                v[k] = _segment_py(0.0, sr, dt, d0[k], d1[k], tau[k], sig[k], xr[k])
-            else:
-                v[k] = 0.0
-                rl[k] = sr - dt
+            v[k], rl[k], fired, ts = cross(v[k], vn[k], rl[k], dt, ref_s, d0[k], d1[k], tau[k], sig[k], xr[k])
+            if fired:
+                steps.append(i)
+                offs.append(ts)
+                idx.append(k)
+                if n_lags > 0:
+                    _ring_add_py(ring, pos, k, h_table, ts / dt)
         if v_out.shape[0]:
             v_out[i] = v
         if n_lags > 0:

@@ -349,9 +349,25 @@ class Nlif(Block):
             return self._step_interp(x.t, u2)
         return self._step_grid(x.t, u2)
 
-    def _step_grid(self, t: np.ndarray, u: np.ndarray) -> dict[str, Chunk]:
-        want_v = self._want_v
-        v_out = np.empty((t.shape[0], self._n)) if want_v else self._no_v
+    def integrate(
+        self, u: np.ndarray, u_first: np.ndarray | None = None, v_out: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """One kernel call on the bound state, without the block's input checks and chunk handling.
+
+        ``u``: (T, 1 or n) C-contiguous float64 drive samples; ``u_first``: the sample that opens
+        the first step (``exp_interp`` only); ``v_out``: (T, n) to receive the membrane, if wanted.
+        Returns the spikes as (step indices, offsets inside their steps in s — ``exp_interp`` only,
+        else None — neuron indices), sorted by step then neuron. The block's steps and the bare-kernel
+        baseline of bench/nlif.py use it.
+        """
+        v_out = self._no_v if v_out is None else v_out
+        if self._interp:
+            steps, offs, idx, self._pos = lif_interp(
+                u_first, u, self._dt, self._coef, self._v, self._rl, self._ref_s, self._ring, self._pos,
+                self._h, self._noise, self._rng_state, self._no_xi, self._work, v_out, TILE, self._cap_hint,
+            )  # fmt: skip
+            self._cap_hint = max(4096, len(steps) + len(steps) // 4)
+            return steps, offs, idx
         steps, idx, self._pos = lif_grid(
             u, self._coef, self._v, self._refc, self._n_clamp, self._ring, self._pos, self._h,
             self._noise, self._rng_state, self._no_xi, self._work, v_out, TILE, self._cap_hint,
@@ -359,6 +375,13 @@ class Nlif(Block):
         n_spk = steps.shape[0]
         if n_spk > 3276:
             self._cap_hint = n_spk + n_spk // 4
+        return steps, None, idx
+
+    def _step_grid(self, t: np.ndarray, u: np.ndarray) -> dict[str, Chunk]:
+        want_v = self._want_v
+        v_out = np.empty((t.shape[0], self._n)) if want_v else self._no_v
+        steps, _, idx = self.integrate(u, v_out=v_out)
+        n_spk = steps.shape[0]
         self._end = t[-1].item() + self._dt
         out = {}
         if self._want_spikes:
@@ -394,12 +417,7 @@ class Nlif(Block):
 
     def _run_interp(self, u_first: np.ndarray, u: np.ndarray, want_v: bool):  # type: ignore[no-untyped-def]
         v_out = np.empty((len(u), self._n)) if want_v else self._no_v
-        steps, offs, idx, self._pos = lif_interp(
-            u_first, u, self._dt, self._coef, self._v, self._rl, self._ref_s, self._ring, self._pos,
-            self._h, self._noise, self._rng_state, self._no_xi, self._work, v_out, TILE, self._cap_hint,
-        )  # fmt: skip
-        self._cap_hint = max(4096, len(steps) + len(steps) // 4)
-        return (steps, offs, idx), v_out
+        return self.integrate(u, u_first, v_out), v_out
 
     def _spike_chunk(self, steps: np.ndarray, times: np.ndarray, idx: np.ndarray) -> Chunk:
         """Interpolated spikes (in step, neuron order) as a chunk sorted by time, then neuron."""

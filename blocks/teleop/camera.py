@@ -201,7 +201,7 @@ class Camera(Source):
         super().__init__(config, **kw)
         self.sources: list[_Folder | _Capture] = []
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
         c = self.config
         n = len(c.devices)
         w, h = c.size

@@ -32,6 +32,7 @@ import numpy as np
 from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
 
 from .hand import FINGERS
+from .image import example_frames
 
 __all__ = [
     "ARCHS",
@@ -518,36 +519,12 @@ class CnnForce(Block):
     @classmethod
     def example(cls) -> Example:
         return Example(
-            params={}, inputs={"x": example_frames()}, rate_hz=40.0, units={"x": "DN"}, duration_s=1.0
+            params={}, inputs={"x": _example_frames()}, rate_hz=40.0, units={"x": "DN"}, duration_s=1.0
         )
 
 
-def example_frames(n: int = 40, seed: int = 1) -> np.ndarray:
-    """A fresh copy of :func:`_example_frames` (cached: the conformance suite asks many times)."""
-    return _example_frames(n, seed).copy()
-
-
-@functools.cache
-def _example_frames(n: int, seed: int) -> np.ndarray:
-    """``n`` synthetic (3, 90, 240) uint8 frames: bright pins on dark skin, pressed progressively.
-
-    Not a TacTip rendering (see ``tactip_sim`` for that): just pin-like images whose pins spread and
-    brighten as a press grows, so the example exercises the network with varied inputs.
-    """
-    rng = np.random.default_rng(seed)
-    h, w = 90, 240
-    yy, xx = np.mgrid[0:h, 0:w]
-    cols, rows = np.meshgrid(np.linspace(20, 220, 10), np.linspace(15, 75, 3))
+def _example_frames(n: int = 40) -> np.ndarray:
+    """``n`` cropped (3, 90, 240) frames of the emulated TacTips under one press rising to 5 N and
+    back (``tactip_sim``'s renderer, which the shipped model was trained on)."""
     press = 0.5 - 0.5 * np.cos(np.linspace(0.0, 2 * np.pi, n))
-    out = np.empty((n, 3, h, w), np.uint8)
-    for i in range(n):
-        for s in range(3):
-            p = press[i] * (0.6 + 0.2 * s)
-            cx = 120 + (cols - 120) * (1 + 0.15 * p)
-            cy = 45 + (rows - 45) * (1 + 0.15 * p)
-            img = np.full((h, w), 30.0)
-            for x0, y0 in zip(cx.ravel(), cy.ravel(), strict=True):
-                img += 150.0 * np.exp(-((xx - x0) ** 2 + (yy - y0) ** 2) / (2 * (3.0 + p) ** 2))
-            img += rng.normal(0.0, 4.0, img.shape)
-            out[i, s] = np.clip(img, 0, 255).astype(np.uint8)
-    return out
+    return example_frames(5.0 * press, seed=1)

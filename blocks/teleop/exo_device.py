@@ -333,10 +333,6 @@ class ExoDevice:
             host_ns=host_ns,
         )
 
-    def angles(self) -> np.ndarray:
-        """True joint angles (3, 3) rad: φ1 and the passive φ2, φ3 of the current pose."""
-        return phi_of_closure(self.c)
-
 
 def _smooth(x: float) -> float:
     x = min(max(x, 0.0), 1.0)

@@ -24,6 +24,7 @@ from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec,
 from flowtact.align import Aligner
 
 from .hand import FINGERS
+from .tactip_sim import pressed_frames
 
 __all__ = [
     "TABLE_3_1",
@@ -36,7 +37,8 @@ __all__ = [
     "Crop",
     "CropConfig",
     "blob_mask_numpy",
-    "synthetic_tactip",
+    "centre_crop",
+    "example_frames",
 ]
 
 #: Camera frame of the thesis's TacTips: 320 wide × 240 high, cropped to 240 wide × 90 high.
@@ -82,83 +84,28 @@ def _frames_out(x: Chunk, data: np.ndarray) -> Chunk:
     return Chunk(x.t, data, x.end)
 
 
-def _empty_like(x: Chunk, shape: tuple[int, ...], dtype: Any) -> Chunk:
-    return Chunk(x.t[:0], np.empty((0, *shape), dtype), x.end)
+# -- example frames: emulated TacTips (examples, tests and benches) ----------------------------------
 
 
-# -- a synthetic TacTip image (examples, tests and benches) -----------------------------------------
+def centre_crop(frames: np.ndarray) -> np.ndarray:
+    """The thesis's 240 × 90 window centred in (…, 240, 320) frames (the :class:`Crop` default), a view."""
+    x0, y0 = (FRAME_W - CROP_W) // 2, (FRAME_H - CROP_H) // 2
+    return frames[..., y0 : y0 + CROP_H, x0 : x0 + CROP_W]
 
 
-def synthetic_tactip(
-    rng: np.random.Generator,
-    *,
-    height: int = FRAME_H,
-    width: int = FRAME_W,
-    region: tuple[int, int, int, int] | None = None,
-    rows: int = 3,
-    cols: int = 10,
-    pin_sigma_px: float = 2.6,
-    pin_peak_dn: float = 190.0,
-    skin_dn: float = 28.0,
-    noise_dn: float = 3.0,
-    press_px: float = 0.0,
-    press_at: tuple[float, float] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """A TacTip-like uint8 image (height, width) and its pin centres (rows·cols, 2) as (x, y) px.
+def example_frames(forces_n: Sequence[float], *, crop: bool = True, seed: int = 11) -> np.ndarray:
+    """Frame stacks (n, 3, H, W) of the three emulated TacTips (``tactip_sim``) pressed with one
+    normal force per frame, in N, cropped to the thesis window unless ``crop=False``.
 
-    Gaussian bright pins (σ ``pin_sigma_px``, peak ``pin_peak_dn``) on dark skin (``skin_dn``)
-    with lens vignetting (35 % darker in the corners) and Gaussian sensor noise; ``rows`` × ``cols``
-    pins (staggered rows) fill ``region`` = (x0, y0, width, height), by default the centred
-    240 × 90 crop. ``press_px`` pushes pins radially away from ``press_at`` (default the region's
-    centre) by up to that many pixels (a Gaussian profile of σ 60 px): a contact. A minimal test
-    pattern, not the ``tactip_sim`` renderer.
+    A fresh copy of a cached render: the conformance suite asks for block examples many times.
     """
-    x0, y0, rw, rh = region or ((width - CROP_W) // 2, (height - CROP_H) // 2, CROP_W, CROP_H)
-    yy, xx = np.mgrid[0:height, 0:width].astype(np.float64)
-    vig = 1.0 - 0.35 * (((xx - width / 2) / (width / 2)) ** 2 + ((yy - height / 2) / (height / 2)) ** 2)
-    img = skin_dn * vig
-    cx, cy = press_at if press_at is not None else (x0 + rw / 2, y0 + rh / 2)
-    pins = []
-    for r in range(rows):
-        py = y0 + (r + 0.5) * rh / rows
-        shift = (6.0 if r % 2 else -6.0) * (rw / CROP_W)
-        for c in range(cols):
-            px = x0 + (c + 0.5) * rw / cols + shift
-            dx, dy = px - cx, py - cy
-            d = math.hypot(dx, dy) + 1e-9
-            g = press_px * math.exp(-(d**2) / (2 * 60.0**2))
-            px, py_ = px + g * dx / d, py + g * dy / d
-            pins.append((px, py_))
-            iy, ix = min(max(int(py_), 0), height - 1), min(max(int(px), 0), width - 1)
-            peak = pin_peak_dn * (0.7 + 0.3 * vig[iy, ix])
-            reach = 6.0 * pin_sigma_px  # beyond 6σ a pin adds < 1e-7 DN
-            y0_, y1_ = max(int(py_ - reach), 0), min(int(py_ + reach) + 2, height)
-            x0_, x1_ = max(int(px - reach), 0), min(int(px + reach) + 2, width)
-            if y0_ < y1_ and x0_ < x1_:
-                yl, xl = yy[y0_:y1_, x0_:x1_], xx[y0_:y1_, x0_:x1_]
-                img[y0_:y1_, x0_:x1_] += peak * np.exp(
-                    -((xl - px) ** 2 + (yl - py_) ** 2) / (2 * pin_sigma_px**2)
-                )
-    img = img + rng.normal(0.0, noise_dn, img.shape)
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8), np.array(pins)
+    return _example_frames_cached(tuple(float(f) for f in forces_n), crop, seed).copy()
 
 
-def _example_frames(n_frames: int = 5, crop: bool = True) -> np.ndarray:
-    """``n_frames`` stacks of 3 synthetic TacTip images, pressed harder frame by frame."""
-    return _example_frames_cached(n_frames, crop).copy()
-
-
-@lru_cache(maxsize=4)
-def _example_frames_cached(n_frames: int, crop: bool) -> np.ndarray:
-    rng = np.random.default_rng(11)
-    out = []
-    for i in range(n_frames):
-        stack = []
-        for _s in range(3):
-            img, _ = synthetic_tactip(rng, press_px=2.0 * i)
-            stack.append(img[75:165, 40:280] if crop else img)
-        out.append(np.stack(stack))
-    return np.stack(out)
+@lru_cache(maxsize=8)
+def _example_frames_cached(forces_n: tuple[float, ...], crop: bool, seed: int) -> np.ndarray:
+    frames = pressed_frames(forces_n, seed)
+    return np.ascontiguousarray(centre_crop(frames)) if crop else frames
 
 
 # -- crop ---------------------------------------------------------------------------------------------
@@ -259,10 +206,9 @@ class Crop(Block):
 
     @classmethod
     def example(cls) -> Example:
-        frames = _example_frames(5, crop=False)
         return Example(
             params={"x0_px": [40, 38, 42], "y0_px": [75]},
-            inputs={"x": frames},
+            inputs={"x": example_frames(range(5), crop=False)},
             rate_hz=40.0,
             units={"x": "DN"},
             duration_s=5 / 40.0,
@@ -346,7 +292,9 @@ class AdaptiveThreshold(Block):
 
     @classmethod
     def example(cls) -> Example:
-        return Example(inputs={"x": _example_frames(5)}, rate_hz=40.0, units={"x": "DN"}, duration_s=5 / 40.0)
+        return Example(
+            inputs={"x": example_frames(range(5))}, rate_hz=40.0, units={"x": "DN"}, duration_s=5 / 40.0
+        )
 
 
 # -- blob_detect ---------------------------------------------------------------------------------------
@@ -354,6 +302,18 @@ class AdaptiveThreshold(Block):
 
 def _t31(key: str) -> tuple[float, ...]:
     return tuple(TABLE_3_1[key])
+
+
+#: The fields of :class:`BlobDetectConfig` that take one value per sensor (or one for all).
+_PER_SENSOR = (
+    "min_threshold_dn",
+    "max_threshold_dn",
+    "min_area_px2",
+    "max_area_px2",
+    "min_circularity",
+    "min_inertia_ratio",
+    "min_convexity",
+)
 
 
 @dataclass(frozen=True)
@@ -412,17 +372,8 @@ class BlobDetectConfig(Config):
     max_pins: int = param(30, doc="rows of the pins output (the TacTip's 30 pins)", ge=1)
 
     def check(self) -> None:
-        per = [
-            "min_threshold_dn",
-            "max_threshold_dn",
-            "min_area_px2",
-            "max_area_px2",
-            "min_circularity",
-            "min_inertia_ratio",
-            "min_convexity",
-        ]
-        n = next((len(getattr(self, f)) for f in per if len(getattr(self, f)) > 1), 1)
-        for f in per:
+        n = next((len(getattr(self, f)) for f in _PER_SENSOR if len(getattr(self, f)) > 1), 1)
+        for f in _PER_SENSOR:
             if len(getattr(self, f)) not in (1, n):
                 raise self.error(
                     f,
@@ -430,29 +381,22 @@ class BlobDetectConfig(Config):
                     f"values here and {n} in another list",
                 )
         for lo, hi in (("min_threshold_dn", "max_threshold_dn"), ("min_area_px2", "max_area_px2")):
-            a = self._expand(lo, n)
-            b = self._expand(hi, n)
+            a = self.per_sensor(lo, n)
+            b = self.per_sensor(hi, n)
             for s in range(n):
                 if not a[s] < b[s]:
                     raise self.error(
                         hi, f"must exceed {lo} for every sensor; sensor {s} has {a[s]:g} >= {b[s]:g}"
                     )
 
-    def _expand(self, field: str, n: int) -> tuple[float, ...]:
+    def per_sensor(self, field: str, n: int) -> tuple[float, ...]:
+        """The per-sensor list ``field`` for ``n`` sensors (a single value serves every sensor)."""
         v = getattr(self, field)
         return v * n if len(v) == 1 else v
 
     def n_sensors(self) -> int:
         """Sensors the per-sensor lists describe (1 if every list has a single value)."""
-        return max(
-            len(self.min_threshold_dn),
-            len(self.max_threshold_dn),
-            len(self.min_area_px2),
-            len(self.max_area_px2),
-            len(self.min_circularity),
-            len(self.min_inertia_ratio),
-            len(self.min_convexity),
-        )
+        return max(len(getattr(self, f)) for f in _PER_SENSOR)
 
 
 class BlobDetect(Block):
@@ -487,10 +431,9 @@ class BlobDetect(Block):
     Example
     -------
     >>> import numpy as np
-    >>> from flowtact.blocks.teleop.image import BlobDetect, synthetic_tactip
+    >>> from flowtact.blocks.teleop.image import BlobDetect, example_frames
     >>> from flowtact.testing import run_offline
-    >>> img, true = synthetic_tactip(np.random.default_rng(0))
-    >>> frames = np.stack([img[75:165, 40:280]] * 3)[None]   # one sample, 3 sensors
+    >>> frames = example_frames([2.0])   # one sample: 3 emulated TacTips pressed with 2 N, cropped
     >>> out = run_offline(BlobDetect(), x=frames, rate_hz=40.0, units={"x": "DN"})
     >>> out["count"].data.tolist()
     [[30.0, 30.0, 30.0]]
@@ -537,24 +480,24 @@ class BlobDetect(Block):
         self._detectors = []
         for s in range(n):
             p = cv2.SimpleBlobDetector_Params()
-            p.minThreshold = float(c._expand("min_threshold_dn", n)[s])
-            p.maxThreshold = float(c._expand("max_threshold_dn", n)[s])
+            p.minThreshold = float(c.per_sensor("min_threshold_dn", n)[s])
+            p.maxThreshold = float(c.per_sensor("max_threshold_dn", n)[s])
             p.thresholdStep = float(c.threshold_step_dn)
             p.minDistBetweenBlobs = float(c.min_dist_between_blobs_px)
             p.minRepeatability = int(c.min_repeatability)
             p.filterByColor = True
             p.blobColor = 255 if c.blob_color == "bright" else 0
             p.filterByArea = True
-            p.minArea = float(c._expand("min_area_px2", n)[s])
-            p.maxArea = float(c._expand("max_area_px2", n)[s])
+            p.minArea = float(c.per_sensor("min_area_px2", n)[s])
+            p.maxArea = float(c.per_sensor("max_area_px2", n)[s])
             p.filterByCircularity = True
-            p.minCircularity = float(c._expand("min_circularity", n)[s])
+            p.minCircularity = float(c.per_sensor("min_circularity", n)[s])
             p.maxCircularity = 1e30  # OpenCV's default upper bounds: no limit
             p.filterByInertia = True
-            p.minInertiaRatio = float(c._expand("min_inertia_ratio", n)[s])
+            p.minInertiaRatio = float(c.per_sensor("min_inertia_ratio", n)[s])
             p.maxInertiaRatio = 1e30
             p.filterByConvexity = True
-            p.minConvexity = float(c._expand("min_convexity", n)[s])
+            p.minConvexity = float(c.per_sensor("min_convexity", n)[s])
             p.maxConvexity = 1e30
             self._detectors.append(cv2.SimpleBlobDetector_create(p))
 
@@ -583,7 +526,9 @@ class BlobDetect(Block):
 
     @classmethod
     def example(cls) -> Example:
-        return Example(inputs={"x": _example_frames(5)}, rate_hz=40.0, units={"x": "DN"}, duration_s=5 / 40.0)
+        return Example(
+            inputs={"x": example_frames(range(5))}, rate_hz=40.0, units={"x": "DN"}, duration_s=5 / 40.0
+        )
 
 
 # -- blob_mask -----------------------------------------------------------------------------------------
@@ -744,7 +689,7 @@ class BlobMask(Block):
 
     @classmethod
     def example(cls) -> Example:
-        frames = _example_frames(5)
+        frames = example_frames(range(5))
         rng = np.random.default_rng(3)
         pins = np.full((5, 3, 30, 3), np.nan)
         for i in range(5):

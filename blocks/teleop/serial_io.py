@@ -252,7 +252,7 @@ class SerialIo(Source):
         self._logged: set[str] = set()
 
     # -- compile time -------------------------------------------------------------------------
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
         c = self.config
         rate = c.rate_hz
         return {
@@ -288,7 +288,6 @@ class SerialIo(Source):
         self._mono0 = self._now0 = 0.0
         self._next_retry = -math.inf
         self._down_since: float | None = None
-        self._hello: Hello | None = None
         if c.port == "sim":
             # the device model only for this in-process mode: the host side speaks the protocol alone
             from flowtact.blocks.teleop.exo_device import ExoDevice, ExoParams
@@ -474,7 +473,7 @@ class SerialIo(Source):
     def _drop_port(self) -> None:
         ser, self._ser = self._ser, None
         if ser is not None:
-            with contextlib.suppress(Exception):  # the device is gone; closing may fail too
+            with contextlib.suppress(OSError):  # the device is gone; closing may fail too
                 ser.close()
 
     def _lost_port(self, err: BaseException) -> None:
@@ -506,7 +505,7 @@ class SerialIo(Source):
                     n = 0
             else:
                 n = self._ser.write(bytes(self._out)) or 0
-        except Exception as e:  # SerialException, OSError: the device vanished
+        except OSError as e:  # the device vanished (pyserial's SerialException is an OSError)
             self._lost_port(e)
             return False
         del self._out[:n]
@@ -516,7 +515,7 @@ class SerialIo(Source):
         start = time.monotonic()
         try:
             data = self._ser.read(65536)
-        except Exception as e:  # SerialException, OSError: the device vanished
+        except OSError as e:  # the device vanished (pyserial's SerialException is an OSError)
             self._lost_port(e)
             return
         arrival = time.monotonic()
@@ -545,7 +544,6 @@ class SerialIo(Source):
         if isinstance(msg, DataPacket):
             self._packet(msg, arrival, after)
         elif isinstance(msg, Hello):
-            self._hello = msg
             self.count("hellos")
             if msg.version != PROTOCOL_VERSION:
                 self._say(

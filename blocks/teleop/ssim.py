@@ -93,50 +93,22 @@ def ssim_exact_numpy(ref: np.ndarray, cur: np.ndarray, *, full: bool = False) ->
 # -- numba kernels ------------------------------------------------------------------------------------
 
 
-@njit(cache=True)
-def _reference_terms(ref, a_out, vx_out):
-    """Per-window reference sums A = Σx and Vx = 49·Σx² − A² (both exact int32).
-
-    ``ref`` (n, H, W) uint8; outputs (n, H−6, W−6), from which :class:`SsimReference` caches
-    P = A² + C1 and Q = Vx + C2 in the kernel's float type.
-    """
-    n, hh, ww = ref.shape
-    h, w = hh - WIN + 1, ww - WIN + 1
-    cs = np.zeros(ww, np.int32)
-    css = np.zeros(ww, np.int32)
-    for s in range(n):
-        x = ref[s]
-        cs[:] = 0
-        css[:] = 0
-        for k in range(WIN):
-            for j in range(ww):
-                v = np.int32(x[k, j])
-                cs[j] += v
-                css[j] += v * v
-        for i in range(h):
-            if i > 0:
-                for j in range(ww):
-                    v_in = np.int32(x[i + WIN - 1, j])
-                    v_out = np.int32(x[i - 1, j])
-                    cs[j] += v_in - v_out
-                    css[j] += v_in * v_in - v_out * v_out
-            for j in range(w):
-                sa = 0
-                saa = 0
-                for q in range(WIN):
-                    sa += cs[j + q]
-                    saa += css[j + q]
-                a_out[s, i, j] = sa
-                vx_out[s, i, j] = _NP * saa - sa * sa
+# The SSIM kernel, per frame and sensor: column sums over the 7 rows of the current window row, for
+# y, y² and x·y, exact int32, updated by one row in and one row out; int64 prefix sums of those
+# along the row, so each window sum is one subtraction; the reference terms A, P = A² + C1,
+# Q = Vx + C2 cached by SsimReference (measured ~10 % faster than forming P and Q from int32 A and
+# Vx per window); each window's value added into a per-column float64 accumulator and the columns
+# summed in order at the end (a fixed order, whatever the chunking). The final formula runs in the
+# float type of the cached P and Q: numba compiles one version for float64 and one for float32.
 
 
-# The two SSIM kernels share one algorithm, per frame and sensor: column sums over the 7 rows of
-# the current window row, for y, y² and x·y, exact int32, updated by one row in and one row out;
-# int64 prefix sums of those along the row, so each window sum is one subtraction; the reference
-# terms A, P = A² + C1, Q = Vx + C2 cached by SsimReference (measured ~10 % faster than forming
-# P and Q from int32 A and Vx per window); each window's value added into a per-column float64
-# accumulator and the columns summed in order at the end (a fixed order, whatever the chunking).
-# They differ only in the float type of the final formula.
+@njit(cache=True, inline="always")
+def _sliding_buffers(ww):  # type: ignore[no-untyped-def]
+    """Column sums of y, y², x·y (int32) and their row prefix sums (int64, leading 0) for rows of
+    ``ww`` pixels."""
+    columns = (np.empty(ww, np.int32), np.empty(ww, np.int32), np.empty(ww, np.int32))
+    prefixes = (np.zeros(ww + 1, np.int64), np.zeros(ww + 1, np.int64), np.zeros(ww + 1, np.int64))
+    return columns + prefixes
 
 
 @njit(cache=True, inline="always")
@@ -177,56 +149,41 @@ def _row_prefix(y, x, i, cy, cyy, cxy, py, pyy, pxy):
 
 
 @njit(cache=True)
-def _ssim_f64(frames, ref, a_ref, p_ref, q_ref, out):
-    """Mean SSIM of ``frames`` (k, n, H, W) uint8 against ``ref`` (n, H, W): float64 formula."""
-    k, n, hh, ww = frames.shape
+def _reference_terms(ref, a_out, vx_out):
+    """Per-window reference sums A = Σx and Vx = 49·Σx² − A² (both exact int32).
+
+    ``ref`` (n, H, W) uint8; outputs (n, H−6, W−6), from which :class:`SsimReference` caches
+    P = A² + C1 and Q = Vx + C2 in the kernel's float type. The kernel's own sliding sums, with the
+    reference as both images (its x·x sums are Σx² again, unused: this runs once per reference).
+    """
+    n, hh, ww = ref.shape
     h, w = hh - WIN + 1, ww - WIN + 1
-    cy = np.empty(ww, np.int32)
-    cyy = np.empty(ww, np.int32)
-    cxy = np.empty(ww, np.int32)
-    py = np.zeros(ww + 1, np.int64)
-    pyy = np.zeros(ww + 1, np.int64)
-    pxy = np.zeros(ww + 1, np.int64)
-    acc = np.empty(w, np.float64)
-    c1w = C1W
-    c2w = C2W
-    for f in range(k):
-        for s in range(n):
-            y, x = frames[f, s], ref[s]
-            a_s, p_s, q_s = a_ref[s], p_ref[s], q_ref[s]
-            acc[:] = 0.0
-            _start_columns(y, x, cy, cyy, cxy)
-            for i in range(h):
-                _row_prefix(y, x, i, cy, cyy, cxy, py, pyy, pxy)
-                for j in range(w):
-                    sb = py[j + WIN] - py[j]
-                    sbb = pyy[j + WIN] - pyy[j]
-                    sab = pxy[j + WIN] - pxy[j]
-                    ab = a_s[i, j] * sb
-                    bb = sb * sb
-                    num = (np.float64(2 * ab) + c1w) * (np.float64(2 * (_NP * sab - ab)) + c2w)
-                    den = (p_s[i, j] + np.float64(bb)) * (q_s[i, j] + np.float64(_NP * sbb - bb))
-                    acc[j] += num / den
-            tot = 0.0
+    cx, cxx, cxx2, px, pxx, pxx2 = _sliding_buffers(ww)
+    for s in range(n):
+        x = ref[s]
+        _start_columns(x, x, cx, cxx, cxx2)
+        for i in range(h):
+            _row_prefix(x, x, i, cx, cxx, cxx2, px, pxx, pxx2)
             for j in range(w):
-                tot += acc[j]
-            out[f, s] = tot / (h * w)
+                sa = px[j + WIN] - px[j]
+                a_out[s, i, j] = sa
+                vx_out[s, i, j] = _NP * (pxx[j + WIN] - pxx[j]) - sa * sa
 
 
 @njit(cache=True)
-def _ssim_f32(frames, ref, a_ref, p_ref, q_ref, out):
-    """As :func:`_ssim_f64` with the final formula in float32 (sums exact, the mean in float64)."""
+def _ssim(frames, ref, a_ref, p_ref, q_ref, out):
+    """Mean SSIM of ``frames`` (k, n, H, W) uint8 against ``ref`` (n, H, W) into ``out`` (k, n).
+
+    The final formula is in the float type of ``p_ref``/``q_ref`` (float64 or float32); the sums
+    are exact and the mean is float64 either way.
+    """
+    ft = p_ref.dtype.type
     k, n, hh, ww = frames.shape
     h, w = hh - WIN + 1, ww - WIN + 1
-    cy = np.empty(ww, np.int32)
-    cyy = np.empty(ww, np.int32)
-    cxy = np.empty(ww, np.int32)
-    py = np.zeros(ww + 1, np.int64)
-    pyy = np.zeros(ww + 1, np.int64)
-    pxy = np.zeros(ww + 1, np.int64)
+    cy, cyy, cxy, py, pyy, pxy = _sliding_buffers(ww)
     acc = np.empty(w, np.float64)
-    c1w = np.float32(C1W)
-    c2w = np.float32(C2W)
+    c1w = ft(C1W)
+    c2w = ft(C2W)
     for f in range(k):
         for s in range(n):
             y, x = frames[f, s], ref[s]
@@ -241,8 +198,8 @@ def _ssim_f32(frames, ref, a_ref, p_ref, q_ref, out):
                     sab = pxy[j + WIN] - pxy[j]
                     ab = a_s[i, j] * sb
                     bb = sb * sb
-                    num = (np.float32(2 * ab) + c1w) * (np.float32(2 * (_NP * sab - ab)) + c2w)
-                    den = (p_s[i, j] + np.float32(bb)) * (q_s[i, j] + np.float32(_NP * sbb - bb))
+                    num = (ft(2 * ab) + c1w) * (ft(2 * (_NP * sab - ab)) + c2w)
+                    den = (p_s[i, j] + ft(bb)) * (q_s[i, j] + ft(_NP * sbb - bb))
                     acc[j] += np.float64(num / den)
             tot = 0.0
             for j in range(w):
@@ -274,7 +231,6 @@ class SsimReference:
         # P = A² + C1 and Q = Vx + C2: A² < 2**53 is exact in float64, so one rounding each
         self._p = (self._a.astype(np.float64) ** 2 + C1W).astype(ft)
         self._q = (vx.astype(np.float64) + C2W).astype(ft)
-        self._kernel = _ssim_f64 if precision == "float64" else _ssim_f32
 
     def compare(self, frames: np.ndarray) -> np.ndarray:
         """Mean SSIM (k, n) of frames (k, n, H, W) uint8 against the reference."""
@@ -283,7 +239,7 @@ class SsimReference:
             raise ValueError(f"frames of shape {frames.shape[1:]} against a reference of {self.image.shape}")
         out = np.empty(frames.shape[:2], np.float64)
         if len(frames):
-            self._kernel(frames, self.image, self._a, self._p, self._q, out)
+            _ssim(frames, self.image, self._a, self._p, self._q, out)
         return out
 
 

@@ -4,13 +4,14 @@
 middle; 320×240 gray at 40 FPS) while a scenario (taps of rising force, grasps of a soft and a
 firm object, rest) or an upstream gripper simulator presses on each fingertip, and emits the true
 contact force next to the frames so that force estimators (SSIM + linear fit, CNN) can be
-trained and scored against the truth. :func:`render` draws frames without a graph.
+trained and scored against the truth. :func:`render` draws frames without a graph (and
+:func:`pressed_frames` those of a press at the centre: the image blocks' examples and tests).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Literal
@@ -27,6 +28,7 @@ from flowtact.block import (
     nonfinite_counter_docs,
     screen_nonfinite,
 )
+from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import param
 
@@ -42,6 +44,7 @@ __all__ = [
     "TactipSimConfig",
     "pin_layout",
     "pins_px",
+    "pressed_frames",
     "render",
     "render_reference",
     "scenario_contacts",
@@ -55,18 +58,12 @@ PX_PER_MM = 7.0
 PIN_PITCH_MM = 3.0
 ROW_PITCH_MM = 3.4
 PIN_RADIUS_MM = 0.7
+#: Width of a pin tip's soft (logistic) edge.
 PIN_EDGE_PX = 0.6
 #: Tangential skin displacement per newton of shear at the contact centre.
 SHEAR_MM_PER_N = 0.3
 MASK64 = (1 << 64) - 1
 GOLDEN = 0x9E3779B97F4A7C15
-#: Irwin–Hall(4) of 16-bit fields: mean and standard deviation of the sum.
-IH_MEAN = 2.0 * 65535.0
-IH_SD = math.sqrt(4.0 * (65536.0**2 - 1.0) / 12.0)
-
-
-def _raised_cosine(x: np.ndarray) -> np.ndarray:
-    return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -343,7 +340,7 @@ def _render_kernel(out, background, vig, xy, radius, bright, keys, noise_dn, buf
                 py = xy[k, s, p, 1]
                 rad = radius[k, s, p]
                 amp = bright[k, s, p]
-                reach = rad + 6.0 * 0.6 + 1.0
+                reach = rad + 6.0 * PIN_EDGE_PX + 1.0
                 x0 = max(int(np.floor(px - reach)), 0)
                 x1 = min(int(np.ceil(px + reach)), w - 1)
                 y0 = max(int(np.floor(py - reach)), 0)
@@ -354,7 +351,7 @@ def _render_kernel(out, background, vig, xy, radius, bright, keys, noise_dn, buf
                         dx = x - px
                         d = np.sqrt(dx * dx + dy * dy)
                         q = min(d, rad) / rad
-                        edge = 1.0 / (1.0 + np.exp((d - rad) / 0.6))
+                        edge = 1.0 / (1.0 + np.exp((d - rad) / PIN_EDGE_PX))
                         buf[y, x] += amp * (1.0 - 0.3 * q * q) * edge * vig[s, y, x]
             key = keys[k, s]
             for y in range(h):
@@ -362,6 +359,7 @@ def _render_kernel(out, background, vig, xy, radius, bright, keys, noise_dn, buf
                     i = np.uint64(y * w + x + 1)
                     hsh = _mix64(key + i * gold)
                     tot = (hsh & m16) + ((hsh >> s16) & m16) + ((hsh >> s32) & m16) + (hsh >> s48)
+                    # a sum of four 16-bit fields (Irwin–Hall): mean 131070, sd ≈ 37837.2268
                     z = (np.float64(tot) - 131070.0) / 37837.2268
                     v = np.floor(buf[y, x] + noise_dn * z + 0.5)
                     if v < 0.0:
@@ -382,14 +380,14 @@ def _render_numpy(out, background, vig, xy, radius, bright, keys, noise_dn) -> N
             for p in range(xy.shape[2]):
                 px, py = xy[k, s, p]
                 rad, amp = radius[k, s, p], bright[k, s, p]
-                reach = rad + 6.0 * 0.6 + 1.0
+                reach = rad + 6.0 * PIN_EDGE_PX + 1.0
                 x0, x1 = max(math.floor(px - reach), 0), min(math.ceil(px + reach), w - 1)
                 y0, y1 = max(math.floor(py - reach), 0), min(math.ceil(py + reach), h - 1)
                 yy, xx = np.mgrid[y0 : y1 + 1, x0 : x1 + 1]
                 dx, dy = xx - px, yy - py
                 d = np.sqrt(dx * dx + dy * dy)
                 q = np.minimum(d, rad) / rad
-                edge = 1.0 / (1.0 + np.exp((d - rad) / 0.6))
+                edge = 1.0 / (1.0 + np.exp((d - rad) / PIN_EDGE_PX))
                 buf[y0 : y1 + 1, x0 : x1 + 1] += (
                     amp * (1.0 - 0.3 * q * q) * edge * vig[s, y0 : y1 + 1, x0 : x1 + 1]
                 )
@@ -448,6 +446,23 @@ def render(
     return out
 
 
+def pressed_frames(
+    forces_n: np.ndarray | Sequence[float],
+    seed: int = 1,
+    params: TactipSimConfig | Mapping[str, Any] | None = None,
+) -> np.ndarray:
+    """Frames uint8 (n, 3, 240, 320) of the three TacTips pressed at the pin-array centre.
+
+    ``forces_n``: the normal force of each frame in N, (n,) for every sensor or (n, 3) per sensor;
+    frame ``i``'s noise comes from ``(seed, i)``. The test, example and bench images of the image,
+    SSIM and CNN blocks.
+    """
+    f = np.asarray(forces_n, np.float64)
+    n = len(f)
+    f = np.broadcast_to(f.reshape(n, -1), (n, N_FINGERS))
+    return render(f, np.zeros((n, N_FINGERS, 2)), np.arange(n), seed, params)
+
+
 def render_reference(
     seed: int, params: TactipSimConfig | Mapping[str, Any] | None = None, frame_index: int = 0
 ) -> np.ndarray:
@@ -486,7 +501,7 @@ def scenario_contacts(
         k = np.maximum(np.floor((t - c.onset_s) / c.tap_period_s), 0.0).astype(np.int64)
         u = t - c.onset_s - k * c.tap_period_s
         third = c.tap_s / 3.0
-        shape = _raised_cosine(u / third) - _raised_cosine((u - 2.0 * third) / third)
+        shape = raised_cosine(u / third) - raised_cosine((u - 2.0 * third) / third)
         shape = np.where(t < c.onset_s, 0.0, shape)
         level = k % c.levels
         group = k // c.levels
@@ -509,7 +524,7 @@ def scenario_contacts(
         firm = (k % 2) == 1
         rise = np.where(firm, c.firm_rise_s, c.soft_rise_s)
         top = np.where(firm, c.firm_force_n, c.soft_force_n)
-        shape = _raised_cosine(u / rise) - _raised_cosine((u - rise - c.hold_s) / c.release_s)
+        shape = raised_cosine(u / rise) - raised_cosine((u - rise - c.hold_s) / c.release_s)
         shape = np.where(t < c.onset_s, 0.0, shape)
         kk = k[:, None]
         share = np.array([1.0, 0.6, 0.5])[None, :]  # the thumb opposes the two fingers

@@ -19,7 +19,6 @@ torch is imported inside the functions (``import flowtact.blocks.teleop.train_fo
 from __future__ import annotations
 
 import argparse
-import contextlib
 import copy
 import datetime as _dt
 import json
@@ -187,21 +186,17 @@ class Dataset:
 
 
 def _provenance(path: Path) -> dict[str, Any]:
-    import h5py
+    """The recording's command, graph seed, creation time, flowtact version and graph name (those it has)."""
+    from flowtact.record import read_recording
 
-    out: dict[str, Any] = {}
-    with h5py.File(path, "r") as f:
-        for key in ("command", "graph_seed", "created_utc", "flowtact_version"):
-            if key in f.attrs:
-                v = f.attrs[key]
-                out[key] = (
-                    v.item() if isinstance(v, np.generic) else (v.decode() if isinstance(v, bytes) else v)
-                )
-        if "graph_yaml" in f.attrs:
-            import yaml
-
-            with contextlib.suppress(yaml.YAMLError, AttributeError):
-                out["graph"] = (yaml.safe_load(f.attrs["graph_yaml"]) or {}).get("name")
+    bundle = read_recording(path, streams=()).provenance
+    out = {
+        key: bundle[key]
+        for key in ("command", "graph_seed", "created_utc", "flowtact_version")
+        if key in bundle
+    }
+    if "graph_name" in bundle:
+        out["graph"] = bundle["graph_name"]
     return out
 
 

@@ -15,17 +15,13 @@ from typing import Literal
 import numpy as np
 
 from flowtact.block import Example, Port, Source
+from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
 
 from .aunp import SENSITIVITY_PER_N
 
-__all__ = ["AunpSensor", "AunpSensorConfig", "raised_cosine"]
-
-
-def raised_cosine(x: np.ndarray) -> np.ndarray:
-    """Smooth step: 0 for x ≤ 0, ½ − ½·cos(πx) on [0, 1], 1 for x ≥ 1 (C¹, zero slope at both ends)."""
-    return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
+__all__ = ["AunpSensor", "AunpSensorConfig"]
 
 
 @dataclass(frozen=True)
@@ -202,7 +198,7 @@ class AunpSensor(Source):
         "force": Port(shape=(3,), units="N", doc="true force [Fx, Fy, Fz] on the bump, for evaluation"),
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
         rate = self.config.rate_hz
         labels = {"r": ("r1", "r2", "r3", "r4"), "force": ("Fx", "Fy", "Fz")}
         return {

@@ -37,6 +37,7 @@ import stat
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -219,15 +220,15 @@ class _RigAuthenticator(ThreadAuthenticator):
 
 
 class _OnlyRigKey:
-    """Credentials provider: admits the rig's public key, records every other one."""
+    """Credentials provider: admits the rig's public key, reports every other one to ``refuse``."""
 
-    def __init__(self, owner: Authenticator) -> None:
-        self.owner = owner
+    def __init__(self, rig_key: bytes, refuse: Callable[[bytes], None]) -> None:
+        self.rig_key, self.refuse = rig_key, refuse
 
-    def callback(self, domain: str, key: bytes) -> bool:
-        if key == self.owner.keys.public:
+    def callback(self, domain: str, key: bytes) -> bool:  # noqa: ARG002 — pyzmq's signature; one policy for all domains
+        if key == self.rig_key:
             return True
-        self.owner._refuse(self.owner._auth.address if self.owner._auth else "?", key)
+        self.refuse(key)
         return False
 
 
@@ -257,7 +258,7 @@ class Authenticator:
             if exc.errno == zmq.EADDRINUSE:
                 raise SecurityError("an Authenticator is already running in this ZeroMQ context") from exc
             raise
-        auth.configure_curve_callback("*", _OnlyRigKey(self))
+        auth.configure_curve_callback("*", _OnlyRigKey(self.keys.public, self._refuse))
         self._auth = auth
         with _active_lock:
             _active[id(self.ctx)] = _active.get(id(self.ctx), 0) + 1
@@ -280,7 +281,8 @@ class Authenticator:
     def running(self) -> bool:
         return self._auth is not None and self._auth.is_alive()
 
-    def _refuse(self, address: str, key: bytes) -> None:
+    def _refuse(self, key: bytes) -> None:
+        address = self._auth.address if self._auth else "?"
         message = (
             f"refused a connection from {address}: unknown CURVE key {key[:8].decode('ascii', 'replace')}…"
         )

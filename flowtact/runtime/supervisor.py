@@ -208,7 +208,7 @@ class ProcessExecutor:
         if threading.current_thread() is not threading.main_thread():
             return lambda: None
 
-        def on_signal(signum: int, frame: Any) -> None:
+        def on_signal(_signum: int, _frame: Any) -> None:
             self.interrupts += 1
 
         old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}

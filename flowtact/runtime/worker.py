@@ -242,7 +242,7 @@ class Worker:
         except _NodeFailure as f:
             self._send("error", **f.report)
             return 1
-        except Exception as e:  # a framework failure: report it rather than vanish
+        except Exception as e:  # noqa: BLE001 — any framework failure is reported to the supervisor, not lost
             self._send(
                 "error",
                 node=None,
@@ -392,7 +392,7 @@ class Worker:
         for block in reversed(getattr(self, "opened", [])):
             try:
                 block.close()
-            except Exception:  # a failing close must not hide the run's outcome
+            except Exception:  # noqa: BLE001 — a block's close may raise anything; it must not hide the run's outcome
                 traceback.print_exc()
 
     # -- the tick loop ----------------------------------------------------------------------

@@ -135,9 +135,10 @@ def test_npz_data_is_read_at_reset_not_at_compile(tmp_path):
     b = Replay(path=str(p))
     spec = b.specs({})["y"]  # header only
     assert spec.shape == (2,) and spec.rate_hz == 10.0
-    assert isinstance(b._src.data, tuple)  # not loaded yet
+    assert isinstance(b._src.data, tuple)  # noqa: SLF001 — not loaded yet: when loading happens is the test
     b.bind({})
-    assert isinstance(b._src.data, np.ndarray) and not b._src.data.flags.writeable
+    loaded = b._src.data  # noqa: SLF001 — as above
+    assert isinstance(loaded, np.ndarray) and not loaded.flags.writeable
 
 
 CSV = "t,fx,fy,fz\n0.000,1,2,3\n0.002,4,5,6\n0.004,7,8,9\n0.006,10,11,12\n"
@@ -259,7 +260,7 @@ def test_close_releases_the_h5_file_and_open_reloads(recording):
     b = Replay(path=str(path), stream="force.f")
     b.bind({})
     b.close()
-    assert b._src.h5_file is None
+    assert b._src.h5_file is None  # noqa: SLF001 — whether the file handle is released is the test
     b.open()
     b.restart()
     np.testing.assert_array_equal(b(0.01)["y"].data, written["force.f"].data[:10])

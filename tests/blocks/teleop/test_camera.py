@@ -80,7 +80,7 @@ def test_mjpg_videos_read_back_within_codec_tolerance(frames, videos):
     np.testing.assert_allclose(out["device_t"].data[:, 0], np.arange(N) / 40, atol=1e-6)
 
 
-def test_end_of_files_stops_or_loops(frames, folders, videos):
+def test_end_of_files_stops_or_loops(folders, videos):
     for devices in (folders, videos):
         b, out = run(devices, 0.5)
         assert len(out["frames"]) == N and b.counters == {"ended": 1}
@@ -149,7 +149,7 @@ def test_missing_devices_fail_clearly_at_open(folders, tmp_path):
         Camera(devices=[57]).open()
 
 
-def test_corrupt_image_and_stalled_device(frames, folders, videos, tmp_path):
+def test_corrupt_image_and_stalled_device(frames, videos, tmp_path):
     bad = tmp_path / "bad"
     bad.mkdir()
     cv2.imwrite(str(bad / "0.png"), frames[0, 0])

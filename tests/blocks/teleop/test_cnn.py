@@ -271,7 +271,9 @@ def _write_recording(path, frames, force, t_force=None):
         "sim.frames": StreamSpec("uint8", frames.shape[1:], "DN", 40.0),
         "sim.force": StreamSpec("float64", (3,), "N", 40.0),
     }
-    with Recorder(path, specs, {"graph_yaml": "name: tiny\n", "command": "test"}) as rec:
+    with Recorder(
+        path, specs, {"graph_name": "tiny", "graph_yaml": "name: tiny\n", "command": "test"}
+    ) as rec:
         rec.write("sim.frames", Chunk(t, frames))
         rec.write("sim.force", Chunk(t if t_force is None else t_force, force))
 

@@ -78,13 +78,13 @@ def spy_read_times(block) -> list[tuple[float, float]]:
     idle machine, milliseconds on a loaded one.
     """
     seen: list[tuple[float, float]] = []
-    handle = block._packet
+    handle = block._packet  # noqa: SLF001 — a spy on the block's packet handler
 
     def spy(p, arrival, after):
         seen.append((p.host_ns * 1e-9, arrival))
         return handle(p, arrival, after)
 
-    block._packet = spy
+    block._packet = spy  # noqa: SLF001 — as above
     return seen
 
 
@@ -121,7 +121,7 @@ def test_sim_commands_engage_the_servos_and_are_clamped():
     assert (eng[(t > 1.05) & (t < 1.98)] == 1).all()  # the sample at ≈ 2.0 s may see the release
     assert (eng[(t < 0.98) | (t > 2.05)] == 0).all()
     assert block.counters["cmd_clamped"] == 3 * 100  # every engaged finger's deviation, every tick
-    assert block._dev.dev_us.tolist() == [0.0, 0.0, 0.0]
+    assert block._dev.dev_us.tolist() == [0.0, 0.0, 0.0]  # noqa: SLF001 — what the sim device's servos got
     rtt = out["rtt"].data[t > 1.1]
     assert np.isfinite(rtt).all() and (rtt > 0).all() and (rtt < 0.03).all()
 
@@ -258,7 +258,7 @@ def test_against_the_emulator_stamps_commands_and_replug():
 
     def unplug():
         unplugged["t"] = time.monotonic()
-        os.kill(block._proc.pid, signal.SIGUSR1)
+        os.kill(block._proc.pid, signal.SIGUSR1)  # noqa: SLF001 — the emulator's "unplug" signal
 
     seen = spy_read_times(block)
     replugged = []  # samples after the unplug, per step
@@ -278,7 +278,7 @@ def test_against_the_emulator_stamps_commands_and_replug():
         )
     finally:
         block.close()
-    assert block._proc is None  # the emulator was stopped
+    assert block._proc is None  # noqa: SLF001 — the emulator was stopped
     t, send_t = out["fsr"].t, out["send_t"].data
     assert (np.diff(t) > 0).all()
 
