@@ -1,4 +1,4 @@
-"""The timing helper every benchmark shares (``python bench/NAME.py`` puts bench/ on ``sys.path``)."""
+"""The timing helper every benchmark shares (``python bench/NAME.py`` puts bench/ on ``sys.path``; the scripts in bench/blocks/ put it there themselves)."""
 
 from __future__ import annotations
 

@@ -326,7 +326,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 def _bench_dir() -> Path | None:
     for base in (Path.cwd(), Path(__file__).resolve().parent.parent):
-        if (base / "bench").is_dir() and any((base / "bench").glob("*.py")):
+        if (base / "bench").is_dir() and any((base / "bench").rglob("*.py")):
             return base / "bench"
     return None
 
@@ -340,8 +340,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         return EXIT_RUN_ERROR
     scripts = {
         p.stem: p
-        for p in sorted(folder.glob("*.py"))
-        if not p.stem.startswith("_") and '__name__ == "__main__"' in p.read_text()
+        for p in sorted(folder.rglob("*.py"), key=lambda p: p.stem)
+        # a benchmark is a script; packages (bench/peers/) hold what the scripts import or start
+        if not p.stem.startswith("_")
+        and not (p.parent / "__init__.py").exists()
+        and '__name__ == "__main__"' in p.read_text()
     }
     if not args.name:
         for name, path in scripts.items():

@@ -1,6 +1,6 @@
 """Contact-force estimation on emulated TacTips: CNN width ladder vs SSIM + linear fit (White 2023).
 
-    python bench/force_estimation.py [--quick] [--json out.json] [--plot out.png]
+    python bench/blocks/teleop/force_estimation.py [--quick] [--json out.json] [--plot out.png]
                                      [--widths w8,w16,w32] [--epochs N] [--time-widths w64,paper]
 
 Data: ``tactip_sim`` taps exactly as ``graphs/tactip_dataset.yaml`` records them (75 s, 3 000
@@ -34,6 +34,7 @@ so a lower MAE here says little about real TacTips.
 from __future__ import annotations
 
 import os
+import sys
 
 for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
@@ -48,6 +49,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
+
+BENCH = Path(__file__).resolve().parents[2]  # bench/: its shared helpers (_timing)
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
 from _timing import median_time  # noqa: E402
 
 from flowtact import Chunk, StreamSpec  # noqa: E402
@@ -56,7 +62,7 @@ from flowtact.blocks.teleop.hand import FINGERS  # noqa: E402
 from flowtact.blocks.teleop.train_force import DEFAULT_CROP, Dataset, TrainConfig, evaluate, train_on_arrays  # noqa: E402
 from flowtact.compile import node_seed  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 DATASET_GRAPH = ROOT / "graphs" / "tactip_dataset.yaml"
 TRAIN_SEED, HELDOUT_SEED = 2023, 7
 PAPER = {
@@ -365,7 +371,7 @@ def main() -> None:
             "torch": torch.__version__,
             "cpu": platform.processor(),
         },
-        "command": "python bench/force_estimation.py" + (" --quick" if args.quick else ""),
+        "command": "python bench/blocks/teleop/force_estimation.py" + (" --quick" if args.quick else ""),
         "data": {
             "train_frames": len(train["force"]),
             "heldout_frames": len(held["force"]),

@@ -1,6 +1,6 @@
 """Benchmark of the savgol block: throughput vs chunk size, and derivative error vs latency.
 
-    python bench/savgol.py [--quick] [--json out.json] [--plot out.png]
+    python bench/blocks/signal/savgol.py [--quick] [--json out.json] [--plot out.png]
 
 (1) Throughput through the block's ``__call__`` (what an executor pays: read-only views, bad-data
     screen, numba kernel, output chunk) for chunks of 1 … 10 000 samples, 1 and 3 channels, both
@@ -16,6 +16,8 @@
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
 for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
@@ -26,6 +28,11 @@ import math  # noqa: E402
 import platform  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+BENCH = Path(__file__).resolve().parents[2]  # bench/: its shared helpers (_timing)
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
 from _timing import median_time  # noqa: E402
 from scipy import signal  # noqa: E402  (bench-only baseline)
 

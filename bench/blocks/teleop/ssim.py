@@ -1,6 +1,6 @@
 """Benchmark of the SSIM block: frames/s per core against scikit-image, and the block's step cost.
 
-    python bench/ssim.py [--quick] [--json out.json]
+    python bench/blocks/teleop/ssim.py [--quick] [--json out.json]
 
 (1) Kernel: mean SSIM of one uint8 frame against a fixed reference, frames/s on one core (threads
     pinned, median of repeats) for the thesis's cropped 90×240 frames and full 240×320 frames:
@@ -19,6 +19,8 @@
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
 for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
@@ -28,6 +30,11 @@ import json  # noqa: E402
 import platform  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+BENCH = Path(__file__).resolve().parents[2]  # bench/: its shared helpers (_timing)
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
 from _timing import median_time  # noqa: E402
 from skimage.metrics import structural_similarity  # noqa: E402  (bench-only baseline)
 

@@ -1,6 +1,6 @@
 """Benchmark of the teleoperation loop: frame-to-servo-command latency, live, with the real serial path.
 
-    python bench/teleop.py [--quick] [--json out.json]
+    python bench/blocks/teleop/teleop.py [--quick] [--json out.json]
 
 Runs ``graphs/teleop.yaml`` in real time (three worker processes; `flowtact sim exo` on a
 pseudo-terminal; 3 TacTips at 40 FPS) and reads the graph's deadline path ``cams -> exo``: from
@@ -23,7 +23,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 BAR_P99_US = 10_000.0
 
 

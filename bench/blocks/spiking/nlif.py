@@ -13,7 +13,7 @@ Measures, in one run (one core, NUMBA_NUM_THREADS=1, median of repeats):
   4. noise: stationary membrane sd vs dt (must be flat for exp) and noisy firing rate vs dt;
   5. optionally (``--brian2``) Brian2's cython target at N = 1000 as the external comparison.
 
-    python bench/nlif.py [--quick] [--json out.json] [--plot out.png] [--brian2]
+    python bench/blocks/spiking/nlif.py [--quick] [--json out.json] [--plot out.png] [--brian2]
 """
 
 from __future__ import annotations
@@ -22,14 +22,21 @@ import argparse
 import json
 import math
 import os
+import sys
+from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
-from _timing import median_time
 
-from flowtact.blocks.spiking.nlif import Nlif
-from flowtact.chunk import Chunk, StreamSpec
+BENCH = Path(__file__).resolve().parents[2]  # bench/: its shared helpers (_timing)
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+
+from _timing import median_time  # noqa: E402  (bench/ is on sys.path now)
+
+from flowtact.blocks.spiking.nlif import Nlif  # noqa: E402
+from flowtact.chunk import Chunk, StreamSpec  # noqa: E402
 
 INTEGRATORS = ("exp", "euler", "exp_interp")
 TAU = 0.01
