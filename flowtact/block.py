@@ -348,13 +348,10 @@ def screen_nonfinite(
     d = chunk.data
     if len(chunk) == 0 or d.dtype.kind != "f":
         return chunk, last
-    with np.errstate(over="ignore", invalid="ignore"):  # inf - inf, or a sum past 1e308: slow path
-        if np.isfinite(np.add.reduce(d, axis=None)):  # the common case, one cheap pass: all finite
-            return chunk, d[-1].copy()
+    if np.isfinite(d).all():  # the common case, one cheap pass (faster than a sum, and never warns)
+        return chunk, (d[-1].copy() if policy == "hold" else last)
     flat = d.reshape(len(chunk), -1)
     bad = ~np.isfinite(flat).all(axis=1)
-    if not bad.any():
-        return chunk, (d[-1].copy() if len(d) else last)
     n_bad = int(bad.sum())
     first_bad = float(chunk.t[np.argmax(bad)])
     if policy == "raise":
