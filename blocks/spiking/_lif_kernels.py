@@ -40,9 +40,11 @@ plain-numpy twins, which step one sample at a time):
 
 The threshold/reset loop lives in a separate (not inlined) function so that the spike buffers are
 plain arguments there: a buffer that may be reallocated inside the hot loop costs 3× in numba.
-Both kernels share their buffers, execution order, noise and ring-slot helpers; inside the per-step
-loops only scalar helpers are inlined (numba adds an atomic reference-count pair per step for each
-array an inlined helper takes there, measured 2–3× at N = 24), so those loops are written out.
+Both kernels share their buffers, execution order, noise and ring-slot helpers. Each kernel is a
+dispatcher over a by-neuron and a by-tile run, inlined into it (a call costs numba a reference-count
+pair per array argument, ~0.3 µs per kernel call). Inside the per-step loops only scalar helpers are
+inlined (an array an inlined helper takes there, or a tuple of arrays a call returns, costs an
+atomic reference-count pair per step: 2–3× at N = 24), so those loops are written out.
 """
 
 from __future__ import annotations
@@ -282,14 +284,6 @@ def _spike_buffers(n_t, n, cap_hint, with_offsets):  # type: ignore[no-untyped-d
 
 
 @njit(cache=True)
-def _grown(spk_step, spk_off, spk_idx, need):  # type: ignore[no-untyped-def]
-    """The spike buffers copied into ones of at least ``need`` entries (offsets only if used)."""
-    if spk_off.shape[0] > 0:
-        spk_off = _grow(spk_off, need)
-    return _grow(spk_step, need), spk_off, _grow(spk_idx, need)
-
-
-@njit(cache=True)
 def _sort_by_step(steps: np.ndarray, idx: np.ndarray, off: np.ndarray, i0: int, n_b: int) -> None:
     """Stable counting sort by step (steps in ``i0 … i0+n_b−1``) of spike arrays, in place.
 
@@ -478,7 +472,7 @@ def _grid_neuron(
     return n_spk, p
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _grid_by_neuron(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs):  # type: ignore[no-untyped-def]
     """The neuron-major grid run: each neuron runs the whole chunk with its state in registers."""
     n_t, n = u.shape[0], v.shape[0]
@@ -487,7 +481,8 @@ def _grid_by_neuron(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, r
     n_spk, pos_end = 0, pos
     for k in range(n):
         if n_spk + n_t > spk_step.shape[0]:
-            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + n_t)
+            spk_step = _grow(spk_step, n_spk + n_t)
+            spk_idx = _grow(spk_idx, n_spk + n_t)
         n_spk, pos_end = _grid_neuron(
             u, k, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode != NOISE_OFF, xi, v_out,
             spk_step, spk_idx, n_spk,
@@ -495,7 +490,7 @@ def _grid_by_neuron(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, r
     return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), pos_end
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _grid_tile_steps(
     u, ib, ie, k0, k1, coef, v, refc, n_clamp, ring, p, h_table, noise_mode, rng, xi_ext, work, v_out,
     spk_step, spk_off, spk_idx, n_spk,
@@ -543,8 +538,9 @@ def _grid_tile_steps(
                 d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
                 vn = vt[k] * a[k] + d * b[k] + s[k] * xr[k]
                 vt[k] = vn if rt[k] == 0 else 0.0
-        if n_spk + m > spk_step.shape[0]:
-            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + m)
+        if n_spk + m > spk_step.shape[0]:  # one call per buffer (see the module notes)
+            spk_step = _grow(spk_step, n_spk + m)
+            spk_idx = _grow(spk_idx, n_spk + m)
         n0 = n_spk
         n_spk = _grid_threshold(vt, rt, n_clamp, k0, i, spk_step, spk_idx, n_spk)
         if n_lags > 0 and n_spk > n0:
@@ -553,7 +549,7 @@ def _grid_tile_steps(
     return spk_step, spk_off, spk_idx, n_spk, p
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _grid_by_tile(
     u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile, bufs
 ):  # type: ignore[no-untyped-def]
@@ -761,7 +757,7 @@ def _interp_neuron(u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, no
     return n_spk, p
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interp_by_neuron(
     u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs
 ):  # type: ignore[no-untyped-def]
@@ -772,7 +768,9 @@ def _interp_by_neuron(
     n_spk, pos_end = 0, pos
     for k in range(n):
         if n_spk + n_t > spk_step.shape[0]:
-            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + n_t)
+            spk_step = _grow(spk_step, n_spk + n_t)
+            spk_idx = _grow(spk_idx, n_spk + n_t)
+            spk_off = _grow(spk_off, n_spk + n_t)
         n_spk, pos_end = _interp_neuron(
             u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode != NOISE_OFF, xi, v_out,
             spk_step, spk_off, spk_idx, n_spk,
@@ -780,7 +778,7 @@ def _interp_by_neuron(
     return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), pos_end
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interp_tile_steps(  # noqa: C901 — one hot loop; see the docstring
     u_first, u, ib, ie, k0, k1, dt, coef, v, rl, ref_s, ring, p, h_table, noise_mode, rng, xi_ext, work, v_out,
     spk_step, spk_off, spk_idx, n_spk,
@@ -829,7 +827,9 @@ def _interp_tile_steps(  # noqa: C901 — one hot loop; see the docstring
             for k in range(m):
                 vn[k] = vt[k] * a[k] + d0[k] * b[k] + (d1[k] - d0[k]) * e[k] + s[k] * xr[k]
         if n_spk + m > spk_step.shape[0]:
-            spk_step, spk_off, spk_idx = _grown(spk_step, spk_off, spk_idx, n_spk + m)
+            spk_step = _grow(spk_step, n_spk + m)
+            spk_idx = _grow(spk_idx, n_spk + m)
+            spk_off = _grow(spk_off, n_spk + m)
         special = False  # any crossing or refractory neuron in the tile at this step?
         for k in range(m):
             special |= (vn[k] > 1.0) | (vt[k] > 1.0) | (rlt[k] > 0.0)
@@ -851,7 +851,7 @@ def _interp_tile_steps(  # noqa: C901 — one hot loop; see the docstring
     return spk_step, spk_off, spk_idx, n_spk, p
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interp_by_tile(
     u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile, bufs
 ):  # type: ignore[no-untyped-def]
