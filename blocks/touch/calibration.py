@@ -285,10 +285,7 @@ class ShearAngle(Block):
     def step(self, r: Chunk) -> dict[str, Chunk]:
         if len(r) == 0:
             return {"theta": Chunk.empty()}
-        if not np.isfinite(np.add.reduce(r.data, axis=None)):
-            r, self._last = screen_nonfinite(self, r, self.config.on_bad_data, "r", self._last)
-        elif self.config.on_bad_data == "hold":
-            self._last = r.data[-1].copy()
+        r, self._last = screen_nonfinite(self, r, self.config.on_bad_data, "r", self._last)
         d = r.data
         return {"theta": Chunk(r.t, np.arctan2(d[:, 1] - d[:, 3], d[:, 2] - d[:, 0]))}
 
