@@ -268,7 +268,8 @@ class Pulses(Block):
         if n_units > c.max_units:
             raise SpecError(
                 "spikes",
-                f"indexes {n_units} units but max_units is {c.max_units} (raise max_units if intended)",
+                f"indexes {n_units} units but max_units is {c.max_units}: one stimulation channel per unit; "
+                f"set max_units: {n_units} if the stimulator has that many channels",
             )
         amp = inputs.get("amplitude")
         if amp is not None:
