@@ -14,6 +14,8 @@ from typing import Any
 __all__ = [
     "MAX_QUEUE",
     "MAX_TICK_S",
+    "NOMINAL_FRAME_BYTES",
+    "NOMINAL_RATE_HZ",
     "STATE_BUDGET_BYTES",
     "budget_problem",
     "cli_finite_seconds",
@@ -30,6 +32,12 @@ MAX_QUEUE = 1_000_000
 """Longest edge queue, in messages."""
 MAX_TICK_S = 10.0
 """Longest clock tick: a source emits a tick's worth of samples at once."""
+
+NOMINAL_RATE_HZ = 10_000.0
+"""Input sample rate that state estimates assume where a config cannot know it (above every
+shipped sensor's)."""
+NOMINAL_FRAME_BYTES = 3 * 320 * 240
+"""Input frame size that state estimates assume where a config cannot know it (three TacTip frames)."""
 
 _LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
 
@@ -79,7 +87,7 @@ def budget_problem(estimates: dict[str, float]) -> tuple[str, str] | None:
     for name, need in estimates.items():
         if not need <= STATE_BUDGET_BYTES:  # NaN counts as over
             return name, (
-                f"must keep the block's state within {format_bytes(STATE_BUDGET_BYTES)} "
+                f"small enough for the block's state to fit in {format_bytes(STATE_BUDGET_BYTES)} "
                 f"(this value needs about {format_bytes(need)})"
             )
     return None
