@@ -134,6 +134,14 @@ class LimitedLoader(yaml.SafeLoader):
             self._count(self._sizes.get(id(node), 1), event.start_mark)
             return node
         event = self.peek_event()
+        if event.anchor is not None and event.anchor in self.anchors:
+            first = self.anchors[event.anchor].start_mark
+            raise yaml.composer.ComposerError(
+                None,
+                None,
+                f"duplicate anchor '&{event.anchor}' (first defined at line {first.line + 1})",
+                event.start_mark,
+            )
         if self._depth >= MAX_DEPTH:
             raise yaml.composer.ComposerError(
                 None, None, f"nested more than {MAX_DEPTH} levels deep", event.start_mark
@@ -176,6 +184,10 @@ def compose(text: str) -> yaml.Node | None:
         mark = e.problem_mark or e.context_mark
         line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
         what = e.problem or e.context or "malformed YAML"
+        if e.problem and e.context:
+            what = f"{e.problem} ({e.context})"
+        if e.context and e.context.startswith("expected a single document"):
+            what = "a graph file holds one YAML document, but another one starts here"
         if isinstance(e, (yaml.scanner.ScannerError, yaml.parser.ParserError)):
             raise SafeYamlError(
                 f"YAML syntax error: {what}", line, col, "check indentation, colons and brackets near here"
