@@ -131,7 +131,8 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     try:
         value = load_value(m.group(3)) if m.group(3).strip() else None
     except SafeYamlError as e:
-        raise ValueError(f"--set '{text}': the value is not valid YAML ({e.message})") from None
+        shown = text if len(text) <= 80 else f"{text[:77]}..."
+        raise ValueError(f"--set '{shown}': the value is not valid YAML ({e.message})") from None
     return m.group(1), m.group(2), value
 
 

@@ -83,14 +83,16 @@ def format_bytes(n: float) -> str:
 
 
 def budget_problem(estimates: dict[str, float]) -> tuple[str, str] | None:
-    """(field, rule) for the first size parameter whose state estimate exceeds the budget, or None."""
-    for name, need in estimates.items():
-        if not need <= STATE_BUDGET_BYTES:  # NaN counts as over
-            return name, (
-                f"small enough for the block's state to fit in {format_bytes(STATE_BUDGET_BYTES)} "
-                f"(this value needs about {format_bytes(need)})"
-            )
-    return None
+    """(field, rule) when the estimates (field -> bytes) add up to more than the budget, naming
+    the field with the largest share; None within the budget."""
+    total = sum(estimates.values(), 0.0)
+    if total <= STATE_BUDGET_BYTES:  # NaN counts as over
+        return None
+    name = max(estimates, key=lambda k: estimates[k] if estimates[k] == estimates[k] else math.inf)
+    return name, (
+        f"small enough for the block's state to fit in {format_bytes(STATE_BUDGET_BYTES)} "
+        f"(it would need about {format_bytes(total)})"
+    )
 
 
 # -- argparse types: a clear one-line usage error and exit status 2 --------------------------------

@@ -100,6 +100,9 @@ def check_text(text: str) -> None:
         raise SafeYamlError(f"{what} is not allowed in a graph file", line, col)
 
 
+_PLAIN_COLLECTIONS = ("tag:yaml.org,2002:map", "tag:yaml.org,2002:seq")
+
+
 class LimitedLoader(yaml.SafeLoader):
     """``yaml.SafeLoader`` whose composer enforces :data:`MAX_DEPTH` and :data:`MAX_NODES`,
     refuses recursive aliases and collection keys, and keeps nothing but safe YAML tags."""
@@ -157,6 +160,10 @@ class LimitedLoader(yaml.SafeLoader):
         finally:
             self._depth -= 1
             self._open.discard(anchor)
+        if isinstance(node, yaml.CollectionNode) and node.tag not in _PLAIN_COLLECTIONS:
+            raise yaml.composer.ComposerError(
+                None, None, f"unsupported YAML tag {node.tag!r} (a graph holds plain values)", node.start_mark
+            )
         if event.anchor is not None:
             self._sizes[id(node)] = self._nodes - before
         return node

@@ -91,6 +91,7 @@ class NlifConfig(BadDataConfig):
         None,
         doc="post-spike basis: first and last peak times in s (default [0.002, 0.05])",
         ge=0,
+        le=10,
         min_len=2,
         max_len=2,
     )
@@ -104,7 +105,7 @@ class NlifConfig(BadDataConfig):
         weights = NLIF_DEFAULTS["h_weights"] if self.h_weights is None else self.h_weights
         peaks = NLIF_DEFAULTS["h_peaks_s"] if self.h_peaks_s is None else self.h_peaks_s
         ring = 2.0 * max(peaks) * NOMINAL_RATE_HZ if any(w != 0 for w in weights) else 0.0
-        return {"n": self.n * 8.0 * 80, "h_peaks_s": self.n * 8.0 * ring}
+        return {"n": self.n * 8.0 * (80 + ring)}
 
     def resolved(self) -> dict[str, Any]:
         """Every model parameter, defaults filled in (per-neuron values as arrays)."""

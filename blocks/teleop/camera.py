@@ -55,7 +55,7 @@ class CameraConfig(Config):
         max_len=3,
     )
     fps: float = param(
-        40.0, doc="frame rate of the output (graph time); each due frame reads every device", gt=0
+        40.0, doc="frame rate of the output (graph time); each due frame reads every device", gt=0, le=1000
     )
     size: tuple[int, ...] = param(
         (320, 240),
@@ -72,9 +72,9 @@ class CameraConfig(Config):
     )
 
     def state_bytes(self) -> dict[str, float]:
-        """A frame per device and its resize buffers; a longest tick of frames."""
+        """A frame per device and its resize buffers, and a longest tick of frames."""
         frame = float(self.size[0]) * self.size[1] * len(self.devices)
-        return {"size": frame * 16, "fps": frame * self.fps * MAX_TICK_S}
+        return {"size": frame * (16 + self.fps * MAX_TICK_S)}
 
 
 class _Folder:
