@@ -35,7 +35,7 @@ MAX_GRAPH_BYTES = 1 << 20
 """Largest graph file read (1 MiB). The shipped graphs are under 5 KiB."""
 MAX_DEPTH = 64
 """Deepest nesting of YAML collections (a graph needs about 6 levels)."""
-MAX_NODES = 100_000
+MAX_NODES = 50_000
 """Most YAML nodes a document may hold with every alias expanded (scalars and collections)."""
 
 # the characters YAML 1.1 forbids in a stream (as yaml.reader.Reader.NON_PRINTABLE)
