@@ -132,8 +132,11 @@ class Block:
     config_cls: ClassVar[type[Config]] = Config
     inputs: ClassVar[Mapping[str, Port]] = {}
     outputs: ClassVar[Mapping[str, Port]] = {}
-    #: Optional heavy modules this block imports in ``open``/``reset`` (never at module import).
-    requires: ClassVar[tuple[str, ...]] = ()
+    #: Optional heavy modules this block imports in ``open``/``reset`` (never at module import):
+    #: import name -> the pip extra that installs it (``{"serial": "serial"}``); a plain tuple of
+    #: names when no extra provides them. ``validate`` and ``run`` refuse a graph whose active
+    #: blocks need one that is missing (:mod:`flowtact.extras`).
+    requires: ClassVar[Mapping[str, str] | tuple[str, ...]] = ()
     #: Registry name; defaults to the snake_case class name.
     name: ClassVar[str] = ""
     #: A sink acts on the world (a stimulator, a serial device): it runs even if nothing consumes it.
@@ -168,6 +171,14 @@ class Block:
         """A validated config from plain values; a ``preset: DOMAIN.NAME`` entry is expanded first."""
         owner = owner or cls.name
         return cls.config_cls.build(apply_preset(cls.name, params, owner), owner=owner)
+
+    @classmethod
+    def required_modules(cls, config: Config) -> dict[str, str]:  # noqa: ARG003 - subclasses use it
+        """The optional modules a block with this config imports: name -> pip extra ("" if none).
+        Override it when the config decides (a serial block in its in-process simulation needs
+        no serial library)."""
+        req = cls.requires
+        return dict(req) if isinstance(req, Mapping) else dict.fromkeys(req, "")
 
     # -- compile-time contract ---------------------------------------------------------------
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:

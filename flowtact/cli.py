@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from flowtact.graph import GraphErrors
+from flowtact.limits import MAX_TICK_S, cli_finite_seconds, cli_positive_seconds, cli_tick_seconds
 
 __all__ = ["main"]
 
@@ -53,14 +54,20 @@ def _parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a graph")
     graph_args(run)
     run.add_argument(
-        "--duration", type=float, metavar="S", help="graph seconds to run (default: the graph's duration_s)"
+        "--duration",
+        type=cli_positive_seconds,
+        metavar="S",
+        help="graph seconds to run (default: the graph's duration_s)",
     )
     run.add_argument(
         "--fast", action="store_true", help="run as fast as possible (virtual clock), not in real time"
     )
     run.add_argument("--record", metavar="FILE.h5", help="record the graph's record: streams to HDF5")
     run.add_argument(
-        "--tick", type=float, metavar="S", help="clock tick (default 1 s with --fast, 5 ms real time)"
+        "--tick",
+        type=cli_tick_seconds,
+        metavar="S",
+        help=f"clock tick, at most {MAX_TICK_S:g} s (default 1 s with --fast, 5 ms real time)",
     )
     run.add_argument(
         "--inproc",
@@ -97,8 +104,8 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("recording", help="an .h5 file written by flowtact run --record")
     plot.add_argument("-o", "--output", required=True, help="image file (.png, .svg, .pdf)")
     plot.add_argument("--streams", nargs="*", help="streams to plot (default: all)")
-    plot.add_argument("--from", dest="t0", type=float, help="start time (s)")
-    plot.add_argument("--to", dest="t1", type=float, help="end time (s)")
+    plot.add_argument("--from", dest="t0", type=cli_finite_seconds, help="start time (s)")
+    plot.add_argument("--to", dest="t1", type=cli_finite_seconds, help="end time (s)")
     bench = sub.add_parser("bench", help="run a benchmark of bench/ (in a source checkout)")
     bench.add_argument("name", nargs="?", help="benchmark name (bench/NAME.py); none lists them")
     bench.add_argument(
@@ -380,7 +387,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     plugins = plugin_commands()
     if argv and argv[0] in plugins and argv[0] not in COMMANDS:  # a plugin parses its own arguments
         return int(plugins[argv[0]].load()(argv[1:]) or 0)
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command == "plot" and args.t0 is not None and args.t1 is not None and not args.t0 < args.t1:
+        parser.error(f"plot: --from ({args.t0:g}) must be before --to ({args.t1:g})")
     try:
         return COMMANDS[args.command](args)
     except GraphErrors as e:

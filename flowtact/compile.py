@@ -18,6 +18,7 @@ import numpy as np
 
 from flowtact.block import Block, SpecError
 from flowtact.chunk import StreamSpec
+from flowtact.extras import missing_extras
 from flowtact.graph import Edge, Graph, GraphError, GraphErrors
 
 __all__ = ["Plan", "compile_graph", "node_seed"]
@@ -132,6 +133,9 @@ def compile_graph(graph: Graph) -> Plan:
         raise GraphErrors(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
 
     active, demanded, needed, active_edges, notes = _propagate_demand(graph, order, blocks, incoming)
+    missing = missing_extras(graph, active)  # before anything starts, naming the pip extra
+    if missing:
+        raise GraphErrors(missing)
     return Plan(
         graph=graph,
         order=active,

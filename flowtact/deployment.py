@@ -18,13 +18,23 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
+from flowtact.limits import host_problem
 from flowtact.located import GraphError, Loc, Located
 from flowtact.params import did_you_mean
 
-__all__ = ["Deadline", "Deployment", "Network", "ProcessDef", "parse_deployment", "parse_duration"]
+__all__ = [
+    "Deadline",
+    "Deployment",
+    "Network",
+    "ProcessDef",
+    "deadline_path_errors",
+    "parse_deployment",
+    "parse_duration",
+]
 
 PROCESS_KEYS = ("restart", "max_restarts", "host", "stall_s", "startup_s", "stop_grace_s")
 NETWORK_KEYS = ("listen", "port", "keys")
@@ -143,7 +153,11 @@ def parse_deployment(doc: dict[str, Any], y: Located, node_docs: dict[str, Any])
 
 def _parse_processes(doc: dict[str, Any], y: Located, node_docs: dict[str, Any]) -> dict[str, ProcessDef]:
     """The ``processes:`` groups that hold nodes; a group no node names is an error."""
-    used = {n.get("process") for n in node_docs.values() if isinstance(n, dict)}
+    used = {
+        n.get("process")
+        for n in node_docs.values()
+        if isinstance(n, dict) and isinstance(n.get("process"), str)
+    }
     raw = doc.get("processes") or {}
     if not isinstance(raw, dict):
         y.errors.append(GraphError(y.loc("processes"), "'processes' must map a process name to its settings"))
@@ -190,8 +204,9 @@ def _parse_process(name: Any, pdoc: Any, y: Located) -> ProcessDef | None:
         )
         max_restarts = 3
     host = pdoc.get("host")
-    if host is not None and not (isinstance(host, str) and host):
-        y.errors.append(GraphError(y.loc("processes", name, "host"), f"{where}: host must be an address"))
+    problem = host_problem(host) if host is not None else None
+    if problem:
+        y.errors.append(GraphError(y.loc("processes", name, "host"), f"{where}: host {problem}"))
         host = None
     windows = _process_windows(name, pdoc, y)
     return ProcessDef(str(name), restart, max_restarts, host, **windows)  # type: ignore[arg-type]
@@ -228,6 +243,10 @@ def _parse_network(doc: dict[str, Any], y: Located) -> Network:
         y.errors.append(GraphError(y.loc("network", "port"), f"network: port must be 0..65535; got {port!r}"))
         port = 5550
     listen = net.get("listen", "127.0.0.1")
+    problem = host_problem(listen, wildcard=True)
+    if problem:
+        y.errors.append(GraphError(y.loc("network", "listen"), f"network: listen {problem}"))
+        listen = "127.0.0.1"
     keys = net.get("keys")
     return Network(str(listen), port, str(keys) if keys is not None else None)
 
@@ -271,3 +290,28 @@ def _parse_deadline(i: int, d: Any, y: Located, node_docs: dict[str, Any]) -> De
     if all(e in node_docs for e in ends) and budget is not None:
         return Deadline(str(ends[0]), str(ends[1]), budget, loc)
     return None
+
+
+def deadline_path_errors(deadlines: Iterable[Deadline], edges: Iterable[Any]) -> list[GraphError]:
+    """An error at each deadline whose ``to`` node no path of ``edges`` (``.src`` -> ``.dst``)
+    leads to from its ``from`` node: its latency could never be measured."""
+    after: dict[str, set[str]] = {}
+    for e in edges:
+        after.setdefault(e.src, set()).add(e.dst)
+    errors = []
+    for d in deadlines:
+        reached, todo = {d.src}, [d.src]
+        while todo:
+            for nxt in after.get(todo.pop(), ()):
+                if nxt not in reached:
+                    reached.add(nxt)
+                    todo.append(nxt)
+        if d.dst not in reached:
+            errors.append(
+                GraphError(
+                    d.loc or Loc("?"),
+                    f"deadline {d.src} -> {d.dst}: no path of edges leads from '{d.src}' to '{d.dst}'",
+                    "a deadline times data along a path; pick nodes that one feeds the other",
+                )
+            )
+    return errors

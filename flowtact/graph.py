@@ -9,6 +9,7 @@ units, rates, cycles, unconnected inputs) happen when the graph is compiled
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -18,10 +19,12 @@ from typing import Any
 import yaml
 
 from flowtact.block import Block
-from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, parse_deployment
+from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, deadline_path_errors, parse_deployment
+from flowtact.limits import MAX_QUEUE, MAX_TICK_S, positive_seconds
 from flowtact.located import GraphError, GraphErrors, Loc, Located
 from flowtact.params import ConfigError, did_you_mean
 from flowtact.registry import UnknownBlockError, load_block
+from flowtact.safe_yaml import SafeYamlError, compose, load_value, read_graph_text
 
 __all__ = [
     "Edge",
@@ -126,9 +129,10 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     if not m:
         raise ValueError(f"--set '{text}': expected node.param=value")
     try:
-        value = yaml.safe_load(m.group(3)) if m.group(3).strip() else None
-    except yaml.YAMLError as e:
-        raise ValueError(f"--set '{text}': the value is not valid YAML ({e.problem})") from None
+        value = load_value(m.group(3)) if m.group(3).strip() else None
+    except SafeYamlError as e:
+        shown = text if len(text) <= 80 else f"{text[:77]}..."
+        raise ValueError(f"--set '{shown}': the value is not valid YAML ({e.message})") from None
     return m.group(1), m.group(2), value
 
 
@@ -148,21 +152,15 @@ def load_graph(
     several). ``text`` gives the YAML directly (``source`` then only names it).
     """
     path = str(source)
-    if text is None:
-        try:
-            text = Path(source).read_text()
-        except OSError as e:
-            raise GraphErrors([GraphError(Loc(path), f"cannot read graph file: {e.strerror or e}")]) from None
     located = Located(path)
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        loc = Loc(path, mark.line + 1, mark.column + 1) if mark else Loc(path)
-        msg = f"YAML syntax error: {e.problem or e.context}"
-        raise GraphErrors(
-            [GraphError(loc, msg, "check indentation, colons and brackets near here")]
-        ) from None
+        if text is None:
+            text = read_graph_text(source)
+        root = compose(text)
+    except SafeYamlError as e:
+        raise GraphErrors([GraphError(Loc(path, e.line, e.col), e.message, e.hint)]) from None
+    except OSError as e:
+        raise GraphErrors([GraphError(Loc(path), f"cannot read graph file: {e.strerror or e}")]) from None
     if root is None:
         raise GraphErrors(
             [GraphError(Loc(path), "the graph file is empty", "a graph needs at least 'nodes:'")]
@@ -244,17 +242,18 @@ def _build(
         errors.append(GraphError(y.loc("seed"), f"'seed' must be a non-negative integer; got {seed!r}"))
         seed = 0
     duration = doc.get("duration_s")
-    if duration is not None and (
-        isinstance(duration, bool) or not isinstance(duration, (int, float)) or duration <= 0
-    ):
+    if duration is not None and positive_seconds(duration) is None:
         errors.append(
-            GraphError(y.loc("duration_s"), f"'duration_s' must be a positive number; got {duration!r}")
+            GraphError(y.loc("duration_s"), f"'duration_s' must be a finite number > 0; got {duration!r}")
         )
         duration = None
     tick = doc.get("tick_s")
-    if tick is not None and (isinstance(tick, bool) or not isinstance(tick, (int, float)) or tick <= 0):
+    if tick is not None and not (positive_seconds(tick) or math.inf) <= MAX_TICK_S:
         errors.append(
-            GraphError(y.loc("tick_s"), f"'tick_s' must be a positive number of seconds; got {tick!r}")
+            GraphError(
+                y.loc("tick_s"),
+                f"'tick_s' must be a number of seconds > 0 and <= {MAX_TICK_S:g}; got {tick!r}",
+            )
         )
         tick = None
     name = doc.get("name", Path(path).stem)
@@ -285,6 +284,7 @@ def _build(
     edges = _edges(doc.get("edges", []), y, node_docs, classes, errors)
     record = _record(doc.get("record", []), y, node_docs, classes, errors)
     deployment = parse_deployment(doc, y, node_docs)
+    errors.extend(deadline_path_errors(deployment.deadlines, edges))
     if errors:
         raise GraphErrors(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
     return Graph(
@@ -517,9 +517,12 @@ def _edge_flow(item: dict[str, Any], y: Located, i: int, errors: list[GraphError
         )
         policy = "block"
     queue = item.get("queue", DEFAULT_QUEUE)
-    if isinstance(queue, bool) or not isinstance(queue, int) or queue < 1:
+    if isinstance(queue, bool) or not isinstance(queue, int) or not 1 <= queue <= MAX_QUEUE:
         errors.append(
-            GraphError(y.loc("edges", i, "queue"), f"edge queue must be an integer >= 1; got {queue!r}")
+            GraphError(
+                y.loc("edges", i, "queue"),
+                f"edge queue must be an integer from 1 to {MAX_QUEUE}; got {queue!r}",
+            )
         )
         queue = DEFAULT_QUEUE
     return policy, queue

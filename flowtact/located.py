@@ -88,7 +88,7 @@ class Located:
         if isinstance(node, yaml.MappingNode):
             out: dict[Any, Any] = {}
             for k_node, v_node in node.value:
-                key = yaml.SafeLoader.construct_object(_LOADER, k_node, deep=True)  # type: ignore[arg-type]
+                key = _construct(k_node)
                 kmark = k_node.start_mark
                 kloc = Loc(self.path, kmark.line + 1, kmark.column + 1)
                 if key in out:
@@ -106,7 +106,21 @@ class Located:
             return out
         if isinstance(node, yaml.SequenceNode):
             return [self.convert(v, (*keys, i)) for i, v in enumerate(node.value)]
-        return yaml.SafeLoader.construct_object(_LOADER, node, deep=True)  # type: ignore[arg-type]
+        return _construct(node)
 
 
 _LOADER = yaml.SafeLoader("")
+
+
+def _construct(node: yaml.Node) -> Any:
+    """The plain value of a scalar node as ``yaml.safe_load`` gives it; a value its constructor
+    rejects (an out-of-range date, an integer of 5 000 digits) is a ConstructorError at the node."""
+    try:
+        return yaml.SafeLoader.construct_object(_LOADER, node, deep=True)  # type: ignore[arg-type]
+    except (ValueError, TypeError, OverflowError) as e:
+        value = node.value if len(node.value) <= 40 else f"{node.value[:37]}..."
+        why = str(e).split(";")[0]  # not Python's advice on sys.set_int_max_str_digits
+        raise yaml.constructor.ConstructorError(None, None, f"{value!r}: {why}", node.start_mark) from None
+    finally:
+        _LOADER.constructed_objects.pop(node, None)  # keep no node alive after the load
+        _LOADER.recursive_objects.pop(node, None)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self, get_args, get_origin
 
 from flowtact.errors import FlowtactError
+from flowtact.limits import budget_problem
 
 __all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param"]
 
@@ -129,6 +130,17 @@ class Config:
     def check(self) -> None:
         """Cross-field rules; raise ``self.error(...)`` when one is broken."""
 
+    def state_bytes(self) -> Mapping[str, float]:
+        """Bytes of state (and of one tick's output, for a source) each size parameter implies:
+        field -> estimate, computed from the field values alone (never by allocating).
+
+        ``build`` refuses a value whose estimate exceeds
+        :data:`flowtact.limits.STATE_BUDGET_BYTES`, before ``check()`` or anything else runs.
+        Override it in every config whose state grows with a parameter (a population size, a
+        window length, a sample shape).
+        """
+        return {}
+
     def error(self, field: str | None, message: str) -> ConfigError:
         """A ConfigError for this config's owner."""
         return ConfigError(self.owner, field, message)
@@ -152,6 +164,10 @@ class Config:
                 raise ConfigError(owner, name, "is required but was not given")
         obj = cls(**values)
         object.__setattr__(obj, "owner", owner)
+        over = budget_problem(dict(obj.state_bytes()))
+        if over:
+            field, rule = over
+            raise _must_be(owner, field, rule, getattr(obj, field), type_error=False)
         try:
             obj.check()
         except ConfigError as e:

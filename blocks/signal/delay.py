@@ -16,6 +16,7 @@ from flowtact import (
     StreamSpec,
     param,
 )
+from flowtact.limits import MAX_TICK_S
 
 __all__ = ["Delay", "DelayConfig"]
 
@@ -28,6 +29,15 @@ class DelayConfig(Config):
     shape: tuple[int, ...] = param((), doc="sample shape of the fed-back stream", ge=1)
     units: str = param("1", doc="units of the fed-back stream")
     rate_hz: float | None = param(None, doc="rate of the fed-back stream (None: an event stream)", gt=0)
+
+    def state_bytes(self) -> dict[str, float]:
+        """One tick of the fed-back stream: its sample size × the samples of a longest tick."""
+        try:
+            itemsize = np.dtype(self.dtype).itemsize
+        except TypeError:
+            itemsize = 8  # not a dtype: the block's own check says so
+        samples = (self.rate_hz or 1.0) * MAX_TICK_S
+        return {"shape": float(np.prod(self.shape, dtype=float)) * itemsize * samples}
 
 
 class Delay(Block):

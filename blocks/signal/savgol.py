@@ -63,6 +63,10 @@ def deriv_units(units: str, deriv: int) -> str:
 # -- Savitzky–Golay coefficients ------------------------------------------------------------------
 
 
+MAX_WINDOW = 10_001
+"""Longest window: the exact rational least-squares fit grows with it (about 1 s at this length)."""
+
+
 @lru_cache(maxsize=128)
 def _exact_coeffs(window: int, order: int, deriv: int, pos: int) -> tuple[Fraction, ...]:
     """Least-squares SG weights per sample (no delta), exactly, as rationals (oldest sample first).
@@ -170,7 +174,13 @@ def savgol_apply_numpy(coef: np.ndarray, tail: np.ndarray, x: np.ndarray) -> np.
 class SavGolConfig(BadDataConfig):
     """Parameters of :class:`SavGol`."""
 
-    window: int = param(DEFAULT_WINDOW, doc="frame length in samples (odd, > order)", ge=3, odd=True)
+    window: int = param(
+        DEFAULT_WINDOW,
+        doc=f"frame length in samples (odd, > order; at most {MAX_WINDOW}: the exact fit takes ~1 s there)",
+        ge=3,
+        le=MAX_WINDOW,
+        odd=True,
+    )
     order: int = param(DEFAULT_ORDER, doc="degree of the fitted polynomial", ge=0, le=10)
     deriv: int = param(1, doc="derivative to estimate: 0 smooths, 1 = d/dt (units/s), 2 = d²/dt²", ge=0)
     mode: Literal["causal", "centred"] = param(

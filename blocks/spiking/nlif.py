@@ -32,6 +32,7 @@ from flowtact.blocks.spiking._lif_kernels import (
 )
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.limits import NOMINAL_RATE_HZ
 from flowtact.params import param
 
 __all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig"]
@@ -90,12 +91,21 @@ class NlifConfig(BadDataConfig):
         None,
         doc="post-spike basis: first and last peak times in s (default [0.002, 0.05])",
         ge=0,
+        le=10,
         min_len=2,
         max_len=2,
     )
     h_offset_s: float | None = param(
         None, doc="post-spike basis: log-time offset b in s (small = finer early lags; default 0.005)", gt=0
     )
+
+    def state_bytes(self) -> dict[str, float]:
+        """Per neuron: a dozen rows of coefficients and state, a chunk of ``v`` and the post-spike
+        history ring (about 2 × the last basis peak at :data:`NOMINAL_RATE_HZ`)."""
+        weights = NLIF_DEFAULTS["h_weights"] if self.h_weights is None else self.h_weights
+        peaks = NLIF_DEFAULTS["h_peaks_s"] if self.h_peaks_s is None else self.h_peaks_s
+        ring = 2.0 * max(peaks) * NOMINAL_RATE_HZ if any(w != 0 for w in weights) else 0.0
+        return {"n": self.n * 8.0 * (80 + ring)}
 
     def resolved(self) -> dict[str, Any]:
         """Every model parameter, defaults filled in (per-neuron values as arrays)."""

@@ -143,6 +143,10 @@ class PulsesConfig(BadDataConfig):
         """Largest amplitude allowed by the charge limit at this width: 1000·max_charge_nc / width_us."""
         return 1000.0 * self.max_charge_nc / self.width_us
 
+    def state_bytes(self) -> dict[str, float]:
+        """Per unit: last pulse time and amplitude, ramp and screen state (a few float64 each)."""
+        return {"max_units": self.max_units * 8.0 * 8}
+
     def check(self) -> None:
         if self.min_amplitude_ua > self.max_amplitude_ua:
             raise self.error("min_amplitude_ua", f"must be <= max_amplitude_ua ({self.max_amplitude_ua:g})")

@@ -20,6 +20,7 @@ import numpy as np
 from flowtact.block import Example, Port, Source
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
+from flowtact.limits import MAX_TICK_S
 from flowtact.params import Config, param
 
 from .hand import FINGERS
@@ -54,7 +55,7 @@ class CameraConfig(Config):
         max_len=3,
     )
     fps: float = param(
-        40.0, doc="frame rate of the output (graph time); each due frame reads every device", gt=0
+        40.0, doc="frame rate of the output (graph time); each due frame reads every device", gt=0, le=1000
     )
     size: tuple[int, ...] = param(
         (320, 240),
@@ -69,6 +70,11 @@ class CameraConfig(Config):
     backend: Literal["any", "v4l2", "dshow", "msmf", "avfoundation", "gstreamer", "ffmpeg"] = param(
         "any", doc="OpenCV capture backend for device indices and video files"
     )
+
+    def state_bytes(self) -> dict[str, float]:
+        """A frame per device and its resize buffers, and a longest tick of frames."""
+        frame = float(self.size[0]) * self.size[1] * len(self.devices)
+        return {"size": frame * (16 + self.fps * MAX_TICK_S)}
 
 
 class _Folder:
@@ -187,7 +193,7 @@ class Camera(Source):
     """
 
     config_cls = CameraConfig
-    requires = ("cv2",)
+    requires = {"cv2": "vision"}
     outputs = {
         "frames": Port(dtype="uint8", units="DN", doc="gray frames, one per device, (n, H, W)"),
         "device_t": Port(units="s", doc="each frame's own time stamp (video position, driver stamp)"),

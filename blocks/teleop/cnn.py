@@ -415,7 +415,7 @@ class CnnForce(Block):
 
     name = "cnn_force"
     config_cls = CnnForceConfig
-    requires = ("torch",)
+    requires = {"torch": "cnn"}
     inputs = {
         "x": Port(
             dtype="uint8",

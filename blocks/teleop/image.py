@@ -22,6 +22,7 @@ from numba import njit
 
 from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
 from flowtact.align import Aligner
+from flowtact.limits import MAX_TICK_S
 
 from .hand import FINGERS
 from .tactip_sim import pressed_frames
@@ -262,7 +263,7 @@ class AdaptiveThreshold(Block):
 
     name = "adaptive_threshold"
     config_cls = AdaptiveThresholdConfig
-    requires = ("cv2",)
+    requires = {"cv2": "vision"}
     inputs = {
         "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
     }
@@ -371,6 +372,11 @@ class BlobDetectConfig(Config):
     )
     max_pins: int = param(30, doc="rows of the pins output (the TacTip's 30 pins)", ge=1)
 
+    def state_bytes(self) -> dict[str, float]:
+        """The pins output of a longest tick at 100 frames/s: (frames, sensors, max_pins, 3) float64."""
+        sensors = max(len(getattr(self, f)) for f in _PER_SENSOR)
+        return {"max_pins": 100 * MAX_TICK_S * sensors * self.max_pins * 3 * 8.0}
+
     def check(self) -> None:
         n = next((len(getattr(self, f)) for f in _PER_SENSOR if len(getattr(self, f)) > 1), 1)
         for f in _PER_SENSOR:
@@ -441,7 +447,7 @@ class BlobDetect(Block):
 
     name = "blob_detect"
     config_cls = BlobDetectConfig
-    requires = ("cv2",)
+    requires = {"cv2": "vision"}
     inputs = {
         "x": Port(
             dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="grayscale frames (sensors, H, W)"

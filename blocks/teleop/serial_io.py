@@ -193,7 +193,7 @@ class SerialIo(Source):
     """
 
     config_cls = SerialIoConfig
-    requires = ("serial",)
+    requires = {"serial": "serial"}
     sink = True  # it drives servos: it runs even when nothing consumes its outputs
     inputs = {
         "cmd": Port(
@@ -269,6 +269,11 @@ class SerialIo(Source):
         return Example(params={"port": "sim", "rate_hz": 100.0}, rate_hz=100.0, duration_s=1.0)
 
     # -- state --------------------------------------------------------------------------------
+    @classmethod
+    def required_modules(cls, config: SerialIoConfig) -> dict[str, str]:  # type: ignore[override]
+        """pyserial, except for ``port: sim`` (the device model runs in this process, no port)."""
+        return {} if config.port == "sim" else super().required_modules(config)
+
     def reset(self) -> None:
         c = self.config
         self._sync = ClockSync()

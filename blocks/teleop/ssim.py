@@ -35,6 +35,7 @@ from flowtact import (
     param,
     screen_nonfinite,
 )
+from flowtact.limits import NOMINAL_FRAME_BYTES
 
 from .hand import FINGERS
 
@@ -283,6 +284,10 @@ class SsimConfig(BadDataConfig):
         doc="the reference is the rounded mean of this many frames from the start (and after a recapture)",
         ge=1,
     )
+
+    def state_bytes(self) -> dict[str, float]:
+        """The frames collected for the reference (uint8 copies, then their float64 mean)."""
+        return {"reference_frames": self.reference_frames * NOMINAL_FRAME_BYTES * 2.0}
 
 
 class Ssim(Block):

@@ -30,6 +30,7 @@ from flowtact.block import (
 )
 from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.limits import MAX_TICK_S
 from flowtact.params import param
 
 from .hand import FINGERS, N_FINGERS
@@ -126,6 +127,10 @@ class TactipSimConfig(BadDataConfig):
         doc="which physical TacTips: fixes each sensor's pin layout, lighting and lens (not the noise)",
         ge=0,
     )
+
+    def state_bytes(self) -> dict[str, float]:
+        """A longest tick of frames: three uint8 frames each, rendered through float64 scratch."""
+        return {"fps": self.fps * MAX_TICK_S * 3 * HEIGHT * WIDTH * 9}
 
     def check(self) -> None:
         if self.force_max_n < self.force_min_n:

@@ -17,6 +17,7 @@ import numpy as np
 from flowtact.block import Example, Port, Source
 from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.limits import MAX_TICK_S
 from flowtact.params import Config, param
 
 from .aunp import SENSITIVITY_PER_N
@@ -82,6 +83,10 @@ class AunpSensorConfig(Config):
         if self.scenario == "slip":
             return self.ramp_s + self.drag_s + self.slip_s + self.hold_s + self.unload_s
         return 0.0
+
+    def state_bytes(self) -> dict[str, float]:
+        """A longest tick of output: 10 float64 channels (r, ref, temp_c, force) and a few scratch copies."""
+        return {"rate_hz": self.rate_hz * MAX_TICK_S * 8 * 10 * 4}
 
     def check(self) -> None:
         if self.shear_ratio > self.friction_mu:

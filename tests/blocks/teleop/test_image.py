@@ -109,7 +109,7 @@ def test_threshold_keeps_pins_and_drops_skin(tactip):
         centres = np.rint(true[s]).astype(int)
         assert (y[0, s, centres[:, 1], centres[:, 0]] == 255).all()  # every pin centre is set
         assert (y[0, s] == 255).mean() < 0.15  # the dark skin is not
-    assert AdaptiveThreshold.requires == ("cv2",)
+    assert AdaptiveThreshold.requires == {"cv2": "vision"}
 
 
 # -- blob_detect ---------------------------------------------------------------------------------------
@@ -268,7 +268,7 @@ def test_pipeline_crop_detect_mask(tactip):
 def test_module_imports_opencv_lazily():
     code = "import sys, flowtact.blocks.teleop.image; assert 'cv2' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)
-    assert BlobDetect.requires == ("cv2",) and Crop.requires == () and BlobMask.requires == ()
+    assert BlobDetect.requires == {"cv2": "vision"} and Crop.requires == () and BlobMask.requires == ()
 
 
 def test_docstring_examples():
