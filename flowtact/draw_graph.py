@@ -17,7 +17,9 @@ from flowtact.graph_layout import EdgeIn, Layout, Rect, layout
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["draw_plan", "graph_figure", "to_dot"]
+__all__ = ["FORMATS", "draw_plan", "graph_figure", "to_dot"]
+
+FORMATS = (".svg", ".png", ".pdf", ".dot")
 
 GREY = "#9e9e9e"
 INK = "#37474f"
@@ -65,8 +67,8 @@ def draw_plan(plan: Plan, output: str | Path) -> Path:
     if out.suffix == ".dot":
         out.write_text(to_dot(plan))
         return out
-    if out.suffix not in (".svg", ".png", ".pdf"):
-        raise ValueError(f"cannot draw to '{out.suffix}': use .svg, .png, .pdf or .dot")
+    if out.suffix not in FORMATS:
+        raise ValueError(f"cannot draw to '{out.suffix}': use {', '.join(FORMATS)}")
     fig = graph_figure(plan)
     fig.savefig(out, dpi=DPI)
     return out
@@ -205,7 +207,7 @@ def _draw_boxes(
                 gid=f"node:{n}",
             )
         )
-        y = r.y + PAD_Y
+        y = r.cy - sum(t.size * LINE for t in lines) / 2  # a box may be taller than its text
         for k, t in enumerate(lines):
             h = t.size * LINE
             ax.text(

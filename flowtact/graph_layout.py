@@ -209,6 +209,7 @@ class _LayeredGraph:
                 chain.append(item)
             chain.append(("n", v))
             self.chains[i] = chain
+        self._fit_ports()
         for n, loops in self.loops.items():
             self.top_extra[("n", n)] = sum(LOOP_RISE + self.edges[i].label[1] + 4 for i in loops)
         self.pred: dict[tuple, list[tuple]] = {it: [] for it in self.size}
@@ -220,6 +221,19 @@ class _LayeredGraph:
         self.y: dict[tuple, float] = {}
         self.col_left: list[float] = []
         self.col_width: list[float] = []
+
+    def _fit_ports(self) -> None:
+        """Make a box tall enough that the edges on each of its sides stay ``PORT_SPACING`` apart."""
+        ends: dict[tuple, list[int]] = {}
+        for chain in self.chains.values():
+            for side in ((chain[0], 1), (chain[-1], 0)):
+                ends.setdefault(side, []).append(0)
+        for n, loops in self.loops.items():
+            for side in (1, 0):
+                ends.setdefault((("n", n), side), []).extend([0] * len(loops))
+        for (item, _), on_side in ends.items():
+            w, h = self.size[item]
+            self.size[item] = (w, max(h, (len(on_side) - 1) * PORT_SPACING + 2 * STUB))
 
     def _add(self, item: tuple, layer: int, size: tuple[float, float]) -> None:
         self.layers[layer].append(item)
@@ -368,20 +382,27 @@ class _LayeredGraph:
         w, h = self.size[item]
         return Rect(self.col_left[k] + (self.col_width[k] - w) / 2, self.y[item] - h / 2, w, h)
 
-    def _ports(self, item: tuple, ends: list[tuple[int, tuple]]) -> dict[int, float]:
-        """Spread the edges on one side of a box by where they come from, so arrows do not pile up."""
+    def _ports(self, item: tuple, ends: list[tuple[int, tuple | None]]) -> dict[int, float]:
+        """Spread the edges on one side of a box by where they come from, so arrows do not pile up.
+
+        A self-loop (no neighbour) goes over the top, so it takes the topmost place.
+        """
         box = self._box(item)
-        ends = sorted(ends, key=lambda e: (self.y[e[1]], e[0]))
-        step = min(PORT_SPACING, (box.h - 8) / (len(ends) - 1)) if len(ends) > 1 else 0.0
+        ends = sorted(ends, key=lambda e: (-float("inf") if e[1] is None else self.y[e[1]], e[0]))
+        step = min(PORT_SPACING, (box.h - 2 * STUB) / (len(ends) - 1)) if len(ends) > 1 else 0.0
         return {i: box.cy + (j - (len(ends) - 1) / 2) * step for j, (i, _) in enumerate(ends)}
 
     def finish(self) -> Layout:
         boxes = {it[1]: self._box(it) for it in self.size if it[0] == "n"}
-        out_ports: dict[tuple, list[tuple[int, tuple]]] = {}
-        in_ports: dict[tuple, list[tuple[int, tuple]]] = {}
+        out_ports: dict[tuple, list[tuple[int, tuple | None]]] = {}
+        in_ports: dict[tuple, list[tuple[int, tuple | None]]] = {}
         for i, chain in self.chains.items():
             out_ports.setdefault(chain[0], []).append((i, chain[1]))
             in_ports.setdefault(chain[-1], []).append((i, chain[-2]))
+        for n, loops in self.loops.items():
+            for i in loops:
+                out_ports.setdefault(("n", n), []).append((i, None))
+                in_ports.setdefault(("n", n), []).append((i, None))
         y_out = {i: y for it, ends in out_ports.items() for i, y in self._ports(it, ends).items()}
         y_in = {i: y for it, ends in in_ports.items() for i, y in self._ports(it, ends).items()}
         labels: dict[int, Rect] = {}
@@ -396,7 +417,7 @@ class _LayeredGraph:
             for i in loops:
                 w, h = self.edges[i].label
                 apex = box.y - rise - LOOP_RISE - h / 2
-                routes[i] = _loop(box, apex)
+                routes[i] = _loop(box, apex, y_out[i], y_in[i])
                 labels[i] = Rect(box.cx - w / 2, apex - h / 2, w, h)
                 rise += LOOP_RISE + h + 4
         return self._framed(boxes, labels, routes)
@@ -458,13 +479,13 @@ def _line(a: Point, b: Point) -> Segment:
     return a, at(1 / 3), at(2 / 3), b
 
 
-def _loop(box: Rect, top: float) -> list[Segment]:
+def _loop(box: Rect, top: float, y_out: float, y_in: float) -> list[Segment]:
     """A self-loop over the top of a box: out of its right side, back into its left side."""
     bulge = 2 * STUB
-    start, apex, end = (box.right, box.cy), (box.cx, top), (box.x, box.cy)
+    start, apex, end = (box.right, y_out), (box.cx, top), (box.x, y_in)
     return [
-        (start, (box.right + bulge, box.cy), (box.right + bulge, top), apex),
-        (apex, (box.x - bulge, top), (box.x - bulge, box.cy), end),
+        (start, (box.right + bulge, y_out), (box.right + bulge, top), apex),
+        (apex, (box.x - bulge, top), (box.x - bulge, y_in), end),
     ]
 
 

@@ -158,3 +158,14 @@ def test_svg_names_every_edge_and_node(tmp_path):
         assert f'id="node:{n}"' in svg
     for i in range(len(plan.graph.edges)):
         assert f'id="edge:{i}"' in svg and f'id="arrow:{i}"' in svg
+
+
+def test_an_unknown_picture_format_is_a_usage_error(tmp_path, capsys):
+    out = tmp_path / "touch.jpg"
+    assert main(["graph", str(GRAPH_DIR / "touch.yaml"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "cannot draw to '.jpg'; use .svg, .png, .pdf, .dot" in err and "Traceback" not in err
+    assert not out.exists()
+    pdf = tmp_path / "touch.pdf"
+    assert main(["graph", str(GRAPH_DIR / "touch.yaml"), "-o", str(pdf)]) == 0
+    assert pdf.read_bytes().startswith(b"%PDF")
