@@ -8,7 +8,7 @@ caller measures its texts, this module imports no drawing library.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 
@@ -23,10 +23,11 @@ NODE_SEP = 16.0  # vertical space between two boxes in a column
 LANE_SEP = 6.0  # vertical space next to an edge lane or label
 STUB = 8.0  # straight run of an edge beside a box or a label (keeps arrow heads horizontal)
 MIN_CURVE = 14.0  # width of the curve that takes an edge from one column to the next
-MAX_CURVE = 70.0
+MAX_CURVE = 110.0
 PORT_SPACING = 9.0  # vertical distance between edges attached to the same side of a box
 LOOP_RISE = 14.0  # height of a self-loop above its box
 SWEEPS = 24
+IN, OUT = 0, 1  # the sides of a box: edges come in on the left, go out on the right
 
 
 @dataclass(frozen=True)
@@ -308,53 +309,150 @@ class _LayeredGraph:
         gap = NODE_SEP if a[0] == "n" and b[0] == "n" else LANE_SEP
         return self._extent(a)[1] + gap + self._extent(b)[0]
 
+    def _port_offsets(self) -> None:
+        """Where each edge meets its box, from the box's centre line: spread in the neighbours' order.
+
+        A self-loop goes over the top, so it takes the topmost place on both sides.
+        """
+        pos = {it: j for layer in self.layers for j, it in enumerate(layer)}
+        sides: dict[tuple[tuple, int], list[tuple[float, int]]] = {}
+        for i, chain in self.chains.items():
+            sides.setdefault((chain[0], OUT), []).append((pos[chain[1]], i))
+            sides.setdefault((chain[-1], IN), []).append((pos[chain[-2]], i))
+        for n, loops in self.loops.items():
+            for i in loops:
+                for side in (IN, OUT):
+                    sides.setdefault((("n", n), side), []).append((-1.0, i))
+        self.port: dict[tuple[int, int], float] = {}
+        for (item, side), ends in sides.items():
+            ends.sort()
+            step = (
+                min(PORT_SPACING, (self.size[item][1] - 2 * STUB) / (len(ends) - 1)) if len(ends) > 1 else 0.0
+            )
+            for j, (_, i) in enumerate(ends):
+                self.port[(i, side)] = (j - (len(ends) - 1) / 2) * step
+        # link (neighbour, delta, weight): the edge is straight when y[item] == y[neighbour] + delta
+        self.pred_links: dict[tuple, list[tuple[tuple, float, float]]] = {it: [] for it in self.size}
+        self.succ_links: dict[tuple, list[tuple[tuple, float, float]]] = {it: [] for it in self.size}
+        for i, chain in self.chains.items():
+            for j, (a, b) in enumerate(pairwise(chain)):
+                off_a = self.port[(i, OUT)] if j == 0 else 0.0
+                off_b = self.port[(i, IN)] if j == len(chain) - 2 else 0.0
+                w = 1.0 if "n" in (a[0], b[0]) else 4.0  # long edges straight first
+                self.succ_links[a].append((b, off_b - off_a, w))
+                self.pred_links[b].append((a, off_a - off_b, w))
+
     def assign_rows(self) -> None:
-        """Each item's centre line: near the mean of its neighbours', in order, never overlapping."""
+        """Each item's centre line: least squares to its neighbours, then nearly straight edges made straight."""
+        self._port_offsets()
         for layer in self.layers:
             y = 0.0
             for i, it in enumerate(layer):
                 y += self._sep(layer[i - 1], it) if i else 0.0
                 self.y[it] = y
-        both = {it: self.pred[it] + self.succ[it] for it in self.size}
+        both = {it: self.pred_links[it] + self.succ_links[it] for it in self.size}
         n = len(self.layers)
         for _ in range(8):
             for k in range(1, n):
-                self._place(self.layers[k], self.pred)
+                self._place(self.layers[k], self.pred_links)
             for k in range(n - 2, -1, -1):
-                self._place(self.layers[k], self.succ)
+                self._place(self.layers[k], self.succ_links)
         for _ in range(4):
             for k in range(n):
                 self._place(self.layers[k], both)
-        for _ in range(2):
-            for chain in sorted(self.chains.values(), key=len, reverse=True):
-                self._straighten(chain)
+        for chain_id in sorted(self.chains, key=lambda i: len(self.chains[i]), reverse=True):
+            self._straighten(chain_id)
+        self._snap(both)
 
-    def _straighten(self, chain: list[tuple]) -> None:
-        """Put an edge's lane on one line when its columns leave room, near its two ends' middle."""
+    def _room(self, it: tuple, moving: Collection[tuple] = ()) -> tuple[float, float]:
+        """Where an item can go without touching its neighbours in the column (those not moving with it)."""
+        layer = self.layers[self.layer_of[it]]
+        j = layer.index(it)
+        above = layer[j - 1] if j > 0 and layer[j - 1] not in moving else None
+        below = layer[j + 1] if j + 1 < len(layer) and layer[j + 1] not in moving else None
+        lo = self.y[above] + self._sep(above, it) if above else -float("inf")
+        hi = self.y[below] - self._sep(it, below) if below else float("inf")
+        return lo, hi
+
+    def _straighten(self, i: int) -> None:
+        """Put a long edge's lane on one line when its columns leave room, level with its producer's port."""
+        chain = self.chains[i]
+        if len(chain) < 4:
+            return
         lo, hi = -float("inf"), float("inf")
         for it in chain[1:-1]:
-            layer = self.layers[self.layer_of[it]]
-            j = layer.index(it)
-            if j > 0:
-                lo = max(lo, self.y[layer[j - 1]] + self._sep(layer[j - 1], it))
-            if j + 1 < len(layer):
-                hi = min(hi, self.y[layer[j + 1]] - self._sep(it, layer[j + 1]))
+            a, b = self._room(it)
+            lo, hi = max(lo, a), min(hi, b)
         if lo <= hi:
-            want = (self.y[chain[0]] + self.y[chain[-1]]) / 2
+            src, side = (chain[-1], IN) if self.backward[i] else (chain[0], OUT)
+            want = self.y[src] + self.port[(i, side)]
             for it in chain[1:-1]:
                 self.y[it] = min(max(want, lo), hi)
 
-    def _place(self, layer: list[tuple], nbrs: dict[tuple, list[tuple]]) -> None:
+    def _snap(self, links: dict[tuple, list[tuple[tuple, float, float]]]) -> None:
+        """Make nearly straight edges straight: move groups already in line as one, where room allows.
+
+        Greedy least absolute deviations: a group (items joined by straight edges) moves onto the line
+        of one of its outside neighbours when that lowers the summed deviation, or keeps it and
+        straightens more edges. Each move lowers that pair, so the loop ends.
+        """
+        for _ in range(30):
+            moved = False
+            for group in self._groups(links):
+                members = set(group)
+                lo, hi = -float("inf"), float("inf")
+                for it in group:
+                    a, b = self._room(it, members)
+                    lo, hi = max(lo, a - self.y[it]), min(hi, b - self.y[it])
+                outside = [(it, m, d, w) for it in group for m, d, w in links[it] if m not in members]
+                if not outside:
+                    continue
+
+                def cost(shift: float, outside: list = outside) -> tuple[float, int, float]:
+                    devs = [(abs(self.y[m] + d - self.y[it] - shift), w) for it, m, d, w in outside]
+                    return round(sum(v * w for v, w in devs), 6), sum(v > 0.01 for v, _ in devs), abs(shift)
+
+                shifts = [min(max(self.y[m] + d - self.y[it], lo), hi) for it, m, d, _ in outside]
+                best = min([0.0, *shifts], key=cost)
+                if best != 0.0:
+                    for it in group:
+                        self.y[it] += best
+                    moved = True
+            if not moved:
+                return
+
+    def _groups(self, links: dict[tuple, list[tuple[tuple, float, float]]]) -> list[list[tuple]]:
+        """Items joined by straight edges, each group in layer order."""
+        parent = {it: it for it in self.size}
+
+        def root(it: tuple) -> tuple:
+            while parent[it] != it:
+                parent[it] = parent[parent[it]]
+                it = parent[it]
+            return it
+
+        for it, ls in links.items():
+            for m, d, _ in ls:
+                if abs(self.y[m] + d - self.y[it]) <= 0.01:
+                    parent[root(it)] = root(m)
+        groups: dict[tuple, list[tuple]] = {}
+        for layer in self.layers:
+            for it in layer:
+                groups.setdefault(root(it), []).append(it)
+        return list(groups.values())
+
+    def _place(self, layer: list[tuple], links: dict[tuple, list[tuple[tuple, float, float]]]) -> None:
         if not layer:
             return
-        want = []
+        want, weights = [], []
         for it in layer:
-            ys = [self.y[m] for m in nbrs[it]]
-            want.append(sum(ys) / len(ys) if ys else self.y[it])
+            ls = links[it]
+            total = sum(w for _, _, w in ls)
+            want.append(sum((self.y[m] + d) * w for m, d, w in ls) / total if ls else self.y[it])
+            weights.append(total or 1.0)
         offsets = [0.0]
         for a, b in pairwise(layer):
             offsets.append(offsets[-1] + self._sep(a, b))
-        weights = [1.0 if it[0] == "n" else 2.0 for it in layer]  # lanes straighten first
         z = _isotonic([w - o for w, o in zip(want, offsets, strict=True)], weights)
         for it, zi, o in zip(layer, z, offsets, strict=True):
             self.y[it] = zi + o
@@ -373,7 +471,7 @@ class _LayeredGraph:
                 rise = max(
                     (abs(self.y[b] - self.y[a]) for a in self.layers[k] for b in self.succ[a]), default=0.0
                 )
-                x += w + 2 * STUB + min(MAX_CURVE, max(MIN_CURVE, 0.35 * rise))
+                x += w + 2 * STUB + min(MAX_CURVE, max(MIN_CURVE, 0.45 * rise))
 
     # -- geometry out -------------------------------------------------------------------------
 
@@ -382,29 +480,14 @@ class _LayeredGraph:
         w, h = self.size[item]
         return Rect(self.col_left[k] + (self.col_width[k] - w) / 2, self.y[item] - h / 2, w, h)
 
-    def _ports(self, item: tuple, ends: list[tuple[int, tuple | None]]) -> dict[int, float]:
-        """Spread the edges on one side of a box by where they come from, so arrows do not pile up.
-
-        A self-loop (no neighbour) goes over the top, so it takes the topmost place.
-        """
-        box = self._box(item)
-        ends = sorted(ends, key=lambda e: (-float("inf") if e[1] is None else self.y[e[1]], e[0]))
-        step = min(PORT_SPACING, (box.h - 2 * STUB) / (len(ends) - 1)) if len(ends) > 1 else 0.0
-        return {i: box.cy + (j - (len(ends) - 1) / 2) * step for j, (i, _) in enumerate(ends)}
-
     def finish(self) -> Layout:
         boxes = {it[1]: self._box(it) for it in self.size if it[0] == "n"}
-        out_ports: dict[tuple, list[tuple[int, tuple | None]]] = {}
-        in_ports: dict[tuple, list[tuple[int, tuple | None]]] = {}
-        for i, chain in self.chains.items():
-            out_ports.setdefault(chain[0], []).append((i, chain[1]))
-            in_ports.setdefault(chain[-1], []).append((i, chain[-2]))
+        y_out = {i: self.y[c[0]] + self.port[(i, OUT)] for i, c in self.chains.items()}
+        y_in = {i: self.y[c[-1]] + self.port[(i, IN)] for i, c in self.chains.items()}
         for n, loops in self.loops.items():
             for i in loops:
-                out_ports.setdefault(("n", n), []).append((i, None))
-                in_ports.setdefault(("n", n), []).append((i, None))
-        y_out = {i: y for it, ends in out_ports.items() for i, y in self._ports(it, ends).items()}
-        y_in = {i: y for it, ends in in_ports.items() for i, y in self._ports(it, ends).items()}
+                y_out[i] = self.y[("n", n)] + self.port[(i, OUT)]
+                y_in[i] = self.y[("n", n)] + self.port[(i, IN)]
         labels: dict[int, Rect] = {}
         routes: dict[int, list[Segment]] = {}
         for i, chain in self.chains.items():
