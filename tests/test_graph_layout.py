@@ -173,3 +173,27 @@ def test_empty_and_single_node_graphs():
     check_geometry(lay, [])
     assert lay.width == pytest.approx(50.0 + 20) and lay.height == pytest.approx(30.0 + 20)
     assert layout({}, []).boxes == {}
+
+
+def test_chains_beside_fans_and_long_edges_are_drawn_straight():
+    # teleop's shape: a source fanning out to three branches, one long chain, a long edge into its end
+    names = ["exo", "fsr", "finger", "kin", "c1", "c2", "c3", "c4", "control"]
+    edges = [
+        EdgeIn("exo", "fsr", LABEL),
+        EdgeIn("fsr", "finger", LABEL),
+        EdgeIn("exo", "finger", LABEL),
+        EdgeIn("exo", "kin", LABEL),
+        EdgeIn("kin", "c1", LABEL),
+        *(EdgeIn(f"c{k}", f"c{k + 1}", LABEL) for k in range(1, 4)),
+        EdgeIn("c4", "control", LABEL),
+        EdgeIn("finger", "control", LABEL),
+        EdgeIn("control", "exo", LABEL, delayed=True),
+    ]
+    lay = layout({n: (60.0, 40.0) for n in names}, edges)
+    check_geometry(lay, edges)
+    for e, route in zip(edges, lay.routes, strict=True):
+        if e.src in ("kin", "c1", "c2", "c3", "c4"):
+            assert route[0][0][1] == pytest.approx(route[-1][3][1], abs=0.01), f"{e} is not straight"
+    back = lay.routes[-1]  # the feedback lane runs level between its two bends
+    lane = [p[1] for seg in back[2:-2] for p in (seg[0], seg[3])]
+    assert max(lane) - min(lane) < 0.01
