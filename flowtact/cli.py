@@ -315,8 +315,15 @@ def _port_text(port: Any) -> str:
 
 
 def _cmd_graph(args: argparse.Namespace) -> int:
-    from flowtact.draw_graph import draw_plan
+    from flowtact.draw_graph import FORMATS, draw_plan
 
+    suffix = Path(args.output).suffix
+    if suffix not in FORMATS:  # a usage error: say so before loading anything
+        print(
+            f"flowtact: error: -o {args.output}: cannot draw to '{suffix}'; use {', '.join(FORMATS)}",
+            file=sys.stderr,
+        )
+        return EXIT_GRAPH_ERROR
     out = draw_plan(_plan(args), args.output)
     print(f"wrote {out}")
     return 0
