@@ -45,7 +45,7 @@ from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
-from flowtact.runtime.stats import LatencyHistogram
+from flowtact.runtime.stats import LatencyHistogram, format_factor
 from flowtact.runtime.wire import recv_message
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
@@ -598,7 +598,7 @@ class ProcessExecutor:
         busiest = ", ".join(f"{n} {100 * share[n]:.0f} %" for n in self.late)
         self.warn(
             f"falling behind real time: {worst.describe()} ran {worst.stats['max_lag_s']:.2f} s late by "
-            f"t={worst.stats['now']:.2f} s (real-time factor {worst.stats['now'] / wall:.2f}); "
+            f"t={worst.stats['now']:.2f} s (real-time factor {format_factor(worst.stats['now'] / wall)}); "
             f"busiest nodes (share of wall time in their steps): {busiest}"
         )
 
