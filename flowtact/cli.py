@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import textwrap
@@ -104,6 +105,9 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "args", nargs=argparse.REMAINDER, help="arguments for the benchmark (e.g. --quick --json out.json)"
     )
+    p.add_argument("--debug", action="store_true", help=DEBUG_HELP)
+    for sp in list(sub.choices.values()):  # also after the command: flowtact run --debug GRAPH
+        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
     for name, ep in plugin_commands().items():  # commands that installed packages add (flowtact.commands)
         sp = sub.add_parser(name, help=_plugin_help(ep), add_help=False)
         sp.add_argument("args", nargs=argparse.REMAINDER)
@@ -111,6 +115,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 PLUGIN_GROUP = "flowtact.commands"
+DEBUG_HELP = "on failure, print the full Python traceback after the error (also: FLOWTACT_DEBUG=1)"
 
 
 def plugin_commands() -> dict[str, Any]:
@@ -376,11 +381,17 @@ COMMANDS = {
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``flowtact`` command."""
+    from flowtact.debug import ENV, debug_enabled, print_error
+
     argv = list(sys.argv[1:] if argv is None else argv)
     plugins = plugin_commands()
+    if argv[:1] == ["--debug"] and argv[1:2] and argv[1] in plugins:
+        os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
+        argv = argv[1:]
     if argv and argv[0] in plugins and argv[0] not in COMMANDS:  # a plugin parses its own arguments
         return int(plugins[argv[0]].load()(argv[1:]) or 0)
     args = _parser().parse_args(argv)
+    debug = debug_enabled(args.debug)
     try:
         return COMMANDS[args.command](args)
     except GraphErrors as e:
@@ -391,17 +402,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("flowtact: interrupted", file=sys.stderr)
         return 130
-    except Exception as e:  # a run-time failure: name it, no traceback unless asked
+    except Exception as e:  # noqa: BLE001 — every failure: one line naming it, the traceback with --debug
         from flowtact.runtime.inproc import NodeError
         from flowtact.runtime.security import SecurityError
         from flowtact.runtime.supervisor import WorkerFailed
 
-        if isinstance(
-            e, (NodeError, WorkerFailed, SecurityError, FileNotFoundError, ValueError, ImportError, OSError)
-        ):
-            print(f"flowtact: error: {e}", file=sys.stderr)
-            return EXIT_RUN_ERROR
-        raise
+        known = (NodeError, WorkerFailed, SecurityError, FileNotFoundError, ValueError, ImportError, OSError)
+        what = str(e) if isinstance(e, known) else f"{type(e).__name__}: {e}"
+        print_error(f"flowtact: error: {what}", e, debug)
+        return EXIT_RUN_ERROR
 
 
 if __name__ == "__main__":

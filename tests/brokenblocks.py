@@ -170,3 +170,10 @@ class BadParamsExample(_Pass):
     @classmethod
     def example(cls) -> Example:
         return Example(params={"gain": -1.0}, inputs={"x": np.zeros(10)})
+
+
+class BadSpecs(_Pass):
+    """Its ``specs`` has a bug: compiling a graph that uses it fails."""
+
+    def specs(self, inputs):  # type: ignore[no-untyped-def]
+        return {"y": inputs["x"].with_(shape=(1 // 0,))}
