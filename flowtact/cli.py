@@ -11,7 +11,6 @@ import json
 import os
 import signal
 import sys
-import textwrap
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -272,44 +271,10 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
     except UnknownBlockError as e:
         print(f"flowtact: {e}", file=sys.stderr)
         return EXIT_GRAPH_ERROR
+    from flowtact.describe import describe_block
+
     print(describe_block(cls))
     return 0
-
-
-def describe_block(cls: Any) -> str:
-    """The block's docstring, ports, parameters and counters, as ``flowtact blocks NAME`` prints them."""
-    lines = [f"{cls.name}  ({cls.__module__}.{cls.__name__})", ""]
-    lines.append(textwrap.dedent(cls.__doc__ or "").strip())
-    lines += ["", "Inputs:"]
-    for name, port in cls.inputs.items():
-        lines.append(f"  {name:<12} {_port_text(port)}  {port.doc}")
-    if not cls.inputs:
-        lines.append("  (none: a source)")
-    lines += ["", "Outputs:"]
-    for name, port in cls.outputs.items():
-        lines.append(f"  {name:<12} {_port_text(port)}  {port.doc}")
-    lines += ["", "Parameters:"]
-    for f in cls.config_cls.fields_info():
-        rules = f"  [{f.rules}]" if f.rules else ""
-        lines.append(f"  {f.name:<16} {f.type:<22} default {f.default!r}{rules}")
-        lines.append(f"      {f.doc}")
-    counters = cls.documented_counters()
-    if counters:
-        lines += ["", "Counters:"]
-        for name, doc in counters.items():
-            lines.append(f"  {name}")
-            lines.append(f"      {doc}")
-    return "\n".join(lines)
-
-
-def _port_text(port: Any) -> str:
-    if port.events:
-        return "events"
-    shape = "any shape" if port.shape is None else f"shape {tuple(port.shape)}"
-    units = f", {port.units}" if port.units else ""
-    extra = ", optional" if port.optional else ""
-    extra += ", delayed" if port.delay else ""
-    return f"{port.dtype or 'any'} {shape}{units}{extra}"
 
 
 def _cmd_graph(args: argparse.Namespace) -> int:
