@@ -367,6 +367,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("flowtact: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader left (flowtact blocks nlif | head): nothing went wrong here
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
     except Exception as e:  # noqa: BLE001 — every failure: one line naming it, the traceback with --debug
         from flowtact.runtime.inproc import NodeError
         from flowtact.runtime.security import SecurityError
