@@ -28,6 +28,7 @@ from flowtact import Block, Chunk, Config, Example, Port, Source, StreamSpec, pa
 from flowtact.compile import compile_graph
 from flowtact.graph import load_graph
 from flowtact.runtime.inproc import InprocExecutor
+from flowtact.runtime.stats import format_factor
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -178,7 +179,7 @@ def main() -> None:
     r = bench_touch(30.0 if args.quick else 60.0, reps)
     results["touch"] = r
     print(
-        f"   {r['graph_seconds']:.0f} s of graph time in {r['wall_s']:.3f} s: {r['realtime_factor']:,.0f}x real time"
+        f"   {r['graph_seconds']:.0f} s of graph time in {r['wall_s']:.3f} s: {format_factor(r['realtime_factor'])} real time"
     )
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))

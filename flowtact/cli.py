@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
-import textwrap
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -111,6 +111,9 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "args", nargs=argparse.REMAINDER, help="arguments for the benchmark (e.g. --quick --json out.json)"
     )
+    p.add_argument("--debug", action="store_true", help=DEBUG_HELP)
+    for sp in list(sub.choices.values()):  # also after the command: flowtact run --debug GRAPH
+        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
     for name, ep in plugin_commands().items():  # commands that installed packages add (flowtact.commands)
         sp = sub.add_parser(name, help=_plugin_help(ep), add_help=False)
         sp.add_argument("args", nargs=argparse.REMAINDER)
@@ -118,6 +121,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 PLUGIN_GROUP = "flowtact.commands"
+DEBUG_HELP = "on failure, print the full Python traceback after the error (also: FLOWTACT_DEBUG=1)"
 
 
 def plugin_commands() -> dict[str, Any]:
@@ -274,44 +278,10 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
     except UnknownBlockError as e:
         print(f"flowtact: {e}", file=sys.stderr)
         return EXIT_GRAPH_ERROR
+    from flowtact.describe import describe_block
+
     print(describe_block(cls))
     return 0
-
-
-def describe_block(cls: Any) -> str:
-    """The block's docstring, ports, parameters and counters, as ``flowtact blocks NAME`` prints them."""
-    lines = [f"{cls.name}  ({cls.__module__}.{cls.__name__})", ""]
-    lines.append(textwrap.dedent(cls.__doc__ or "").strip())
-    lines += ["", "Inputs:"]
-    for name, port in cls.inputs.items():
-        lines.append(f"  {name:<12} {_port_text(port)}  {port.doc}")
-    if not cls.inputs:
-        lines.append("  (none: a source)")
-    lines += ["", "Outputs:"]
-    for name, port in cls.outputs.items():
-        lines.append(f"  {name:<12} {_port_text(port)}  {port.doc}")
-    lines += ["", "Parameters:"]
-    for f in cls.config_cls.fields_info():
-        rules = f"  [{f.rules}]" if f.rules else ""
-        lines.append(f"  {f.name:<16} {f.type:<22} default {f.default!r}{rules}")
-        lines.append(f"      {f.doc}")
-    counters = cls.documented_counters()
-    if counters:
-        lines += ["", "Counters:"]
-        for name, doc in counters.items():
-            lines.append(f"  {name}")
-            lines.append(f"      {doc}")
-    return "\n".join(lines)
-
-
-def _port_text(port: Any) -> str:
-    if port.events:
-        return "events"
-    shape = "any shape" if port.shape is None else f"shape {tuple(port.shape)}"
-    units = f", {port.units}" if port.units else ""
-    extra = ", optional" if port.optional else ""
-    extra += ", delayed" if port.delay else ""
-    return f"{port.dtype or 'any'} {shape}{units}{extra}"
 
 
 def _cmd_graph(args: argparse.Namespace) -> int:
@@ -390,14 +360,20 @@ COMMANDS = {
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``flowtact`` command."""
+    from flowtact.debug import ENV, debug_enabled, print_error
+
     argv = list(sys.argv[1:] if argv is None else argv)
     plugins = plugin_commands()
+    if argv[:1] == ["--debug"] and argv[1:2] and argv[1] in plugins:
+        os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
+        argv = argv[1:]
     if argv and argv[0] in plugins and argv[0] not in COMMANDS:  # a plugin parses its own arguments
         return int(plugins[argv[0]].load()(argv[1:]) or 0)
     parser = _parser()
     args = parser.parse_args(argv)
     if args.command == "plot" and args.t0 is not None and args.t1 is not None and not args.t0 < args.t1:
         parser.error(f"plot: --from ({args.t0:g}) must be before --to ({args.t1:g})")
+    debug = debug_enabled(args.debug)
     try:
         return COMMANDS[args.command](args)
     except GraphErrors as e:
@@ -408,17 +384,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("flowtact: interrupted", file=sys.stderr)
         return 130
-    except Exception as e:  # a run-time failure: name it, no traceback unless asked
+    except BrokenPipeError:  # the reader left (flowtact blocks nlif | head): nothing went wrong here
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
+    except Exception as e:  # noqa: BLE001 — every failure: one line naming it, the traceback with --debug
         from flowtact.runtime.inproc import NodeError
         from flowtact.runtime.security import SecurityError
         from flowtact.runtime.supervisor import WorkerFailed
 
-        if isinstance(
-            e, (NodeError, WorkerFailed, SecurityError, FileNotFoundError, ValueError, ImportError, OSError)
-        ):
-            print(f"flowtact: error: {e}", file=sys.stderr)
-            return EXIT_RUN_ERROR
-        raise
+        known = (NodeError, WorkerFailed, SecurityError, FileNotFoundError, ValueError, ImportError, OSError)
+        what = str(e) if isinstance(e, known) else f"{type(e).__name__}: {e}"
+        print_error(f"flowtact: error: {what}", e, debug)
+        return EXIT_RUN_ERROR
 
 
 if __name__ == "__main__":

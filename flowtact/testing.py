@@ -16,13 +16,16 @@ from typing import Any
 import numpy as np
 import yaml
 
-from flowtact.block import Block, Source
+from flowtact.block import Block, Example, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.conformance import ConformanceError, differing_rows, example_of, first_difference, value_text
 from flowtact.params import ConfigError
 
 __all__ = [
     "CHECKS",
+    "ConformanceError",
     "assert_same",
+    "example_of",
     "infer_specs",
     "run_block_example",
     "run_graph",
@@ -258,6 +261,7 @@ def assert_same(a: Mapping[str, Chunk], b: Mapping[str, Chunk], what: str = "") 
 
 
 # -- conformance suite -------------------------------------------------------------------------
+# Each check fails with a ConformanceError: "<block>: <check>: expected <what>; <what happened>".
 
 
 def run_block_example(
@@ -267,9 +271,10 @@ def run_block_example(
     seed: int = 0,
     empty_between: bool = False,
     check_readonly: bool = True,
+    example: Example | None = None,
 ) -> dict[str, Chunk]:
-    """Run ``cls.example()`` with the given chunking (sources: ticks of ``chunk`` samples)."""
-    ex = cls.example()
+    """Run ``cls``'s example (or ``example``) with the given chunking (sources: ticks of ``chunk`` samples)."""
+    ex = example if example is not None else example_of(cls)
     block = cls(**ex.params)
     if issubclass(cls, Source):
         tick: float | list[float]
@@ -306,77 +311,163 @@ def run_block_example(
     )
 
 
+def _fed(chunk: int | Sequence[int] | None, empty_between: bool = False) -> str:
+    """How a run was fed, in words: ``whole``, ``in chunks of 7``, ``in chunks of 3, 250, 1, 64 in turn``."""
+    if chunk is None:
+        how = "whole"
+    elif isinstance(chunk, int):
+        how = f"in chunks of {chunk}"
+    else:
+        how = f"in chunks of {', '.join(map(str, chunk))} in turn"
+    return f"{how} with empty chunks between" if empty_between else how
+
+
+def _run(cls: type[Block], check: str, expected: str, **how: Any) -> dict[str, Chunk]:
+    """Run the example; a block that raises fails ``check`` saying how it was fed and what it raised."""
+    try:
+        return run_block_example(cls, **how)
+    except ConformanceError:
+        raise
+    except Exception as e:  # whatever the block raised is the finding, reported with its cause
+        fed = _fed(how.get("chunk"), how.get("empty_between", False))
+        happened = f"running the example fed {fed} raised {type(e).__name__}: {e}"
+        if isinstance(e, ValueError) and "read-only" in str(e):
+            happened = (
+                f"step() tried to change an input in place when fed {fed} ({type(e).__name__}: {e}); inputs "
+                "are read-only views: compute into a new array (y = x.data * 2) or copy first (x.data.copy())"
+            )
+        raise ConformanceError(cls.name, check, expected, happened) from e
+
+
 def check_config_yaml_roundtrip(cls: type[Block]) -> None:
     """The example config survives YAML dump and load unchanged."""
-    block = cls(**cls.example().params)
-    text = yaml.safe_dump(block.config.to_dict())
-    again = cls.config_cls.build(yaml.safe_load(text))
-    assert again == block.config, f"{cls.name}: config changed through YAML:\n{text}"
+    check, expected = "config YAML round trip", "the example config to come back unchanged from YAML"
+    block = cls(**example_of(cls).params)
+    values = block.config.to_dict()
+    try:
+        text = yaml.safe_dump(values)
+        again = cls.config_cls.build(yaml.safe_load(text))
+    except Exception as e:
+        raise ConformanceError(cls.name, check, expected, f"{type(e).__name__}: {e}") from e
+    if again != block.config:
+        back = again.to_dict()
+        field = next((k for k in values if back.get(k) != values[k]), None)
+        what = (
+            f"field '{field}' was {values[field]!r}, came back {back.get(field)!r}"
+            if field
+            else "the configs differ"
+        )
+        raise ConformanceError(cls.name, check, expected, f"{what} (YAML:\n{text})")
 
 
 def check_invalid_config_rejected(cls: type[Block]) -> None:
     """Values that break each field's type or rules raise a ConfigError naming block and field."""
-    base = dict(cls.example().params)
-    for field, bad in cls.config_cls.invalid_values():
-        params = {**base, field: bad}
+    check = "invalid config rejected"
+    base = dict(example_of(cls).params)
+    for field, bad in [*cls.config_cls.invalid_values(), ("no_such_parameter", 1)]:
+        expected = f"{cls.__name__}({field}={bad!r}) to raise a ConfigError naming {cls.name} and '{field}'"
         try:
-            cls(**params)
+            cls(**{**base, field: bad})
         except ConfigError as e:
-            assert e.field == field or field in str(e), (
-                f"{cls.name}: error for {field}={bad!r} names another field: {e}"
-            )
-            assert cls.name in str(e), f"{cls.name}: error does not name the block: {e}"
+            if not (e.field == field or field in str(e)):
+                raise ConformanceError(
+                    cls.name, check, expected, f"its message names another field: {e}"
+                ) from e
+            if cls.name not in str(e):
+                raise ConformanceError(
+                    cls.name, check, expected, f"its message does not name the block: {e}"
+                ) from e
             continue
-        raise AssertionError(f"{cls.name}: {field}={bad!r} was accepted")
-    unknown = {**base, "no_such_parameter": 1}
-    try:
-        cls(**unknown)
-    except ConfigError as e:
-        assert "no_such_parameter" in str(e)
-    else:
-        raise AssertionError(f"{cls.name}: unknown parameter accepted")
+        except Exception as e:
+            raise ConformanceError(
+                cls.name,
+                check,
+                expected,
+                f"it raised {type(e).__name__}: {e} (check values in the config's fields and check(), "
+                "raising self.error(field, rule))",
+            ) from e
+        raise ConformanceError(cls.name, check, expected, "it was accepted")
 
 
 def check_deterministic(cls: type[Block]) -> None:
     """Two runs with the same seed give identical outputs."""
-    assert_same(run_block_example(cls, seed=3), run_block_example(cls, seed=3), f"{cls.name} determinism")
+    check, expected = "deterministic", "two runs with seed 3 to give identical outputs"
+    first = _run(cls, check, expected, seed=3)
+    why = first_difference(first, _run(cls, check, expected, seed=3), "on the second run", "first run")
+    if why:
+        raise ConformanceError(
+            cls.name, check, expected, f"{why} (draw random numbers from self.rng, seeded by reset)"
+        )
 
 
 def check_inputs_not_mutated(cls: type[Block]) -> None:
     """Inputs come out of a run exactly as they went in (they are also passed read-only)."""
-    ex = cls.example()
+    check, expected = "inputs not mutated", "the example's inputs to come out of a run unchanged"
+    ex = example_of(cls)
     before = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in ex.inputs.items()}
-    run_block_example(cls, chunk=7)
+    _run(cls, check, expected, chunk=7, example=ex)
     for k, v in ex.inputs.items():
         if isinstance(v, np.ndarray):
-            assert np.array_equal(v, before[k], equal_nan=True), f"{cls.name}: input '{k}' was mutated"
+            rows = differing_rows(before[k], v)
+            if rows.size:
+                i = int(rows[0])
+                raise ConformanceError(
+                    cls.name,
+                    check,
+                    expected,
+                    f"input '{k}' was changed at sample {i}: expected {value_text(before[k][i])} (as given), "
+                    f"got {value_text(v[i])}",
+                )
 
 
 def check_chunking_invariance(cls: type[Block]) -> None:
     """Feeding 1, 7 or irregular numbers of samples per chunk gives the same output as one chunk."""
-    whole = run_block_example(cls)
+    check = "chunking invariance"
+    expected = "the same output, bit for bit, whatever the chunk sizes"
+    whole = _run(cls, check, expected)
     for chunk in (1, 7, [3, 250, 1, 64]):
-        assert_same(run_block_example(cls, chunk=chunk), whole, f"{cls.name} chunk={chunk}")
+        why = first_difference(
+            whole, _run(cls, check, expected, chunk=chunk), f"when fed {_fed(chunk)}", "whole"
+        )
+        if why:
+            raise ConformanceError(cls.name, check, expected, why)
 
 
 def check_empty_chunks(cls: type[Block]) -> None:
     """Empty chunks between real ones leave state and output untouched."""
-    assert_same(
-        run_block_example(cls, chunk=13, empty_between=True),
-        run_block_example(cls, chunk=13),
-        f"{cls.name} empty chunks",
-    )
+    check, expected = "empty chunks", "empty chunks between real ones to change nothing"
+    plain = _run(cls, check, expected, chunk=13)
+    padded = _run(cls, check, expected, chunk=13, empty_between=True)
+    why = first_difference(plain, padded, f"when fed {_fed(13, True)}", "without")
+    if why:
+        raise ConformanceError(cls.name, check, expected, why)
 
 
 def check_documented(cls: type[Block]) -> None:
     """A summary line, a doc for every field and every port."""
+    check = "documented"
     doc = (cls.__doc__ or "").strip()
-    assert doc and doc.splitlines()[0].strip(), f"{cls.name}: no docstring summary"
+    if not (doc and doc.splitlines()[0].strip()):
+        raise ConformanceError(
+            cls.name, check, "a docstring whose first line says what the block does", "it has none"
+        )
     for f in cls.config_cls.fields_info():
-        assert f.doc, f"{cls.name}: field '{f.name}' has no doc"
+        if not f.doc:
+            raise ConformanceError(
+                cls.name,
+                check,
+                f"a doc for every parameter: param(..., doc=...) on '{f.name}'",
+                "it has none",
+            )
     for name, port in {**cls.inputs, **cls.outputs}.items():
-        assert name.isidentifier(), f"{cls.name}: port '{name}' is not an identifier"
-        assert port.doc, f"{cls.name}: port '{name}' has no doc"
+        if not name.isidentifier():
+            raise ConformanceError(
+                cls.name, check, "port names that are identifiers", f"port {name!r} is not"
+            )
+        if not port.doc:
+            raise ConformanceError(
+                cls.name, check, f"a doc for every port: Port(doc=...) on '{name}'", "it has none"
+            )
 
 
 CHECKS: tuple[Callable[[type[Block]], None], ...] = (

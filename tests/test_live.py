@@ -83,7 +83,7 @@ def test_full_snapshot_shows_every_stream_process_and_path():
     text = text_of(FULL)
     title = text.splitlines()[0]
     assert "touch.yaml" in title and "realtime" in title
-    assert "3.2/10.0 s" in title and "32%" in title and "×2.00" in title  # real-time factor now/wall
+    assert "3.2/10.0 s" in title and "32%" in title and "2.0× real time" in title  # real-time factor now/wall
     src = line_with(text, "src.out")
     assert "1000" in src and "16003" in src and "182 µs" in src and "640 µs" in src and "block" in src
     cam = line_with(text, "cam.frame")

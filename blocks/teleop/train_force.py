@@ -23,7 +23,9 @@ import copy
 import datetime as _dt
 import json
 import math
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -38,7 +40,9 @@ from .hand import FINGERS
 __all__ = [
     "DEFAULT_CROP",
     "Dataset",
+    "StopOnInterrupt",
     "TrainConfig",
+    "TrainingInterrupted",
     "evaluate",
     "load_dataset",
     "main",
@@ -51,6 +55,10 @@ __all__ = [
 DEFAULT_CROP = (40, 75, 240, 90)
 #: Frame size the default crop applies to (H, W).
 DEFAULT_FRAME_HW = (240, 320)
+
+
+class TrainingInterrupted(KeyboardInterrupt):
+    """Training was stopped before it had a model worth saving."""
 
 
 @dataclass(frozen=True)
@@ -378,10 +386,14 @@ def train_on_arrays(
     seed: int = 0,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> tuple[Any, dict[str, Any]]:
     """Train a ``ForceCNN`` on a :class:`Dataset`; returns ``(model in eval mode, report)``.
 
     The report holds everything the checkpoint metadata records (see :func:`train_force`).
+    ``stop`` is asked after every batch: when it says so, training ends there with the best model
+    of the epochs completed (``stopped: "interrupted"``, ``interrupted_at_epoch``); it raises
+    :class:`TrainingInterrupted` when no epoch was completed.
     Deterministic for a given seed, data and thread count (weights are initialised from
     ``seed`` without touching torch's global random state; the split and the batch order are
     seeded too).
@@ -391,9 +403,46 @@ def train_on_arrays(
     if config.threads is not None:
         torch.set_num_threads(int(config.threads))
     try:
-        return _train(torch, data, config, seed, progress, log)
+        return _train(torch, data, config, seed, progress, log, stop)
     finally:
         torch.set_num_threads(threads)  # the setting is process-wide: give it back
+
+
+def _epoch(
+    torch: Any,
+    model: Any,
+    opt: Any,
+    x_tr: Any,
+    y_tr: Any,
+    perm: Any,
+    config: TrainConfig,
+    weights: Any,
+    stop: Callable[[], bool] | None,
+) -> tuple[float, int, bool]:
+    """One pass over the training set in ``perm`` order: (sum of batch MSE × size, samples, completed?).
+
+    ``stop`` is asked after each batch; when it says so the pass ends there, incomplete.
+    """
+    model.train()
+    total, count = 0.0, 0
+    for a in range(0, len(perm), config.batch_size):
+        idx = perm[a : a + config.batch_size]
+        if len(idx) < 2:  # batch norm needs two samples in training mode
+            continue
+        mse = torch.mean((model(x_tr[idx]) - y_tr[idx]) ** 2)
+        loss = mse
+        if config.l1:
+            loss = loss + config.l1 * sum(w.abs().sum() for w in weights)
+        if config.l2:
+            loss = loss + config.l2 * sum((w * w).sum() for w in weights)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        total += float(mse.detach()) * len(idx)
+        count += len(idx)
+        if stop is not None and stop():
+            return total, count, False
+    return total, count, True
 
 
 def _train(
@@ -403,6 +452,7 @@ def _train(
     seed: int,
     progress: bool,
     log: Callable[[str], None] | None,
+    stop: Callable[[], bool] | None = None,
 ) -> tuple[Any, dict[str, Any]]:
     n = len(data)
     train, val, test = split_indices(n, seed, config.split)
@@ -436,28 +486,16 @@ def _train(
     best_val, best_state, best_epoch, bad = math.inf, copy.deepcopy(model.state_dict()), 0, 0
     history: dict[str, list[float]] = {"train_mse": [], "val_mse": []}
     stopped = "max_epochs"
+    interrupted_at: int | None = None
     t0 = time.perf_counter()
     bar = _Bar(progress, config.max_epochs)
     try:
         for epoch in range(1, config.max_epochs + 1):
-            model.train()
             perm = torch.randperm(len(train), generator=gen)
-            total, count = 0.0, 0
-            for a in range(0, len(train), config.batch_size):
-                idx = perm[a : a + config.batch_size]
-                if len(idx) < 2:  # batch norm needs two samples in training mode
-                    continue
-                mse = torch.mean((model(x_tr[idx]) - y_tr[idx]) ** 2)
-                loss = mse
-                if config.l1:
-                    loss = loss + config.l1 * sum(w.abs().sum() for w in weights)
-                if config.l2:
-                    loss = loss + config.l2 * sum((w * w).sum() for w in weights)
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                total += float(mse.detach()) * len(idx)
-                count += len(idx)
+            total, count, complete = _epoch(torch, model, opt, x_tr, y_tr, perm, config, weights, stop)
+            if not complete:  # interrupted: this epoch is partial, keep the best of those before it
+                interrupted_at, stopped = epoch, "interrupted"
+                break
             val_mse = float(np.mean((_predict(model, x_va, torch) - y_va.numpy()) ** 2))
             train_mse = total / max(count, 1)
             if sched is not None:
@@ -482,6 +520,8 @@ def _train(
     finally:
         bar.close()
     train_s = time.perf_counter() - t0
+    if interrupted_at is not None and not history["val_mse"]:
+        raise TrainingInterrupted("interrupted before the first epoch finished")
     model.load_state_dict(best_state)
     model.eval()
 
@@ -513,6 +553,7 @@ def _train(
         "best_epoch": best_epoch,
         "best_val_mse": best_val,
         "stopped": stopped,
+        **({"interrupted_at_epoch": interrupted_at} if interrupted_at is not None else {}),
         "train_s": round(train_s, 2),
         "seed": seed,
         "threads": torch.get_num_threads(),
@@ -561,6 +602,8 @@ def train_force(
     *,
     heldout: Sequence[str | Path] = (),
     meta: Mapping[str, Any] | None = None,
+    log: Callable[[str], None] | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> dict[str, Any]:
     """Train the force CNN on recordings, save the checkpoint (if ``out``), return the report.
 
@@ -572,9 +615,10 @@ def train_force(
     ``report["heldout"] = {"mae_n": {...}, "sources": [...]}``. The random split's test frames have
     near-identical neighbours (the next frame of the same tap) in the training split; a held-out
     recording is the honest measure of how the model does on new contacts.
+    ``log`` gets one line per epoch; ``stop`` ends training early (see :func:`train_on_arrays`).
     """
     data = load_dataset(recordings, frames_stream, force_stream, config.crop, config.sensors)
-    model, report = train_on_arrays(data, config, seed=seed, progress=progress)
+    model, report = train_on_arrays(data, config, seed=seed, progress=progress, log=log, stop=stop)
     if heldout:
         held = load_dataset(heldout, frames_stream, force_stream, data.crop, config.sensors)
         if held.input_hw != data.input_hw:
@@ -722,20 +766,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             lr_plateau=args.lr_plateau or None,
         )
         command = "flowtact train-force " + " ".join(argv)
-        report = train_force(
-            args.recordings,
-            args.frames_stream,
-            args.force_stream,
-            config,
-            out=args.out,
-            seed=args.seed,
-            progress=not args.no_progress,
-            heldout=args.heldout,
-            meta={"command": command},
-        )
+        quiet = args.no_progress or sys.stderr.isatty()  # a terminal has the progress bar instead
+        with StopOnInterrupt() as interrupt:
+            report = train_force(
+                args.recordings,
+                args.frames_stream,
+                args.force_stream,
+                config,
+                out=args.out,
+                seed=args.seed,
+                progress=not args.no_progress,
+                heldout=args.heldout,
+                meta={"command": command},
+                log=None if quiet else _log,
+                stop=interrupt.requested,
+            )
     except (ValueError, KeyError, FileNotFoundError, OSError) as e:
         print(f"flowtact train-force: {e}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt as e:
+        print(f"flowtact train-force: {e or 'aborted'}; nothing saved", file=sys.stderr)
+        return 130
     if args.json:
         print(json.dumps({k: v for k, v in report.items() if k != "history"}, indent=1))
         return 0
@@ -755,7 +806,51 @@ def main(argv: Sequence[str] | None = None) -> int:
         per = ", ".join(f"{k} {v:.3f}" for k, v in h.items() if k != "combined")
         print(f"held-out MAE {h['combined']:.3f} N ({per}) on {report['heldout']['samples']} images")
     print(f"checkpoint: {report['checkpoint']} (+ {Path(report['checkpoint']).with_suffix('.json').name})")
+    if report["stopped"] == "interrupted":
+        print(
+            f"interrupted at epoch {report['interrupted_at_epoch']}: saved the best model so far "
+            f"(epoch {report['best_epoch']}) to {report['checkpoint']}"
+        )
     return 0
+
+
+def _log(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+class StopOnInterrupt:
+    """Ctrl-C (SIGINT) asks training to stop after its current batch; a second Ctrl-C aborts.
+
+    ``requested()`` says whether the first came. Used as a context manager; the previous handler
+    comes back on exit. Outside the main thread it does nothing (Python delivers signals there only).
+    """
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.previous: Any = None
+
+    def requested(self) -> bool:
+        return self.count > 0
+
+    def _on_sigint(self, _signum: int, _frame: Any) -> None:
+        self.count += 1
+        if self.count > 1:
+            raise KeyboardInterrupt("interrupted twice: aborted")
+        print(
+            "\nflowtact train-force: stopping after this batch and saving the best model so far "
+            "(Ctrl-C again aborts)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    def __enter__(self) -> StopOnInterrupt:
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._on_sigint)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -22,6 +22,7 @@ from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
+from flowtact.runtime.stats import format_factor
 
 __all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk", "explain_counters"]
 
@@ -108,7 +109,7 @@ class RunSummary:
         """A short human summary."""
         lines = [
             f"{self.graph}: {self.duration_s:.3f} s of graph time in {self.wall_s:.3f} s wall "
-            f"({self.realtime_factor:,.0f}x real time, {self.stopped_by})"
+            f"({format_factor(self.realtime_factor)} real time, {self.stopped_by})"
         ]
         if self.realtime is False:
             busiest = f"; busiest nodes: {', '.join(self.late_nodes)}" if self.late_nodes else ""

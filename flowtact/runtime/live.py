@@ -29,6 +29,8 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from flowtact.runtime.stats import format_factor
+
 __all__ = ["LiveView", "format_latency", "render"]
 
 _STATE_STYLE = {
@@ -85,7 +87,7 @@ def _title(snap: Mapping[str, Any]) -> Text:
         else:
             title.append(" s")
         if wall:
-            title.append(f"  ×{now / wall:.2f} real time")
+            title.append(f"  {format_factor(now / wall)} real time")
     elif wall is not None:
         title.append(f"  wall {_format_seconds(wall)} s")
     return title

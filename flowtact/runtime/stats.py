@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BUCKETS", "LatencyHistogram"]
+__all__ = ["BUCKETS", "LatencyHistogram", "format_factor"]
 
 _LO_NS = 1_000.0
 """Lower edge of the first bucket: 1 µs."""
@@ -183,3 +183,21 @@ class LatencyHistogram:
     def __repr__(self) -> str:
         s = self.summary()
         return f"LatencyHistogram(n={s['n']}, p50={s['p50']}, p99={s['p99']}, max={s['max']} µs)"
+
+
+def format_factor(factor: float) -> str:
+    """A real-time factor with two significant digits and a ×: ``0.13×``, ``1.0×``, ``25×``, ``1,200×``.
+
+    Every place that shows a run's speed (summary, live view, the overload warning) uses this, so a
+    0.13× run never reads "0x".
+    """
+    if math.isnan(factor):
+        return "?×"
+    if math.isinf(factor):
+        return "∞×"
+    if factor <= 0:
+        return "0×"
+    r = float(f"{factor:.2g}")  # two significant digits, rounded once (9.96 -> 10)
+    if r >= 10:
+        return f"{r:,.0f}×"
+    return f"{r:.{1 - math.floor(math.log10(r))}f}×"

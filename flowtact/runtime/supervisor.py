@@ -45,7 +45,7 @@ from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
-from flowtact.runtime.stats import LatencyHistogram
+from flowtact.runtime.stats import LatencyHistogram, format_factor
 from flowtact.runtime.wire import recv_message
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
@@ -68,7 +68,15 @@ IDLE_CPU = 0.05
 
 
 class WorkerFailed(FlowtactError, RuntimeError):
-    """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause."""
+    """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause.
+
+    ``traceback`` is the failing block's Python traceback as the worker formatted it (None when
+    no Python exception caused the failure: a death, a stall); ``flowtact --debug`` prints it.
+    """
+
+    def __init__(self, message: str, traceback: str | None = None) -> None:
+        super().__init__(message)
+        self.traceback = traceback
 
 
 @dataclass
@@ -169,6 +177,7 @@ class ProcessExecutor:
         self.t_start = time.monotonic()
         stopped_by = "duration"
         failure: str | None = None
+        remote_tb: str | None = None
         restore = self._catch_signals()
         try:
             self._open_sockets()
@@ -192,13 +201,13 @@ class ProcessExecutor:
                     self._say_waiting(proc)
             stopped_by = self._supervise() if self._start_all() else "interrupted"
         except WorkerFailed as e:
-            failure = str(e)
+            failure, remote_tb = str(e), e.traceback
         finally:
             restore()
             self._shutdown(failure is not None)
         summary = self._summary(stopped_by)
         if failure is not None:
-            err = WorkerFailed(failure)
+            err = WorkerFailed(failure, remote_tb)
             err.summary = summary  # type: ignore[attr-defined]
             raise err
         return summary
@@ -337,7 +346,7 @@ class ProcessExecutor:
             try:
                 self._pump(50)
             except _Failure as f:
-                raise WorkerFailed(describe_failure(f.proc, f.report)) from None
+                raise WorkerFailed(describe_failure(f.proc, f.report), f.report.get("traceback")) from None
             if all(p.endpoints or not self.wplans[p.name]["inbound"] for p in self.procs.values()) and all(
                 p.state in ("ready", "wiring", "wired") for p in self.procs.values()
             ):
@@ -598,7 +607,7 @@ class ProcessExecutor:
         busiest = ", ".join(f"{n} {100 * share[n]:.0f} %" for n in self.late)
         self.warn(
             f"falling behind real time: {worst.describe()} ran {worst.stats['max_lag_s']:.2f} s late by "
-            f"t={worst.stats['now']:.2f} s (real-time factor {worst.stats['now'] / wall:.2f}); "
+            f"t={worst.stats['now']:.2f} s (real-time factor {format_factor(worst.stats['now'] / wall)}); "
             f"busiest nodes (share of wall time in their steps): {busiest}"
         )
 
@@ -665,7 +674,7 @@ class ProcessExecutor:
             or proc.host is not None
             or self.stopped
         ):
-            raise WorkerFailed(text)
+            raise WorkerFailed(text, f.report.get("traceback"))
         proc.restarts += 1
         self.warn(f"{text}; restarting it ({proc.restarts}/{proc.max_restarts})")
         if proc.popen is not None and proc.popen.poll() is None:
