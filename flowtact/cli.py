@@ -108,7 +108,9 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("--from", dest="t0", type=float, help="start time (s)")
     plot.add_argument("--to", dest="t1", type=float, help="end time (s)")
     plot.add_argument(
-        "--paper", action="store_true", help="compact touch/slip figure: force, dF/dt, rasters, rates (one column)"
+        "--paper",
+        action="store_true",
+        help="compact touch/slip figure: force, dF/dt, rasters, rates (one column)",
     )
     bench = sub.add_parser("bench", help="run a benchmark of bench/ (in a source checkout)")
     bench.add_argument("name", nargs="?", help="benchmark name (bench/NAME.py); none lists them")
@@ -331,7 +333,9 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     try:
-        out = plot_recording(args.recording, args.output, streams=args.streams, t_range=t_range, paper=args.paper)
+        out = plot_recording(
+            args.recording, args.output, streams=args.streams, t_range=t_range, paper=args.paper
+        )
     except KeyError as e:  # an unknown --streams name: a usage error
         print(f"flowtact: error: {e.args[0]}", file=sys.stderr)
         return EXIT_GRAPH_ERROR
