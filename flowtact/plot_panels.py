@@ -198,7 +198,7 @@ def _draw_lines(ax: Any, p: Panel, t0: float, t1: float) -> None:
     styles = _styles(tuple(s.spec.shape), total) if whole else _styles((), len(p.channels))
     for k, (c, name) in enumerate(zip(p.channels, p.names, strict=True)):
         style = styles[c] if whole else styles[k]
-        ax.plot(env.t, env.y[:, c], linewidth=0.9 if len(p.channels) <= 4 else 0.7, label=name, **style)
+        ax.plot(env.t, env.y[:, c], linewidth=1.0 if len(p.channels) <= 9 else 0.7, label=name, **style)
     _legend(ax, len(p.channels))
     unit = pretty_units(p.units)
     ax.set_ylabel(unit, fontsize=8)

@@ -19,6 +19,7 @@ from flowtact.plot_units import pretty_units
 __all__ = ["paper_figure", "paper_streams"]
 
 WIDTH_IN = 3.6  # one journal column
+DPI = 300  # print resolution
 FONT = 7
 
 
@@ -75,7 +76,7 @@ def paper_figure(figure_cls: Any, sources: dict[str, StreamSource], t0: float, t
     kinds = ["force"] + (["deriv"] if deriv else []) + ["raster"] * len(spikes) + ["rate"]
     heights = {"force": 1.0, "deriv": 1.0, "raster": 0.9, "rate": 1.0}
     ratios = [heights[k] for k in kinds]
-    fig = figure_cls(figsize=(WIDTH_IN, sum(ratios) * 1.05 + 0.8), dpi=300, layout="constrained")
+    fig = figure_cls(figsize=(WIDTH_IN, sum(ratios) * 1.05 + 0.8), dpi=DPI, layout="constrained")
     axes = fig.subplots(len(kinds), 1, sharex=True, height_ratios=ratios)
     rows = iter(axes)
     ax = next(rows)

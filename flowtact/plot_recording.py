@@ -135,5 +135,5 @@ def plot_recording(
     fig = recording_figure(path, list(streams) if streams else None, t_range, paper=paper)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=DPI)
+    fig.savefig(out, dpi=fig.dpi)  # DPI, or the paper figure's print resolution
     return out
