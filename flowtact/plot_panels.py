@@ -206,11 +206,29 @@ def _draw_lines(ax: Any, p: Panel, t0: float, t1: float) -> None:
         _count(total, "channel") if whole else f"{_group_name(p.names)}{len(p.channels)} of {total} channels"
     )
     note = f"; min–max envelope, {env.per_point} samples per point" if env.per_point > 1 else ""
+    note += _missing(ax, env, p.channels)
     ax.set_title(f"{s.name} — {which} as lines, {unit}{_rate_text(s)}{note}", **TITLE)
 
 
+def _say(ax: Any, text: str) -> None:
+    """Write ``text`` across an axes that has nothing to show, so an empty panel is never silent."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=9, color="0.4")
+
+
+def _missing(ax: Any, env: Any, channels: tuple[int, ...]) -> str:
+    """Title note (and in-axes text) for no samples or non-finite values among ``channels``."""
+    if env.n == 0:
+        _say(ax, "no samples in this time range")
+        return "; no samples"
+    bad = int(env.nonfinite[list(channels)].sum())
+    if bad == env.n * len(channels):
+        _say(ax, "every value is NaN or inf")
+        return "; every value NaN/inf"
+    return f"; {bad} NaN/inf values (gaps)" if bad else ""
+
+
 def _count(n: int, word: str) -> str:
-    return f"{n} {word}{'s' if n != 1 else ''}"
+    return f"{n:,} {word}{'s' if n != 1 else ''}"
 
 
 def _draw_heatmap(ax: Any, p: Panel, t0: float, t1: float) -> None:
@@ -226,11 +244,11 @@ def _draw_heatmap(ax: Any, p: Panel, t0: float, t1: float) -> None:
     ax.set_ylabel("channel", fontsize=8)
     if len(p.channels) <= 24:
         ax.set_yticks(range(len(p.channels)), list(p.names), fontsize=6)
-    note = f" (means of {env.per_point} samples)" if env.per_point > 1 else ""
+    note = f"; each cell the mean of {env.per_point} samples" if env.per_point > 1 else ""
+    note += _missing(ax, env, p.channels)
+    unit = pretty_units(p.units)
     ax.set_title(
-        f"{s.name} — heat map of {len(p.channels)} channels{note}, colour in {pretty_units(p.units)}"
-        f"{_rate_text(s)}",
-        **TITLE,
+        f"{s.name} — heat map of {len(p.channels)} channels, colour in {unit}{_rate_text(s)}{note}", **TITLE
     )
 
 
@@ -248,7 +266,9 @@ def _draw_steps(ax: Any, p: Panel, t0: float, t1: float) -> None:
         if len(t):
             last = float(s.t[j - 1]) if j > i else t1
             ax.step(np.r_[t, last], np.r_[v, v[-1]], where="post", color="C0", linewidth=1.2)
-        how = f"steps, {_count(max(len(t) - 1, 0), 'change')}"
+        how = f"steps, {_count(max(len(t) - 1, 0), 'change')}" if len(t) else "no samples"
+        if not len(t):
+            _say(ax, "no samples in this time range")
     ax.set_yticks(range(len(cats)), cats, fontsize=8)
     ax.set_ylim(-0.5, len(cats) - 0.5)
     ax.set_title(f"{s.name} — categorical ({' / '.join(cats)}): {how}", **TITLE)
@@ -267,14 +287,23 @@ def _draw_raster(ax: Any, p: Panel, t0: float, t1: float) -> None:
         ax.plot(
             t, unit, linestyle="none", marker="|", markersize=float(np.clip(90.0 / n, 2.0, 10.0)), color="k"
         )
-        how = f"{_count(j - i, what[:-1])}"
+        how = ""
+        if j == i:
+            _say(ax, f"no {what} in this time range")
     else:  # too many for a tick each: counts per (unit, bin), bounded
         edges = np.linspace(t0, t1, 1001)
         counts = binned_event_counts(s, i, j, n, edges, col)
+        top = max(float(counts.max()), 1.0)
         ax.imshow(
-            counts.T, aspect="auto", extent=(t0, t1, n - 0.5, -0.5), cmap="Greys", interpolation="nearest"
+            counts.T,
+            aspect="auto",
+            extent=(t0, t1, n - 0.5, -0.5),
+            cmap="Greys",
+            interpolation="nearest",
+            vmin=0.0,
+            vmax=top,
         )
-        how = f"{_count(j - i, what[:-1])}, as counts per {_ms(edges[1] - edges[0])} bin (darker: more)"
+        how = f" as counts per {_ms(edges[1] - edges[0])} bin (white 0, black {top:g})"
     ax.set_ylim(n - 0.5, -0.5)
     ax.set_ylabel("channel" if what == "pulses" else "unit", fontsize=8)
     labels = spec.labels if col is None else None
@@ -283,7 +312,7 @@ def _draw_raster(ax: Any, p: Panel, t0: float, t1: float) -> None:
     elif n <= 8:
         ax.set_yticks(range(n))
     rows = _count(n, "channel" if what == "pulses" else "unit")
-    ax.set_title(f"{s.name} — {what[:-1]} raster: {how} on {rows}", **TITLE)
+    ax.set_title(f"{s.name} — {what[:-1]} raster{how}: {_count(j - i, what[:-1])} on {rows}", **TITLE)
 
 
 def _draw_rate(ax: Any, p: Panel, t0: float, t1: float) -> None:
@@ -331,6 +360,8 @@ def _draw_pulses(ax: Any, p: Panel, t0: float, t1: float) -> None:
         else:
             ax.vlines(t, 0, amp, color="C3", linewidth=0.6)
         how = f"{_count(j - i, 'pulse')} on {n} channels"
+        if j == i:
+            _say(ax, "no pulses in this time range")
         if "width" in cols and len(d):
             w = d[:, cols["width"]]
             w_unit = pretty_units(label_unit(labels[cols["width"]])[1] or s.spec.units)
@@ -385,8 +416,9 @@ def draw_frames(subfig: Any, p: Panel, t0: float, t1: float) -> None:
     if frames.dtype == np.uint8:
         lo, hi, scale = 0, 255, f"gray 0–255 {pretty_units(s.spec.units)}"
     else:
-        lo, hi = float(np.nanmin(imgs)), float(np.nanmax(imgs))
-        scale = f"gray {lo:.3g}–{hi:.3g} {pretty_units(s.spec.units)}"
+        finite = imgs[np.isfinite(imgs)]
+        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+        scale = f"gray {lo:.3g}–{hi:.3g} {pretty_units(s.spec.units)}" + ("" if finite.size else " (all NaN)")
     axes = subfig.subplots(n_cam, len(times), squeeze=False)
     for c, (k, t) in itertools.product(range(n_cam), enumerate(times)):
         ax = axes[c, k]

@@ -97,7 +97,8 @@ class Envelope:
     """Lines of every channel: ``t`` (m,), ``y`` (m, channels), ``per_point`` samples per bucket.
 
     When ``per_point`` > 1 the line alternates each bucket's min and max (at its first and last
-    sample times), so peaks stay visible; ``mean`` holds each bucket's mean (for heat maps).
+    sample times), so peaks stay visible; ``mean`` holds each bucket's mean (for heat maps);
+    ``nonfinite`` counts the NaN/inf values per channel (left out of buckets, gaps in raw lines).
     """
 
     t: np.ndarray
@@ -106,16 +107,17 @@ class Envelope:
     t_mean: np.ndarray
     per_point: int
     n: int
+    nonfinite: np.ndarray
 
 
 def sample_envelope(s: StreamSource, i: int, j: int, buckets: int = 2000) -> Envelope:
     """The samples ``[i, j)`` of every channel, or a min-max envelope of ``buckets`` buckets."""
     n = j - i
+    size = max(1, int(np.prod(s.data.shape[1:], dtype=np.int64)))
     if n <= 2 * buckets:
         t = np.asarray(s.t[i:j], np.float64)
-        y = np.asarray(s.data[i:j], np.float64).reshape(n, -1)
-        return Envelope(t, y, y, t, 1, n)
-    size = max(1, int(np.prod(s.data.shape[1:], dtype=np.int64)))
+        y = np.asarray(s.data[i:j], np.float64).reshape(n, size)
+        return Envelope(t, y, y, t, 1, n, (~np.isfinite(y)).sum(axis=0))
     lo = np.full((buckets, size), np.nan)
     hi = np.full((buckets, size), np.nan)
     total = np.zeros((buckets, size))
@@ -140,7 +142,9 @@ def sample_envelope(s: StreamSource, i: int, j: int, buckets: int = 2000) -> Env
     yy[0::2], yy[1::2] = lo, hi
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = total / count
-    return Envelope(tt, yy, mean, (tb0 + tb1) / 2, math.ceil(n / buckets), n)
+    return Envelope(
+        tt, yy, mean, (tb0 + tb1) / 2, math.ceil(n / buckets), n, n - count.sum(axis=0).astype(int)
+    )
 
 
 def change_points(

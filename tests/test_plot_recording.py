@@ -315,6 +315,26 @@ def test_binned_rates():
     assert r.sum() * 0.02 == 6
 
 
+def test_empty_and_non_finite_streams_say_so(tmp_path):
+    path = tmp_path / "quiet.h5"
+    specs = {
+        "a.x": StreamSpec("float64", (3,), "N", 100.0),
+        "b.spikes": StreamSpec("int64", (), "1", None, events=True, n_units=5),
+        "c.y": StreamSpec("float64", (2,), "V", 10.0),
+        "d.y": StreamSpec("float64", (), "1", 10.0, categories=("x", "y")),
+    }
+    with Recorder(path, specs, {}) as rec:
+        y = np.full((5, 2), np.nan)
+        y[:2, 0] = 1.0
+        rec.write("c.y", Chunk(np.arange(5) / 10, y))
+    fig = recording_figure(path)
+    said = {ax.get_title(loc="left"): [t.get_text() for t in ax.texts] for ax in fig.get_axes()}
+    assert said["a.x — 3 channels as lines, N, 100 Hz; no samples"] == ["no samples in this time range"]
+    assert said["b.spikes — spike raster: 0 spikes on 5 units"] == ["no spikes in this time range"]
+    assert "c.y — 2 channels as lines, V, 10 Hz; 8 NaN/inf values (gaps)" in said
+    assert said["d.y — categorical (x / y): no samples"] == ["no samples in this time range"]
+
+
 def test_incomplete_recording_is_flagged(tmp_path):
     path = tmp_path / "killed.h5"
     rec = Recorder(path, {"x.y": StreamSpec("float64", (), "V", 100.0)}, {}, flush_interval_s=3600)
@@ -403,3 +423,17 @@ def test_categories_are_stored_in_the_recording_and_cross_processes(recording):
     spec = stream_specs(recording)["state.y"][0]
     assert spec.categories == ("rest", "grasp", "hold")
     assert spec_from_wire(spec_to_wire(spec)) == spec
+
+
+def test_too_many_events_for_ticks_become_counts_that_add_up(recording, monkeypatch):
+    import flowtact.plot_panels as pp
+
+    monkeypatch.setattr(pp, "MAX_EVENT_TICKS", 100)
+    ax = _one(recording_figure(recording, streams=["pop.spikes"]), "pop.spikes", "raster")
+    (img,) = ax.get_images()
+    counts = img.get_array()
+    assert counts.shape == (30, 1000) and counts.sum() == 600  # every spike, in its unit's row
+    assert img.norm.vmin == 0 and img.norm.vmax == counts.max()
+    assert ax.get_title(loc="left").startswith(
+        "pop.spikes — spike raster as counts per 1 ms bin (white 0, black"
+    )
