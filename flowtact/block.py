@@ -43,7 +43,9 @@ class Port:
     left unconnected; ``delay`` an input that receives data one tick late, which is what lets a
     feedback loop through it. On inputs, ``ndim`` lists the sample ranks accepted where ``shape``
     is left open (``(0, 1)``: a value or a vector of channels) and ``require_rate`` asks for a
-    sample stream with a nominal rate. The framework checks inputs against these declarations on
+    sample stream with a nominal rate. On outputs, ``categories`` declares a categorical stream
+    (value ``i`` means ``categories[i]``); a block whose names come from its config sets them in
+    ``specs`` instead (``StreamSpec.categories``). The framework checks inputs against these declarations on
     every path (graph compile, in-process, worker, offline), so a block never re-checks them.
     """
 
@@ -56,6 +58,7 @@ class Port:
     doc: str = ""
     ndim: tuple[int, ...] | None = None
     require_rate: bool = False
+    categories: tuple[str, ...] | None = None
 
     def mismatch(self, spec: StreamSpec) -> str | None:
         """Why a stream cannot feed this input port (``"expects …, gets …"``), or None."""
@@ -198,6 +201,7 @@ class Block:
                 events=port.events,
                 n_units=first.n_units if port.events else None,
                 labels=first.labels if port.shape is None else None,
+                categories=port.categories,
             )
         return out
 

@@ -72,7 +72,9 @@ class StreamSpec:
 
     ``rate_hz`` is the nominal sample rate (None for event streams); ``units`` a unit string such
     as ``"N"``, ``"N/s"`` or ``"1"`` (dimensionless); ``n_units`` the number of units an event
-    stream indexes; ``labels`` optional channel names for the last axis.
+    stream indexes; ``labels`` optional channel names for the last axis, or one per value of a
+    multi-axis sample (C order); ``categories`` marks a categorical stream: sample value ``i`` means
+    ``categories[i]`` (an object, a state), which plots draw as steps named on the axis.
     """
 
     dtype: str = "float64"
@@ -82,6 +84,7 @@ class StreamSpec:
     events: bool = False
     n_units: int | None = None
     labels: tuple[str, ...] | None = None
+    categories: tuple[str, ...] | None = None
 
     @property
     def size(self) -> int:

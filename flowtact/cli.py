@@ -100,12 +100,25 @@ def _parser() -> argparse.ArgumentParser:
     graph_args(draw)
     draw.add_argument("-o", "--output", required=True, help="output file: .svg, .png or .dot")
 
-    plot = sub.add_parser("plot", help="plot a recording: forces, spike rasters and rates")
+    plot = sub.add_parser(
+        "plot",
+        help="plot a recording: each stream as what it is (lines in units, steps, rasters, pulses, frames)",
+        description="Plot a recording on a shared time axis: vector samples as labelled lines per channel "
+        "in their units (heat map beyond 12 channels), categorical streams as named steps, spike events "
+        "as rasters with firing rates, stimulation pulses as pulse trains, frames as a thumbnail strip. "
+        "Reads block by block: memory stays bounded whatever the file size. --paper draws the compact "
+        "touch/slip figure instead (force, dF/dt, SA1/FA1 rasters, rates; after Rager et al. Fig. 4).",
+    )
     plot.add_argument("recording", help="an .h5 file written by flowtact run --record")
     plot.add_argument("-o", "--output", required=True, help="image file (.png, .svg, .pdf)")
     plot.add_argument("--streams", nargs="*", help="streams to plot (default: all)")
     plot.add_argument("--from", dest="t0", type=cli_finite_seconds, help="start time (s)")
     plot.add_argument("--to", dest="t1", type=cli_finite_seconds, help="end time (s)")
+    plot.add_argument(
+        "--paper",
+        action="store_true",
+        help="compact touch/slip figure: force, dF/dt, rasters, rates (one column)",
+    )
     bench = sub.add_parser("bench", help="run a benchmark of bench/ (in a source checkout)")
     bench.add_argument("name", nargs="?", help="benchmark name (bench/NAME.py); none lists them")
     bench.add_argument(
@@ -303,7 +316,13 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     from flowtact.plot_recording import plot_recording
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
-    out = plot_recording(args.recording, args.output, streams=args.streams, t_range=t_range)
+    try:
+        out = plot_recording(
+            args.recording, args.output, streams=args.streams, t_range=t_range, paper=args.paper
+        )
+    except KeyError as e:  # an unknown --streams name: a usage error
+        print(f"flowtact: error: {e.args[0]}", file=sys.stderr)
+        return EXIT_GRAPH_ERROR
     print(f"wrote {out}")
     return 0
 

@@ -9,7 +9,7 @@ Layout of a recording (one ``.h5`` file)::
     /streams/<node>.<port>/t      float64 (n,)   sample times, or spike times for event streams
     /streams/<node>.<port>/data   (n, *shape)    samples, frames, or the unit index of each event
         attributes: units, rate_hz (NaN for events), events (0/1), n_units (-1: none), labels
-        (JSON list or "null"), dtype, shape (JSON list), end_s (last time the stream reached)
+        and categories (JSON lists or "null"; categories[i] names sample value i), dtype, shape (JSON list), end_s (last time the stream reached)
     /provenance/<key>          only for provenance values too long for an attribute (> 60 kB)
 
 Values that were not strings (dicts, lists) are stored as JSON text and listed in the root
@@ -143,6 +143,7 @@ def _spec_attrs(spec: StreamSpec) -> dict[str, Any]:
         "events": np.int8(bool(spec.events)),
         "n_units": np.int64(-1 if spec.n_units is None else spec.n_units),
         "labels": _dumps(list(spec.labels) if spec.labels is not None else None),
+        "categories": _dumps(list(spec.categories) if spec.categories is not None else None),
         "dtype": np.dtype(spec.dtype).name,
         "shape": _dumps(list(spec.shape)),
         "end_s": math.nan,
@@ -158,6 +159,7 @@ def _spec_from_attrs(attrs: Mapping[str, Any], data: h5py.Dataset) -> StreamSpec
     rate = float(_attr(attrs.get("rate_hz", math.nan)))
     n_units = int(_attr(attrs.get("n_units", -1)))
     labels = json.loads(_attr(attrs.get("labels", "null")))
+    categories = json.loads(_attr(attrs.get("categories", "null")))
     shape = attrs.get("shape")
     return StreamSpec(
         dtype=str(_attr(attrs.get("dtype", data.dtype.name))),
@@ -167,6 +169,7 @@ def _spec_from_attrs(attrs: Mapping[str, Any], data: h5py.Dataset) -> StreamSpec
         events=events,
         n_units=None if n_units < 0 else n_units,
         labels=None if labels is None else tuple(labels),
+        categories=None if categories is None else tuple(categories),
     )
 
 

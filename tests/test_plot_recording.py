@@ -1,27 +1,122 @@
-"""flowtact plot: one figure per recording, panels per stream on a shared time axis."""
+"""flowtact plot: each stream drawn as what it is, checked on the figure's own axes; bounded memory."""
 
+import re
+import subprocess
 import sys
+import textwrap
 
 import numpy as np
 import pytest
 
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.cli import main
 from flowtact.plot_recording import DPI, binned_rates, plot_recording, recording_figure
 from flowtact.record import Recorder
 
 pytest.importorskip("matplotlib")
 
+ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+
+
+def _axes(fig, name):
+    """The time-axis panels of a stream (titles start with ``name —``)."""
+    return [ax for ax in fig.get_axes() if ax.get_title(loc="left").startswith(f"{name} — ")]
+
+
+def _one(fig, name, contains=""):
+    found = [ax for ax in _axes(fig, name) if contains in ax.get_title(loc="left")]
+    assert len(found) == 1, [ax.get_title(loc="left") for ax in fig.get_axes()]
+    return found[0]
+
+
+def _legend(ax):
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def _all_text(fig):
+    texts = [fig.get_suptitle()]
+    for sub in fig.subfigs:
+        texts.append(sub.get_suptitle())
+    for ax in fig.get_axes():
+        texts += [ax.get_title(loc="left"), ax.get_title(), ax.get_xlabel(), ax.get_ylabel()]
+        texts += [t.get_text() for t in ax.get_yticklabels()]
+        if ax.get_legend():
+            texts += _legend(ax)
+    return texts
+
+
+# -- a teleop recording made by the command line -----------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def teleop(tmp_path_factory):
+    """2 s of graphs/teleop.yaml on the in-process exoskeleton emulator, objects swapped each second."""
+    path = tmp_path_factory.mktemp("teleop") / "teleop.h5"
+    argv = [
+        "run",
+        str(ROOT / "graphs" / "teleop.yaml"),
+        "--set",
+        "exo.port=sim",
+        "--set",
+        "gripper.period_s=1",
+    ]
+    assert main([*argv, "--fast", "--inproc", "--duration", "2", "--record", str(path)]) == 0
+    return path
+
+
+def test_teleop_angles_are_nine_labelled_lines_in_rad(teleop):
+    fig = recording_figure(teleop)
+    ax = _one(fig, "exo.angles")
+    assert len(ax.get_lines()) == 9
+    fingers, joints = ("thumb", "index", "middle"), ("φ1", "φ2", "φ3")
+    assert _legend(ax) == [f"{f} {j}" for f in fingers for j in joints]
+    assert ax.get_ylabel() == "rad"
+    assert "9 channels as lines, rad, 100 Hz" in ax.get_title(loc="left")
+    y = np.array([line.get_ydata() for line in ax.get_lines()])
+    assert y.shape[1] == 200 and np.ptp(y, axis=1).max() > 0.1  # the recorded angles, not a mean
+    assert fig.get_axes()[0].get_xlim() == (0.0, 2.0) and "time [s]" in [
+        a.get_xlabel() for a in fig.get_axes()
+    ]
+
+
+def test_teleop_categorical_object_is_steps_named_on_the_axis(teleop):
+    ax = _one(teleop_fig := recording_figure(teleop), "gripper.object")
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["strawberry", "bottle"]
+    (line,) = ax.get_lines()
+    assert line.get_drawstyle() == "steps-post"
+    assert set(np.unique(line.get_ydata())) == {0.0, 1.0}  # values, not a ramp
+    assert line.get_xdata()[1] == pytest.approx(1.0, abs=0.011)  # the swap at 1 s
+    assert "categorical (strawberry / bottle): steps, 1 change" in ax.get_title(loc="left")
+    assert teleop_fig.get_suptitle() == "teleop.h5 — graph teleop"
+
+
+def test_teleop_command_columns_get_their_own_units_and_us_is_written_micro(teleop):
+    fig = recording_figure(teleop)
+    engage = _one(fig, "control.cmd", "engage")
+    deviation = _one(fig, "control.cmd", "deviation")
+    assert deviation.get_ylabel() == "µs" and engage.get_ylabel() == "dimensionless"
+    assert _legend(deviation) == ["thumb deviation", "index deviation", "middle deviation"]
+    bare_us = [t for t in _all_text(fig) if re.search(r"\bus\b|_us\b", t)]
+    assert not bare_us, bare_us
+
+
+# -- a synthetic recording with every kind of stream ---------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
-    """1 s: forces (labelled), their derivative, 2 labelled afferents, 30 units, and frames."""
+    """1 s: forces, 2 labelled afferents, 30 units, pulses, a categorical state, 20 channels, frames."""
     path = tmp_path_factory.mktemp("plot") / "run.h5"
     streams = {
         "force.f": StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz")),
-        "dforce.y": StreamSpec("float64", (3,), "N/s", 1000.0),
         "aff.spikes": StreamSpec("int64", (), "1", None, events=True, n_units=2, labels=("SA1", "FA1")),
         "pop.spikes": StreamSpec("int64", (), "1", None, events=True, n_units=30),
-        "cam.frame": StreamSpec("uint8", (12, 16), "1", 40.0),
+        "stim.y": StreamSpec(
+            "float64", (3,), "1", None, events=True, n_units=2, labels=("unit", "amplitude_ua", "width_us")
+        ),
+        "state.y": StreamSpec("float64", (), "1", 100.0, categories=("rest", "grasp", "hold")),
+        "array.x": StreamSpec("float64", (20,), "mV", 100.0),
+        "cam.frame": StreamSpec("uint8", (2, 12, 16), "DN", 40.0),
     }
     t = np.arange(1000) / 1000.0
     f = np.stack([np.sin(2 * np.pi * t), np.cos(2 * np.pi * t), 0.12 + (t > 0.3) * 0.2], axis=1)
@@ -32,34 +127,67 @@ def recording(tmp_path_factory):
     order = np.argsort(ev_t, kind="stable")
     ev_u = np.concatenate([np.zeros(len(sa1), int), np.ones(3, int)])[order]
     pop_t = np.sort(rng.uniform(0, 1, 600))
+    t100 = np.arange(100) / 100.0
     with Recorder(path, streams, {"graph_name": "touch"}) as rec:
         rec.write("force.f", Chunk(t, f))
-        rec.write("dforce.y", Chunk(t, np.gradient(f, axis=0) * 1000))
         rec.write("aff.spikes", Chunk(ev_t[order], ev_u, end=1.0))
         rec.write("pop.spikes", Chunk(pop_t, rng.integers(0, 30, 600), end=1.0))
-        rec.write(
-            "cam.frame", Chunk(np.arange(40) / 40.0, rng.integers(0, 256, (40, 12, 16), dtype=np.uint8))
-        )
+        pulses = np.array([[0, 60.0, 200.0], [1, 40.0, 200.0], [0, 60.0, 200.0]])
+        rec.write("stim.y", Chunk(np.array([0.2, 0.25, 0.5]), pulses, end=1.0))
+        rec.write("state.y", Chunk(t100, np.select([t100 < 0.3, t100 < 0.6], [0.0, 1.0], 2.0)))
+        rec.write("array.x", Chunk(t100, rng.normal(size=(100, 20))))
+        frames = np.zeros((40, 2, 12, 16), np.uint8)
+        frames[:, 1] = np.arange(40, dtype=np.uint8)[:, None, None] * 6  # camera 1 brightens
+        rec.write("cam.frame", Chunk(np.arange(40) / 40.0, frames))
     return path
 
 
-def test_png_has_a_panel_per_stream_and_two_per_event_stream(recording, tmp_path):
+def test_every_kind_of_stream_is_drawn_as_what_it_is(recording, tmp_path):
     fig = recording_figure(recording)
-    axes = fig.get_axes()
-    assert len(axes) == 7  # force, dforce, aff raster + rate, pop raster + rate, frames
-    titles = [ax.get_title(loc="left") for ax in axes]
-    assert titles[0] == "force.f [N]" and titles[1] == "dforce.y [N/s]"
-    assert titles[2].startswith("aff.spikes: spikes (103 in view, 2 units)")
-    assert titles[3] == "aff.spikes: firing rate, 20 ms bins"
-    assert titles[6] == "cam.frame: mean intensity per frame"
-    assert [t.get_text() for t in axes[0].get_legend().get_texts()] == ["Fx", "Fy", "Fz"]
-    assert [t.get_text() for t in axes[2].get_yticklabels()] == ["SA1", "FA1"]
-    assert [t.get_text() for t in axes[5].get_legend().get_texts()] == ["mean of 30 units"]
-    assert all(ax.get_xlim() == (0.0, 1.0) for ax in axes)  # shared time axis
-    assert axes[-1].get_xlabel() == "time [s]"
+    force = _one(fig, "force.f")
+    assert _legend(force) == ["Fx", "Fy", "Fz"] and force.get_ylabel() == "N"
+
+    raster = _one(fig, "aff.spikes", "raster")
+    assert raster.get_title(loc="left") == "aff.spikes — spike raster: 103 spikes on 2 units"
+    (ticks,) = raster.get_lines()
+    assert ticks.get_marker() == "|" and sorted(set(ticks.get_ydata())) == [0, 1]
+    assert [t.get_text() for t in raster.get_yticklabels()] == ["SA1", "FA1"]
+    rate = _one(fig, "aff.spikes", "rate")
+    assert rate.get_ylabel() == "1/s" and _legend(rate) == ["SA1", "FA1"]
+    assert "population firing rate (mean over 30 units), 20 ms bins" in _one(
+        fig, "pop.spikes", "rate"
+    ).get_title(loc="left")
+
+    pulses = _one(fig, "stim.y", "stimulation pulses")
+    assert pulses.get_ylabel() == "µA"
+    heights = sorted(seg[1][1] for c in pulses.collections for seg in c.get_segments())
+    assert heights == [40.0, 60.0, 60.0]  # one stem per pulse, at its amplitude
+    assert "3 pulses on 2 channels; widths 200 µs" in pulses.get_title(loc="left")
+    assert _one(fig, "stim.y", "pulse raster").get_ylabel() == "channel"
+
+    state = _one(fig, "state.y")
+    assert [t.get_text() for t in state.get_yticklabels()] == ["rest", "grasp", "hold"]
+    assert state.get_lines()[0].get_drawstyle() == "steps-post"
+
+    heat = _one(fig, "array.x")
+    assert "heat map of 20 channels" in heat.get_title(loc="left") and len(heat.get_images()) == 1
+
+    strip = [sub for sub in fig.subfigs if sub.get_suptitle().startswith("cam.frame — ")]
+    assert (
+        len(strip) == 1
+        and "8 of 40 frames (2×12×16) at evenly spaced times, 2 cameras" in strip[0].get_suptitle()
+    )
+    thumbs = [ax for ax in strip[0].get_axes() if ax.get_images()]
+    assert len(thumbs) == 16  # 8 times × 2 cameras, each an image
+    times = [float(ax.get_title()[4:-2]) for ax in thumbs if ax.get_title()]
+    assert times == sorted(times) and times[0] == 0.0 and times[-1] == pytest.approx(0.975)
+    brightest = thumbs[-1].get_images()[0].get_array()
+    assert int(brightest.max()) == 39 * 6  # the last frame of camera 1, as recorded
+
+    time_axes = [ax for ax in fig.get_axes() if ax not in strip[0].get_axes()]
+    assert all(ax.get_xlim() == (0.0, 1.0) for ax in time_axes)  # one shared time axis
 
     out = plot_recording(recording, tmp_path / "sub" / "fig.png")
-    assert out == tmp_path / "sub" / "fig.png" and out.stat().st_size > 10_000
     import matplotlib.image
 
     img = matplotlib.image.imread(out)
@@ -71,13 +199,110 @@ def test_selected_streams_and_time_range(recording, tmp_path):
     fig = recording_figure(recording, streams=["aff.spikes"], t_range=(0.25, 0.5))
     axes = fig.get_axes()
     assert len(axes) == 2 and axes[0].get_xlim() == (0.25, 0.5)
-    assert axes[0].get_title(loc="left").startswith("aff.spikes: spikes (28 in view")
+    assert axes[0].get_title(loc="left") == "aff.spikes — spike raster: 28 spikes on 2 units"
     out = plot_recording(recording, tmp_path / "f.svg", streams=["force.f"], t_range=(0.1, None))
     assert out.read_text().lstrip().startswith("<?xml")
-    with pytest.raises(KeyError, match=r"no stream 'nope' \(available: force\.f, dforce\.y"):
+    with pytest.raises(KeyError, match=r"no stream 'nope' \(available: force\.f, aff\.spikes"):
         recording_figure(recording, streams=["nope"])
     with pytest.raises(ValueError, match="empty time range"):
         recording_figure(recording, t_range=(0.5, 0.5))
+
+
+def test_cli_plot_and_its_usage_errors(recording, tmp_path, capsys):
+    assert main(["plot", str(recording), "-o", str(tmp_path / "a.png")]) == 0
+    assert (tmp_path / "a.png").stat().st_size > 10_000
+    assert main(["plot", str(recording), "-o", str(tmp_path / "b.png"), "--streams", "nope"]) == 2
+    assert "no stream 'nope'" in capsys.readouterr().err
+    assert main(["plot", str(tmp_path / "missing.h5"), "-o", str(tmp_path / "c.png")]) == 1
+
+
+# -- the paper figure ------------------------------------------------------------------------------
+
+
+def test_paper_figure_stacks_force_derivative_rasters_and_rates(tmp_path):
+    path = tmp_path / "touch.h5"
+    streams = {
+        "force.f": StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz")),
+        "dforce.y": StreamSpec("float64", (3,), "N/s", 1000.0, labels=("Fx", "Fy", "Fz")),
+        "sa1.spikes": StreamSpec("int64", (), "1", None, events=True, n_units=4),
+        "fa1.spikes": StreamSpec("int64", (), "1", None, events=True, n_units=4),
+        "sa1_stim.y": StreamSpec(
+            "float64", (3,), "1", None, events=True, n_units=4, labels=("unit", "amplitude_ua", "width_us")
+        ),
+    }
+    t = np.arange(1000) / 1000.0
+    f = np.stack([0 * t, 0 * t, 0.12 + 0.2 * (t > 0.3)], axis=1)
+    with Recorder(path, streams, {"graph_name": "touch"}) as rec:
+        rec.write("force.f", Chunk(t, f))
+        rec.write("dforce.y", Chunk(t, np.gradient(f, axis=0) * 1000))
+        rec.write("sa1.spikes", Chunk(np.arange(0.3, 1.0, 0.01), np.arange(70) % 4, end=1.0))  # 25/s per unit
+        rec.write("fa1.spikes", Chunk(np.array([0.3, 0.301]), np.array([0, 1]), end=1.0))
+        rec.write("sa1_stim.y", Chunk(np.array([0.3]), np.array([[0, 60.0, 200.0]]), end=1.0))
+    fig = recording_figure(path, paper=True)
+    axes = fig.get_axes()
+    assert [ax.get_ylabel() for ax in axes] == [
+        "force\n[N]",
+        "dF/dt\n[N/s]",
+        "SA1\nunit",
+        "FA1\nunit",
+        "rate [1/s]\n20 ms bins",
+    ]
+    assert len(axes[0].get_lines()) == 3 and _legend(axes[0]) == ["Fx", "Fy", "Fz"]
+    assert len(axes[2].get_lines()[0].get_xdata()) == 70  # every SA1 spike, not the pulses
+    sa1_rate = axes[4].patches[0].get_data()[0]
+    assert sa1_rate[20:45].mean() == pytest.approx(25.0)  # mean over 4 units of 100 spikes/s
+    assert _legend(axes[4]) == ["SA1 (mean of 4)", "FA1 (mean of 4)"]
+    assert all(ax.get_xlim() == (0.0, 1.0) for ax in axes) and axes[-1].get_xlabel() == "time [s]"
+    assert main(["plot", str(path), "--paper", "-o", str(tmp_path / "p.png")]) == 0
+
+
+def test_paper_figure_refuses_a_recording_without_force_or_spikes(recording, tmp_path, capsys):
+    with pytest.raises(ValueError, match=r"--paper needs a spike event stream|--paper needs a force"):
+        recording_figure(recording, streams=["force.f"], paper=True)
+    assert (
+        main(["plot", str(recording), "--streams", "state.y", "--paper", "-o", str(tmp_path / "x.png")]) == 1
+    )
+    assert "--paper needs a force stream in N" in capsys.readouterr().err
+
+
+# -- readers -------------------------------------------------------------------------------------
+
+
+def test_envelope_and_change_points_read_block_by_block(tmp_path, monkeypatch):
+    """Buckets cut across read blocks give the same min, max and mean as the whole array at once."""
+    import flowtact.plot_read as pr
+
+    rng = np.random.default_rng(3)
+    n = 50_003
+    t = np.arange(n) / 1000.0
+    y = rng.normal(size=(n, 2))
+    y[12_345, 1] = 40.0  # a one-sample spike survives decimation
+    y[777, 0] = np.nan
+    state = np.repeat(np.arange(7) % 3, n // 7 + 1)[:n].astype(float)
+    path = tmp_path / "r.h5"
+    specs = {"x.y": StreamSpec("float64", (2,), "V", 1000.0), "s.y": StreamSpec("float64", (), "1", 1000.0)}
+    with Recorder(path, specs, {}) as rec:
+        rec.write("x.y", Chunk(t, y))
+        rec.write("s.y", Chunk(t, state))
+    monkeypatch.setattr(pr, "BLOCK_BYTES", 8 * 2 * 997)  # 997 rows per block: buckets straddle blocks
+    f, src, _ = pr.open_recording(path)
+    with f:
+        i, j = pr.index_range(src["x.y"], 1.0, 41.0)
+        assert (i, j) == (1000, 41_001)
+        env = pr.sample_envelope(src["x.y"], i, j, buckets=100)
+        assert env.y.shape == (200, 2) and env.per_point == 401
+        b = ((np.arange(i, j) - i) * 100) // (j - i)
+        for k in (0, 37, 99):
+            rows = y[i:j][b == k]
+            np.testing.assert_array_equal(env.y[2 * k], np.nanmin(rows, axis=0))
+            np.testing.assert_array_equal(env.y[2 * k + 1], np.nanmax(rows, axis=0))
+            np.testing.assert_allclose(env.mean[k], np.nanmean(rows, axis=0))
+        assert env.y[:, 1].max() == 40.0
+        ct, cv = pr.change_points(src["s.y"], 0, n)
+        edges = np.flatnonzero(np.diff(state)) + 1
+        np.testing.assert_array_equal(ct, np.r_[t[0], t[edges]])
+        np.testing.assert_array_equal(cv, np.r_[state[0], state[edges]])
+        assert pr.change_points(src["s.y"], 0, n, limit=3) is None
 
 
 def test_binned_rates():
@@ -85,12 +310,29 @@ def test_binned_rates():
     u = np.array([0, 1, 0, 0, 1, 1])
     starts, r = binned_rates(t, u, 2, 0.0, 1.0)
     assert len(starts) == 50 and r.shape == (50, 2)
-    np.testing.assert_allclose(starts[:3], [0.0, 0.02, 0.04])
     np.testing.assert_allclose(r[0], [100.0, 50.0])  # 2 and 1 spikes in 20 ms
     np.testing.assert_allclose(r[1], [50.0, 0.0])
-    np.testing.assert_allclose(r[2], [0.0, 50.0])
-    np.testing.assert_allclose(r[49], [0.0, 50.0])
     assert r.sum() * 0.02 == 6
+
+
+def test_empty_and_non_finite_streams_say_so(tmp_path):
+    path = tmp_path / "quiet.h5"
+    specs = {
+        "a.x": StreamSpec("float64", (3,), "N", 100.0),
+        "b.spikes": StreamSpec("int64", (), "1", None, events=True, n_units=5),
+        "c.y": StreamSpec("float64", (2,), "V", 10.0),
+        "d.y": StreamSpec("float64", (), "1", 10.0, categories=("x", "y")),
+    }
+    with Recorder(path, specs, {}) as rec:
+        y = np.full((5, 2), np.nan)
+        y[:2, 0] = 1.0
+        rec.write("c.y", Chunk(np.arange(5) / 10, y))
+    fig = recording_figure(path)
+    said = {ax.get_title(loc="left"): [t.get_text() for t in ax.texts] for ax in fig.get_axes()}
+    assert said["a.x — 3 channels as lines, N, 100 Hz; no samples"] == ["no samples in this time range"]
+    assert said["b.spikes — spike raster: 0 spikes on 5 units"] == ["no spikes in this time range"]
+    assert "c.y — 2 channels as lines, V, 10 Hz; 8 NaN/inf values (gaps)" in said
+    assert said["d.y — categorical (x / y): no samples"] == ["no samples in this time range"]
 
 
 def test_incomplete_recording_is_flagged(tmp_path):
@@ -109,3 +351,89 @@ def test_missing_file_and_missing_matplotlib(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(ImportError, match=r"pip install 'flowtact\[plot\]'"):
         plot_recording(tmp_path / "nope.h5", tmp_path / "x.png")
+
+
+# -- memory ----------------------------------------------------------------------------------------
+
+_PEAK = textwrap.dedent(
+    """
+    import sys
+    from flowtact.plot_recording import plot_recording
+    plot_recording(sys.argv[1], sys.argv[2])
+    # VmHWM: this process's own peak (ru_maxrss would carry the parent's across fork + exec)
+    status = open("/proc/self/status").read()
+    print(int(status.split("VmHWM:")[1].split()[0]) // 1024)
+    """
+)
+
+
+def _big_recording(path, n_frames, n_samples):
+    """Frames of 3×240×320 uint8 (230 kB each), a 1 kHz 4-channel stream and 20-unit spikes."""
+    specs = {
+        "cam.frames": StreamSpec("uint8", (3, 240, 320), "DN", 40.0),
+        "sensor.x": StreamSpec("float64", (4,), "N", 1000.0),
+        "pop.spikes": StreamSpec("int64", (), "1", None, events=True, n_units=20),
+    }
+    tile = np.random.default_rng(1).integers(0, 200, (3, 240, 320), dtype=np.uint8)
+    with Recorder(path, specs, {}, flush_interval_s=0) as rec:
+        for k in range(0, n_frames, 200):
+            m = min(200, n_frames - k)
+            frames = np.broadcast_to(tile, (m, 3, 240, 320)) + (
+                np.arange(k, k + m)[:, None, None, None] % 50
+            ).astype(np.uint8)
+            rec.write("cam.frames", Chunk((k + np.arange(m)) / 40.0, frames))
+        span = n_frames / 40.0
+        for k in range(0, n_samples, 1_000_000):
+            m = min(1_000_000, n_samples - k)
+            t = (k + np.arange(m)) * (span / n_samples)
+            rec.write("sensor.x", Chunk(t, np.sin(t)[:, None] * np.arange(1, 5)))
+            rec.write("pop.spikes", Chunk(t[::20], np.arange(len(t[::20])) % 20, end=float(t[-1])))
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads the peak RSS from /proc")
+def test_plot_memory_is_bounded_whatever_the_file_size(tmp_path):
+    """Peak RSS plotting a 1.3 GB recording (frames alone 1.1 GB) stays < 500 MB, as for a small one."""
+    small = _big_recording(tmp_path / "small.h5", 200, 100_000)
+    big = _big_recording(tmp_path / "big.h5", 4800, 4_000_000)
+    assert big.stat().st_size > 1.2e9 and 4800 * 3 * 240 * 320 > 1e9
+    peaks = []
+    for rec in (small, big):
+        out = subprocess.run(
+            [sys.executable, "-c", _PEAK, str(rec), str(tmp_path / f"{rec.stem}.png")],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        peaks.append(int(out.stdout.split()[-1]))
+    assert peaks[1] < 500, f"peak RSS {peaks[1]} MB plotting {big.stat().st_size / 1e9:.2f} GB"
+    assert peaks[1] - peaks[0] < 80, f"peak RSS grew from {peaks[0]} to {peaks[1]} MB with the file"
+
+
+def test_categories_are_stored_in_the_recording_and_cross_processes(recording):
+    import h5py
+
+    from flowtact.record import stream_specs
+    from flowtact.runtime.placement import spec_from_wire, spec_to_wire
+
+    with h5py.File(recording) as f:
+        assert f["streams/state.y"].attrs["categories"] == '["rest", "grasp", "hold"]'
+        assert f["streams/force.f"].attrs["categories"] == "null"
+    spec = stream_specs(recording)["state.y"][0]
+    assert spec.categories == ("rest", "grasp", "hold")
+    assert spec_from_wire(spec_to_wire(spec)) == spec
+
+
+def test_too_many_events_for_ticks_become_counts_that_add_up(recording, monkeypatch):
+    import flowtact.plot_panels as pp
+
+    monkeypatch.setattr(pp, "MAX_EVENT_TICKS", 100)
+    ax = _one(recording_figure(recording, streams=["pop.spikes"]), "pop.spikes", "raster")
+    (img,) = ax.get_images()
+    counts = img.get_array()
+    assert counts.shape == (30, 1000) and counts.sum() == 600  # every spike, in its unit's row
+    assert img.norm.vmin == 0 and img.norm.vmax == counts.max()
+    assert ax.get_title(loc="left").startswith(
+        "pop.spikes — spike raster as counts per 1 ms bin (white 0, black"
+    )

@@ -17,7 +17,7 @@ import numpy as np
 from flowtact import Block, Chunk, Config, Example, Port, StreamSpec, param
 from flowtact.merge import LatestMerger
 
-from .hand import N_FINGERS
+from .hand import FINGERS, N_FINGERS
 
 __all__ = ["GAIN_US_PER_N", "ForceFeedback", "ForceFeedbackConfig"]
 
@@ -25,6 +25,9 @@ __all__ = ["GAIN_US_PER_N", "ForceFeedback", "ForceFeedbackConfig"]
 GAIN_US_PER_N = (80.0, 100.0, 100.0)
 
 _CMD = (N_FINGERS, 2)
+#: One name per command value (C order); the ``_us`` suffix gives the unit of a column that is not
+#: the stream's own (engage is a 0/1 flag), so plots draw the two columns on their own axes.
+_CMD_LABELS = tuple(f"{finger} {what}" for finger in FINGERS for what in ("engage_1", "deviation_us"))
 
 
 def _fill(
@@ -211,7 +214,9 @@ class ForceFeedback(Block):
     }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        return {"cmd": StreamSpec(shape=_CMD, units="us", rate_hz=inputs["finger"].rate_hz)}
+        return {
+            "cmd": StreamSpec(shape=_CMD, units="us", rate_hz=inputs["finger"].rate_hz, labels=_CMD_LABELS)
+        }
 
     def reset(self) -> None:
         cfg = self.config

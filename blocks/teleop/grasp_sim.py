@@ -176,7 +176,12 @@ class GraspSim(Block):
     }
     outputs = {
         "force": Port(dtype="float64", shape=(3,), units="N", doc="true contact force per finger, N"),
-        "object": Port(dtype="float64", shape=(), units="1", doc="index of the object in hand"),
+        "object": Port(
+            dtype="float64",
+            shape=(),
+            units="1",
+            doc="index of the object in hand (categorical: object_names)",
+        ),
     }
     counter_docs = {
         "clipped": "command samples with a finger outside [0, 1] (beyond open or closed): clipped into range",
@@ -187,7 +192,9 @@ class GraspSim(Block):
         g = inputs["grip"]
         return {
             "force": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=g.rate_hz, labels=FINGERS),
-            "object": StreamSpec(shape=(), units="1", rate_hz=g.rate_hz),
+            "object": StreamSpec(
+                shape=(), units="1", rate_hz=g.rate_hz, categories=tuple(self.config.object_names)
+            ),
         }
 
     def reset(self) -> None:

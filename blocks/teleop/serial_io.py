@@ -39,6 +39,9 @@ __all__ = ["SerialIo", "SerialIoConfig"]
 
 log = logging.getLogger("flowtact.serial_io")
 
+#: Names of the 9 joint angles, finger by finger (the sample's C order): "thumb φ1", ...
+ANGLE_LABELS = tuple(f"{finger} φ{j}" for finger in FINGERS for j in (1, 2, 3))
+
 #: Graph time may run ahead of the wall clock by this much before a real port refuses (a --fast run).
 FAST_RUN_SLACK_S = 1.0
 #: Commands kept for round-trip matching.
@@ -256,7 +259,7 @@ class SerialIo(Source):
         c = self.config
         rate = c.rate_hz
         return {
-            "angles": StreamSpec("float64", (N_FINGERS, 3), "rad", rate),
+            "angles": StreamSpec("float64", (N_FINGERS, 3), "rad", rate, labels=ANGLE_LABELS),
             "fsr": StreamSpec("float64", (N_FINGERS,), "ADC", rate, labels=FINGERS),
             "engaged": StreamSpec("float64", (N_FINGERS,), "1", rate, labels=FINGERS),
             "device_t": StreamSpec("float64", (), "s", rate),

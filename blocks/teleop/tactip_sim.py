@@ -682,7 +682,12 @@ class TactipSim(Source):
         return {
             "frames": StreamSpec(dtype="uint8", shape=(N_FINGERS, HEIGHT, WIDTH), units="DN", rate_hz=rate),
             "force": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=rate, labels=FINGERS),
-            "contact": StreamSpec(shape=(N_FINGERS, 2), units="mm", rate_hz=rate),
+            "contact": StreamSpec(
+                shape=(N_FINGERS, 2),
+                units="mm",
+                rate_hz=rate,
+                labels=tuple(f"{f} {a}" for f in FINGERS for a in "xy"),
+            ),
         }
 
     def reset(self) -> None:

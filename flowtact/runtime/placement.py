@@ -36,6 +36,7 @@ def spec_to_wire(spec: StreamSpec) -> dict[str, Any]:
         "events": spec.events,
         "n_units": spec.n_units,
         "labels": list(spec.labels) if spec.labels is not None else None,
+        "categories": list(spec.categories) if spec.categories is not None else None,
     }
 
 
@@ -49,6 +50,7 @@ def spec_from_wire(d: dict[str, Any]) -> StreamSpec:
         events=d["events"],
         n_units=d["n_units"],
         labels=tuple(d["labels"]) if d["labels"] is not None else None,
+        categories=tuple(d["categories"]) if d.get("categories") is not None else None,
     )
 
 
