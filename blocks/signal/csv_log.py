@@ -152,10 +152,10 @@ def _header(row: str, name: str, line: int) -> tuple[tuple[str, ...], str | None
     delimiter = next((d for d in (",", ";", "\t") if d in text), None)
     cells = [(c + offset, s) for c, s in _split(text, delimiter)]
     names = [s for _, s in cells]
-    for col, s in cells:
+    for k, (col, s) in enumerate(cells):
         if not s:
             raise CsvError(name, line, col, "an empty column name in the header row")
-        if names.count(s) > 1:
+        if s in names[:k]:
             raise CsvError(name, line, col, f"column '{s}' is named twice in the header row")
     if TIME not in names:
         looks = next((s for s in names if s in _TIME_LIKE or s.lower().startswith("time")), None)

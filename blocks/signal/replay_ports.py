@@ -165,7 +165,7 @@ class ReplayPorts:
                 None,
                 f"{self._file()} has no {what} for port{'s' if len(missing) > 1 else ''} "
                 f"{', '.join(repr(p) for p in missing)} of {self.replaces.name} ({what}s: "
-                f"{', '.join(names) or 'none'}); name {what}s after the ports or map them: "
+                f"{', '.join(names) or 'none'}); {'map them' if what == 'stream' else f'name {what}s after the ports or map them'}: "
                 f"--replay '{self.node}={self._file()}:{example}'",
             )
         return sources
@@ -292,8 +292,8 @@ class ReplayPorts:
 def stand_in_class(block: str) -> type[Source]:
     """The replay class standing in for nodes of ``block`` (a registered name or ``module:Class``)."""
     replaced = load_block(block)
-    if issubclass(replaced, ReplayPorts):  # replaying a replay: the same ports
-        replaced = replaced.replaces
+    if issubclass(replaced, ReplayPorts):  # replaying a replay: the same ports, the same class
+        return replaced
     ports = ", ".join(replaced.outputs) or "none"
     return type(
         f"ReplayAs{replaced.__name__}",
