@@ -68,6 +68,6 @@ class EndWatch:
 
     def finish(self, summary: Any) -> None:
         """After the run: say what was not said yet; the notices, and the ``record:`` entries left
-    out (:attr:`Plan.record_notes`), go in the summary's notes."""
+        out (:attr:`Plan.record_notes`), go in the summary's notes."""
         self.check(summary.duration_s)
         summary.notes.extend([*self.plan.record_notes, *self.said.values()])

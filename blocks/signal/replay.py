@@ -1,7 +1,9 @@
 """Play back a recorded stream: a flowtact HDF5 recording, or a plain .npz / .csv file.
 
-``replay`` is the "swap live for recorded" source: ``flowtact run graph.yaml --replay sensor=run.h5``
-puts one in place of a live sensor, and everything downstream runs unchanged.
+``replay`` is the "swap live for recorded" source with one output ``y``, for graph files. On the
+command line, ``flowtact run graph.yaml --replay sensor=run.h5`` (or ``=log.csv``) puts a replay in
+place of a live sensor on the sensor's own ports (:mod:`.replay_ports`), and everything downstream
+runs unchanged. CSV logs are read by :mod:`.csv_log`; see docs/your-own-data.md.
 """
 
 from __future__ import annotations
@@ -103,8 +105,12 @@ class Replay(Source):
     rate and labels come from the file; a configured ``units``/``rate_hz`` that differs is an
     error. ``.npz``: an array ``stream`` (default ``data``, shape (n, ...)) and optionally ``t``
     (n,); without ``t`` samples are stamped ``i / rate_hz``. ``.csv``: a header row naming the
-    columns, one of them ``t``, separated by commas (or semicolons or tabs); the output is float64
-    of shape (k,) with the column names as labels, or () when ``stream`` names one column.
+    columns, one of them ``t``, separated by commas (or semicolons, tabs or spaces); the output is
+    float64 of shape (k,) with the column names as labels, or () when ``stream`` names one column.
+    A bad CSV (binary or not UTF-8, a ragged row, a cell that is not a number, no ``t``, a time
+    that is not finite or goes back) is refused when the graph is compiled, at its line and column.
+    After the file's end (without ``loop``) nothing is emitted: no held value. A relative ``path``
+    in a graph file is from the graph file's folder.
     Without ``rate_hz`` the rate is 1 / the median step of ``t``; a configured rate more than 1 %
     away from it is an error.
 
