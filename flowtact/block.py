@@ -80,10 +80,15 @@ class Port:
 
 
 class SpecError(FlowtactError, ValueError):
-    """An input stream does not fit what a block expects (``port`` names the input, if any)."""
+    """An input stream does not fit what a block expects (``port`` names the input, if any).
 
-    def __init__(self, port: str | None, message: str) -> None:
+    ``where`` is (file, line, column) when the problem sits in a data file the block reads (a
+    replayed CSV log): the graph compiler then reports it there instead of at the node.
+    """
+
+    def __init__(self, port: str | None, message: str, where: tuple[str, int, int] | None = None) -> None:
         self.port = port
+        self.where = where
         super().__init__(message)
 
 
@@ -332,6 +337,12 @@ class Source(Block):
         if not self._bound:
             raise RuntimeError(f"{self.node}: bind() the source before ticking it")
         return self.step(now, **self._inputs(chunks))
+
+    def ends_at(self) -> float | None:
+        """Graph time after which this source emits nothing more (a played-back file's end), or None
+        when it never ends. A run without a duration lasts until its sources' ends
+        (:mod:`flowtact.source_ends`); called after ``specs``."""
+        return None
 
     @staticmethod
     def due(now: float, rate_hz: float) -> int:

@@ -47,8 +47,12 @@ def _parser() -> argparse.ArgumentParser:
             dest="replays",
             action="append",
             default=[],
-            metavar="NODE=FILE",
-            help="swap a source node for a replay of its recorded output; repeatable",
+            metavar="NODE=FILE[:MAP]",
+            help="play FILE (.h5 recording, .csv log, .npz) in place of NODE, on NODE's own output ports "
+            "(names, records and edges unchanged). A .h5 feeds port P from stream NODE.P; a .csv from "
+            "column P, or columns P[0], P[1], ... (or P.0, P_0); MAP overrides: "
+            "'sensor=log.csv:r=g1,g2,g3,g4;ref=g0'. Without --duration the run ends at the file's "
+            "end; see docs/your-own-data.md. Repeatable",
         )
 
     run = sub.add_parser("run", help="run a graph")
@@ -57,7 +61,7 @@ def _parser() -> argparse.ArgumentParser:
         "--duration",
         type=cli_positive_seconds,
         metavar="S",
-        help="graph seconds to run (default: the graph's duration_s)",
+        help="graph seconds to run (default: the end of the --replay'd files, else the graph's duration_s)",
     )
     run.add_argument(
         "--fast", action="store_true", help="run as fast as possible (virtual clock), not in real time"
@@ -167,11 +171,16 @@ def _version() -> str:
 
 
 def _replays(items: Sequence[str]) -> dict[str, str]:
-    out = {}
-    for item in items:
+    from flowtact.graph import GraphError, Loc
+
+    out: dict[str, str] = {}
+    for i, item in enumerate(items):
         node, sep, path = item.partition("=")
-        if not sep or not node or not path:
-            raise SystemExit(f"flowtact: --replay '{item}': expected NODE=FILE")
+        node = node.strip()
+        why = "expected NODE=FILE[:PORT=COLUMN,...;PORT=...]" if not sep or not node or not path else ""
+        why = why or (f"node '{node}' is replayed twice" if node in out else "")
+        if why:
+            raise GraphErrors([GraphError(Loc("--replay", 1, i + 1), f"--replay '{item}': {why}")])
         out[node] = path
     return out
 

@@ -16,10 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flowtact.block import Block, SpecError
+from flowtact.block import Block, Source, SpecError
 from flowtact.chunk import StreamSpec
 from flowtact.extras import missing_extras
-from flowtact.graph import Edge, Graph, GraphError, GraphErrors
+from flowtact.graph import Edge, Graph, GraphError, GraphErrors, Loc
+from flowtact.params import ConfigError
 
 __all__ = ["Plan", "compile_graph", "node_seed"]
 
@@ -44,7 +45,11 @@ class Plan:
     seeds: dict[str, int]
     record: list[Stream]
     notes: list[str] = field(default_factory=list)
-    """Human-readable reasons for what was pruned."""
+    """Human-readable reasons for what was pruned (or not recorded)."""
+    record_notes: list[str] = field(default_factory=list)
+    """The ``record:`` entries left out, and why (a replayed file without that port)."""
+    ends: dict[str, float] = field(default_factory=dict)
+    """Active sources that end (played-back files): node -> graph time after their last sample."""
 
     @property
     def requires(self) -> set[str]:
@@ -132,7 +137,15 @@ def compile_graph(graph: Graph) -> Plan:
     if errors:
         raise GraphErrors(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
 
-    active, demanded, needed, active_edges, notes = _propagate_demand(graph, order, blocks, incoming)
+    record, notes = _recordable(graph, specs)
+    active, demanded, needed, active_edges, pruning = _propagate_demand(
+        graph, order, blocks, incoming, record
+    )
+    ends = {
+        n: end
+        for n in active
+        if isinstance(blocks[n], Source) and (end := blocks[n].ends_at()) is not None  # type: ignore[attr-defined]
+    }
     missing = missing_extras(graph, active)  # before anything starts, naming the pip extra
     if missing:
         raise GraphErrors(missing)
@@ -145,9 +158,25 @@ def compile_graph(graph: Graph) -> Plan:
         active_edges=active_edges,
         pruned=[n for n in order if n not in active],
         seeds=_node_seeds(graph),
-        record=[(n, p) for n, p, _ in graph.record],
-        notes=notes,
+        record=[(n, p) for n, p, _ in record],
+        notes=notes + pruning,
+        record_notes=notes,
+        ends=ends,
     )
+
+
+def _recordable(
+    graph: Graph, specs: Mapping[Stream, StreamSpec]
+) -> tuple[list[tuple[str, str, Loc]], list[str]]:
+    """The ``record:`` entries whose stream exists, and a note for each that does not: a block may
+    leave an output without a stream when it has no data for it (a replayed file without that port)."""
+    kept, notes = [], []
+    for n, p, loc in graph.record:
+        if (n, p) in specs:
+            kept.append((n, p, loc))
+        else:
+            notes.append(f"{n}.{p}: not recorded ({graph.nodes[n].cls.name} '{n}' has no data for it)")
+    return kept, notes
 
 
 def _stream_specs(
@@ -168,9 +197,14 @@ def _stream_specs(
             continue
         try:
             out = blocks[n].specs(inputs)
-        except SpecError as err:
-            loc = next((e.loc for e in incoming[n] if e.dst_port == err.port), graph.nodes[n].loc)
-            errors.append(GraphError(loc, f"node '{n}' ({graph.nodes[n].cls.name}): {err}"))
+        except (SpecError, ConfigError) as err:  # a ConfigError here: a file the config names (a replay)
+            loc = next(
+                (e.loc for e in incoming[n] if e.dst_port == getattr(err, "port", None)), graph.nodes[n].loc
+            )
+            where = getattr(err, "where", None)
+            errors.append(
+                GraphError(Loc(*where) if where else loc, f"node '{n}' ({graph.nodes[n].cls.name}): {err}")
+            )
             broken.add(n)
             continue
         for port, spec in out.items():
@@ -260,7 +294,11 @@ def _node_seeds(graph: Graph) -> dict[str, int]:
 
 
 def _propagate_demand(
-    graph: Graph, order: list[str], blocks: Mapping[str, Block], incoming: Mapping[str, list[Edge]]
+    graph: Graph,
+    order: list[str],
+    blocks: Mapping[str, Block],
+    incoming: Mapping[str, list[Edge]],
+    record: list[tuple[str, str, Loc]],
 ) -> tuple[list[str], dict[str, frozenset[str]], dict[str, frozenset[str]], list[Edge], list[str]]:
     """Walk backwards from recorded streams and sinks.
 
@@ -268,7 +306,7 @@ def _propagate_demand(
     edges that carry data, and a note for everything skipped.
     """
     demanded: dict[str, set[str]] = defaultdict(set)
-    for n, p, _ in graph.record:
+    for n, p, _ in record:
         demanded[n].add(p)
     active: set[str] = {n for n in order if graph.nodes[n].cls.sink}
     needed: dict[str, frozenset[str]] = {}

@@ -22,8 +22,10 @@ from flowtact.block import Block
 from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, deadline_path_errors, parse_deployment
 from flowtact.limits import MAX_QUEUE, MAX_TICK_S, positive_seconds
 from flowtact.located import GraphError, GraphErrors, Loc, Located
+from flowtact.param_paths import resolve_path, resolve_paths
 from flowtact.params import ConfigError, did_you_mean
 from flowtact.registry import UnknownBlockError, load_block
+from flowtact.replay_spec import parse_port_map, split_replay
 from flowtact.safe_yaml import SafeYamlError, compose, load_value, read_graph_text
 
 __all__ = [
@@ -146,10 +148,12 @@ def load_graph(
     """Load and validate a graph file; raise :class:`GraphErrors` listing every problem.
 
     ``overrides`` are ``node.param=value`` strings (``--set``), applied before validation, so they
-    go through exactly the same checks. ``replays`` maps a source node to a recording
-    (``--replay sensor=out.h5``): the node is swapped for a ``replay`` block playing back its
-    recorded output (one replay node per consumed port, named ``<node>_<port>`` when there are
-    several). ``text`` gives the YAML directly (``source`` then only names it).
+    go through exactly the same checks. ``replays`` maps a node to ``FILE[:PORT=COLUMNS;...]``
+    (``--replay sensor=log.csv``): the node is swapped for a replay of that file standing in on the
+    node's own output ports (:mod:`flowtact.replay_spec`). ``text`` gives the YAML directly
+    (``source`` then only names it). Relative file names in parameters (``param(path=True)``) are
+    resolved against the graph file's folder, those given by ``--set`` or ``--replay`` against the
+    working directory.
     """
     path = str(source)
     located = Located(path)
@@ -174,54 +178,97 @@ def load_graph(
     return _build(doc, located, path, text, list(overrides), dict(replays or {}))
 
 
-def _apply_replays(doc: dict[str, Any], replays: Mapping[str, str], errors: list[GraphError]) -> None:
-    """Swap each replayed node for replay node(s) of its consumed or recorded outputs, in place.
+def _apply_replays(
+    doc: dict[str, Any], y: Located, replays: Mapping[str, str], errors: list[GraphError]
+) -> None:
+    """Swap each replayed node for a replay of a file on the node's own output ports, in place.
 
-    The node's inputs are dropped (a replay has none); each consumed or recorded output ``port``
-    becomes a replay node named ``<node>`` (one output) or ``<node>_<port>`` (several).
+    ``replays`` maps a node to ``FILE[:PORT=COLUMNS;...]`` (:mod:`flowtact.replay_spec`); a relative
+    FILE is from the working directory. The node keeps its name, ports, process and seed, so edges
+    and ``record:`` are untouched; its inputs are dropped (a replay has none). Problems are located
+    at ``--replay:1:N`` (the N-th ``--replay``), and so is everything later said about the node.
     """
     nodes = doc.get("nodes")
-    for i, (name, rec_path) in enumerate(replays.items()):
+    planned: dict[str, tuple[Loc, str, str, str]] = {}
+    for i, (name, text) in enumerate(replays.items()):
         loc = Loc("--replay", 1, i + 1)
-        if not isinstance(nodes, dict) or name not in nodes:
-            known = map(str, nodes or {})
+        where = f"--replay {name}={text}"
+        ndoc = nodes.get(name) if isinstance(nodes, dict) else None
+        if not isinstance(ndoc, dict):
+            known = map(str, nodes if isinstance(nodes, dict) else {})
+            errors.append(GraphError(loc, f"{where}: unknown node '{name}'{did_you_mean(name, known)}"))
+            continue
+        try:
+            cls = load_block(str(ndoc.get("block")))
+        except UnknownBlockError:
+            errors.append(GraphError(loc, f"{where}: node '{name}' has no valid block to stand in for"))
+            continue
+        path, mapping = split_replay(text)
+        head, colon, tail = path.rpartition(":")
+        if colon and Path(head).suffix and not Path(path).is_file():
+            mapping = tail  # FILE:MAP with a map missing its '=': say so, not "no such file"
+        try:
+            ports = parse_port_map(mapping)
+        except ValueError as e:
             errors.append(
-                GraphError(
-                    loc, f"--replay {name}={rec_path}: unknown node '{name}'{did_you_mean(name, known)}"
-                )
+                GraphError(loc, f"{where}: {e}", "map ports as FILE:PORT=COLUMN[,COLUMN...];PORT=...")
             )
             continue
-        edges = [e for e in doc.get("edges") or [] if isinstance(e, str)]
-        parsed = [(e, EDGE_RE.match(e)) for e in edges]
-        record = doc.get("record") or []
-        ports = {m.group(2) for _, m in parsed if m and m.group(1) == name}
-        ports |= {
-            r.partition(".")[2] for r in record if isinstance(r, str) and r.partition(".")[0].strip() == name
-        }
-        if not ports:
+        bad = [p for p in ports if p not in cls.outputs]
+        if not path or bad:
+            why = (
+                "no file given"
+                if not path
+                else f"'{bad[0]}' is not an output of {cls.name}{did_you_mean(bad[0], cls.outputs)}"
+            )
             errors.append(
-                GraphError(loc, f"--replay {name}={rec_path}: nothing consumes or records node '{name}'")
+                GraphError(loc, f"{where}: {why}", f"outputs of {cls.name}: {', '.join(cls.outputs)}")
             )
             continue
-        del nodes[name]
-        renamed = {p: (name if len(ports) == 1 else f"{name}_{p}") for p in sorted(ports)}
-        for port, new in renamed.items():
-            nodes[new] = {"block": "replay", "params": {"path": str(rec_path), "stream": f"{name}.{port}"}}
-        kept = []
-        for e, m in parsed:
-            if m and m.group(3) == name:
-                continue  # an input of the replayed node: the replay has none
-            if m and m.group(1) == name:
-                e = f"{renamed[m.group(2)]}.y -> {m.group(3)}.{m.group(4)}"
-            kept.append(e)
-        if "edges" in doc:
-            doc["edges"] = kept
-        doc["record"] = [
-            f"{renamed[r.partition('.')[2].strip()]}.y"
-            if isinstance(r, str) and r.partition(".")[0].strip() == name
-            else r
-            for r in record
-        ]
+        planned[name] = (loc, str(ndoc["block"]), resolve_path(path, Path.cwd()), mapping)
+    if not planned:
+        return
+    _drop_edges_into(doc, y, set(planned))
+    consumed = {(m.group(1), m.group(2)) for m in map(_edge_match, doc.get("edges") or []) if m}
+    recorded = {str(r).partition(".")[0].strip() for r in doc.get("record") or [] if isinstance(r, str)}
+    replay = load_block("replay")
+    for name, (loc, block, path, mapping) in planned.items():
+        need = sorted(p for n, p in consumed if n == name)
+        if not need and name not in recorded:
+            errors.append(
+                GraphError(loc, f"--replay {name}={replays[name]}: nothing consumes or records node '{name}'")
+            )
+            continue
+        old = nodes[name]
+        params = {"path": path, "ports": mapping, "need": need}
+        nodes[name] = {"block": replay.stand_in(block), "params": params}  # type: ignore[attr-defined]
+        nodes[name].update({k: old[k] for k in ("process", "seed") if k in old})
+        for table in (y.locs, y.key_locs):  # the node is now written on the command line
+            for key in [k for k in table if k[:2] == ("nodes", name) and len(k) > 2]:
+                del table[key]
+            table[("nodes", name)] = loc
+
+
+def _edge_match(item: Any) -> re.Match[str] | None:
+    """An edge (string or ``{from:, to:}`` mapping) as an :data:`EDGE_RE` match, if well formed."""
+    if isinstance(item, dict):
+        item = f"{item.get('from')} -> {item.get('to')}"
+    return EDGE_RE.match(item) if isinstance(item, str) else None
+
+
+def _drop_edges_into(doc: dict[str, Any], y: Located, nodes: set[str]) -> None:
+    """Remove the edges into ``nodes``, keeping every other edge's YAML location."""
+    edges = doc.get("edges")
+    if not isinstance(edges, list):
+        return
+    kept = [i for i, e in enumerate(edges) if not ((m := _edge_match(e)) and m.group(3) in nodes)]
+    doc["edges"] = [edges[i] for i in kept]
+    for table in (y.locs, y.key_locs):
+        moved = {k: v for k, v in table.items() if k[:1] == ("edges",) and len(k) > 1}
+        for k in moved:
+            del table[k]
+        for new, old in enumerate(kept):
+            table.update({("edges", new, *k[2:]): v for k, v in moved.items() if k[1] == old})
 
 
 def _build(
@@ -231,7 +278,7 @@ def _build(
     if not isinstance(doc, dict):
         raise GraphErrors([GraphError(y.loc(), "a graph file must be a mapping with 'nodes:' and 'edges:'")])
     if replays:
-        _apply_replays(doc, replays, errors)
+        _apply_replays(doc, y, replays, errors)
     for key in doc:
         if key not in TOP_KEYS:
             errors.append(
@@ -377,10 +424,10 @@ def _node(
             GraphError(y.loc("nodes", name, "params"), f"node '{name}': 'params' must be a mapping")
         )
         return None
-    params = dict(params)
+    params = resolve_paths(cls.config_cls, params, Path(y.path).parent)  # paths: beside the graph file
     param_locs = {k: y.loc("nodes", name, "params", k) for k in params}
     for k, (value, sloc) in sets.items():
-        params[k] = value
+        params[k] = resolve_paths(cls.config_cls, {k: value}, Path.cwd())[k]  # --set: from here
         param_locs[k] = sloc
     process = ndoc.get("process")
     if process is not None and not (isinstance(process, str) and NAME_RE.match(process)):

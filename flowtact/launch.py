@@ -21,6 +21,7 @@ from flowtact.deployment import DEFAULT_QUEUE, STOP_GRACE_S
 from flowtact.graph import load_graph, resolve_graph_path
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
+from flowtact.source_ends import EndWatch, default_duration
 
 __all__ = ["load_plan", "provenance", "resolved_graph", "run_plan", "versions"]
 
@@ -146,8 +147,12 @@ def run_plan(
     """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
     ``record:`` streams to ``record``. A failing worker raises
     :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed."""
-    duration = duration_s if duration_s is not None else plan.graph.duration_s
+    duration = default_duration(
+        plan, duration_s
+    )  # --duration, else the replayed files' end, else the graph's
     tick_s = tick_s or plan.graph.tick_s or (DEFAULT_TICK_REALTIME_S if has_feedback(plan) else None)
+    ends = EndWatch(plan, duration, warn)
+    progress = ends.progress(progress)
 
     def executor(recorder: Any) -> Any:
         if inproc:
@@ -159,7 +164,9 @@ def run_plan(
         )
 
     if record is None:
-        return executor(None).run(duration)
+        summary = executor(None).run(duration)
+        ends.finish(summary)
+        return summary
     from flowtact.record import Recorder
 
     streams = {f"{n}.{p}": plan.specs[(n, p)] for n, p in plan.record}
@@ -170,5 +177,6 @@ def run_plan(
             partial = getattr(e, "summary", None)
             recorder.close({**(partial.to_dict() if partial else {}), "error": str(e)})
             raise
+        ends.finish(summary)
         recorder.close(summary.to_dict())
     return summary

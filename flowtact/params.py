@@ -96,15 +96,19 @@ def param(
     min_len: int | None = None,
     max_len: int | None = None,
     kw_only: bool = False,
+    path: bool = False,
 ) -> Any:
     """Declare a config field with its one-line doc and rules (units belong in the field name).
 
     ``kw_only`` lets a base config's field (with a default) precede a subclass's required fields.
+    ``path`` marks a file or folder name (a string, or strings in a list): a relative one written in
+    a graph file is resolved against the graph file's folder (:mod:`flowtact.param_paths`).
     """
     if isinstance(default, list):
         default = _freeze(default)
     rules = Rules(ge, gt, le, lt, odd, min_len, max_len)
-    return dataclasses.field(default=default, metadata={"doc": doc, "rules": rules}, kw_only=kw_only)
+    metadata = {"doc": doc, "rules": rules, "path": path}
+    return dataclasses.field(default=default, metadata=metadata, kw_only=kw_only)
 
 
 @dataclass(frozen=True)

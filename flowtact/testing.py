@@ -203,13 +203,17 @@ def run_graph(
 ) -> dict[str, Chunk]:
     """Run a whole graph offline (in process, virtual clock) and return its recorded streams.
 
-    ``feed`` replaces source outputs by arrays: ``{"sensor.r": (t, data)}`` swaps node ``sensor``
-    for a replay of those samples (every consumed output of a fed node must be given), so a
-    graph can be driven by your own data without touching its file.
+    ``feed`` replaces source outputs by arrays: ``{"sensor.r": (t, r), "sensor.ref": (t, ref)}``
+    swaps node ``sensor`` for a replay of those samples on its own ports, as ``--replay`` does
+    (every consumed output of a fed node must be given; a recorded one that is not is left out of
+    the result), so a graph can be driven by your own data without touching its file. Without
+    ``duration_s`` the run lasts until the fed samples end (one sample period after the last).
     """
     from flowtact.compile import compile_graph
     from flowtact.graph import load_graph, resolve_graph_path
+    from flowtact.params import did_you_mean
     from flowtact.runtime.inproc import InprocExecutor
+    from flowtact.source_ends import default_duration
 
     replays: dict[str, str] = {}
     with tempfile.TemporaryDirectory(prefix="flowtact-feed-") as tmp:
@@ -229,6 +233,11 @@ def run_graph(
                 path = str(Path(tmp) / f"{node}.h5")
                 specs = {}
                 for port, c in ports.items():
+                    if (node, port) not in base.specs:
+                        known = [f"{n}.{p}" for n, p in base.specs]
+                        raise ValueError(
+                            f"feed: no output stream '{node}.{port}'{did_you_mean(f'{node}.{port}', known)}"
+                        )
                     declared = base.specs[(node, port)]
                     specs[f"{node}.{port}"] = declared.with_(dtype=str(c.data.dtype), shape=c.data.shape[1:])
                 with Recorder(path, specs, {"graph_yaml": "", "fed": "flowtact.testing.run_graph"}) as rec:
@@ -238,7 +247,7 @@ def run_graph(
         plan = compile_graph(load_graph(resolve_graph_path(graph), overrides=overrides, replays=replays))
         memory = _Memory()
         InprocExecutor(plan, fast=True, tick_s=tick_s, recorder=memory).run(
-            duration_s if duration_s is not None else plan.graph.duration_s
+            default_duration(plan, duration_s)
         )
     return {f"{n}.{p}": concat(memory.chunks.get(f"{n}.{p}", []), plan.specs[(n, p)]) for n, p in plan.record}
 

@@ -1,7 +1,9 @@
 """Play back a recorded stream: a flowtact HDF5 recording, or a plain .npz / .csv file.
 
-``replay`` is the "swap live for recorded" source: ``flowtact run graph.yaml --replay sensor=run.h5``
-puts one in place of a live sensor, and everything downstream runs unchanged.
+``replay`` is the "swap live for recorded" source with one output ``y``, for graph files. On the
+command line, ``flowtact run graph.yaml --replay sensor=run.h5`` (or ``=log.csv``) puts a replay in
+place of a live sensor on the sensor's own ports (:mod:`.replay_ports`), and everything downstream
+runs unchanged. CSV logs are read by :mod:`.csv_log`; see docs/your-own-data.md.
 """
 
 from __future__ import annotations
@@ -11,7 +13,6 @@ import contextlib
 import math
 import os
 import tempfile
-import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,8 +21,9 @@ from typing import Any
 import numpy as np
 
 from flowtact.block import Example, Port, Source, SpecError
+from flowtact.blocks.signal.csv_log import CsvError, read_csv_log
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
+from flowtact.params import Config, did_you_mean, param
 
 __all__ = ["Replay", "ReplayConfig"]
 
@@ -33,7 +35,10 @@ RATE_TOLERANCE = 0.01
 
 @dataclass(frozen=True)
 class ReplayConfig(Config):
-    path: str = param(doc="file to play back: a flowtact recording (.h5) or a .npz / .csv file")
+    path: str = param(
+        doc="file to play back: a flowtact recording (.h5) or a .npz / .csv file (relative: to the graph file)",
+        path=True,
+    )
     stream: str | tuple[str, ...] | None = param(
         None,
         doc=".h5: '<node>.<port>' (optional if the file holds one stream); .npz: data array (default "
@@ -100,8 +105,12 @@ class Replay(Source):
     rate and labels come from the file; a configured ``units``/``rate_hz`` that differs is an
     error. ``.npz``: an array ``stream`` (default ``data``, shape (n, ...)) and optionally ``t``
     (n,); without ``t`` samples are stamped ``i / rate_hz``. ``.csv``: a header row naming the
-    columns, one of them ``t``, separated by commas (or semicolons or tabs); the output is float64
-    of shape (k,) with the column names as labels, or () when ``stream`` names one column.
+    columns, one of them ``t``, separated by commas (or semicolons, tabs or spaces); the output is
+    float64 of shape (k,) with the column names as labels, or () when ``stream`` names one column.
+    A bad CSV (binary or not UTF-8, a ragged row, a cell that is not a number, no ``t``, a time
+    that is not finite or goes back) is refused when the graph is compiled, at its line and column.
+    After the file's end (without ``loop``) nothing is emitted: no held value. A relative ``path``
+    in a graph file is from the graph file's folder.
     Without ``rate_hz`` the rate is 1 / the median step of ``t``; a configured rate more than 1 %
     away from it is an error.
 
@@ -241,43 +250,33 @@ class Replay(Source):
 
     def _inspect_csv(self, path: Path) -> _Source:
         c = self.config
-        with open(path, encoding="utf-8") as fh:
-            header = fh.readline().strip().lstrip("#").strip()
-        delimiter = next((d for d in (",", ";", "\t") if d in header), None)
-        names = [s.strip().strip('"').strip("'") for s in header.split(delimiter)]
+        try:
+            log = read_csv_log(path)
+        except CsvError as e:
+            raise SpecError("y", e.message, where=e.where) from None
+        names = log.names
         listed = ", ".join(names)
-        if "t" not in names:
-            raise c.error("path", f"{path} has no 't' column in its header row (columns: {listed})")
         if c.stream is None:
-            columns = [n for n in names if n != "t"]
+            columns = list(log.data_columns)
         else:
             columns = [c.stream] if isinstance(c.stream, str) else list(c.stream)
         for col in columns:
             if col not in names:
-                raise c.error("stream", f"must name columns of {path} (columns: {listed}); got '{col}'")
-        if not columns:
-            raise c.error("path", f"{path} has no data columns besides 't'")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # an empty table is fine: zero samples
-            try:
-                table = np.loadtxt(path, delimiter=delimiter, skiprows=1, ndmin=2, dtype=np.float64)
-            except ValueError as e:
-                raise SpecError("y", f"{self._where()}: cannot read {path} as numbers: {e}") from None
-        if table.size and table.shape[1] != len(names):
-            raise SpecError(
-                "y", f"{self._where()}: {path} rows have {table.shape[1]} values for {len(names)} columns"
-            )
-        table = table.reshape(-1, len(names))
+                close = did_you_mean(col, names)
+                close = close if close.startswith(" (did") else ""  # the columns are listed anyway
+                raise c.error(
+                    "stream", f"must name columns of {path} (columns: {listed}); got '{col}'{close}"
+                )
         idx = [names.index(col) for col in columns]
         single = isinstance(c.stream, str)
-        data = np.ascontiguousarray(table[:, idx[0]] if single else table[:, idx])
+        data = np.ascontiguousarray(log.table[:, idx[0]] if single else log.table[:, idx])
         spec = StreamSpec(
             dtype="float64",
             shape=() if single else (len(columns),),
             units=c.units or "1",
             labels=None if single else tuple(columns),
         )
-        return _Source(spec=spec, t=np.ascontiguousarray(table[:, names.index("t")]), data=data)
+        return _Source(spec=spec, t=np.ascontiguousarray(log.t), data=data)
 
     def _check_times(self, t: np.ndarray, path: Path) -> None:
         bad = ~np.isfinite(t)
@@ -314,6 +313,31 @@ class Replay(Source):
                 f"{inferred:g} Hz (median)",
             )
         return float(c.rate_hz)
+
+    def ends_at(self) -> float | None:
+        """Graph time just past the last sample (one sample period after it; an event stream's
+        recorded end), or None when looping or empty. Known once ``specs`` has read the file."""
+        src = self._src
+        if self.config.loop or src is None:
+            return None
+        last, end = (
+            (float(src.t[-1]) if len(src.t) else None, src.end_s) if src.t is not None else (None, None)
+        )
+        if src.t is None and src.h5_stream is not None:
+            last, end = _h5_tail(Path(self.config.path), src.h5_stream)
+        if last is None:
+            return None
+        if src.spec.events:
+            stop = max(last, end if end is not None else last)
+        else:
+            stop = last + (1.0 / src.spec.rate_hz if src.spec.rate_hz else 0.0)
+        return stop + self.config.time_offset_s
+
+    @classmethod
+    def stand_in(cls, block: str) -> str:
+        """The block reference of a replay standing in for a node of ``block``, on its own output
+        ports (what ``--replay NODE=FILE`` puts in the graph; see :mod:`.replay_ports`)."""
+        return f"{__package__}.replay_ports:{block}"
 
     # -- run time ----------------------------------------------------------------------------
     def open(self) -> None:
@@ -421,6 +445,18 @@ class Replay(Source):
             rate_hz=1000.0,
             duration_s=1.0,
         )
+
+
+def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
+    """The last time stamp of a recorded stream and its recorded end watermark (None if absent)."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        g = f["streams"][stream]
+        n = int(min(g["t"].shape[0], g["data"].shape[0]))
+        last = float(g["t"][n - 1]) if n else None
+        end = float(g.attrs.get("end_s", math.nan))
+    return last, (end if math.isfinite(end) else None)
 
 
 def _npy_header(z: zipfile.ZipFile, key: str) -> tuple[tuple[int, ...], np.dtype]:

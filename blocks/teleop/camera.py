@@ -49,10 +49,12 @@ class CameraError(FlowtactError, RuntimeError):
 class CameraConfig(Config):
     devices: tuple[int | str, ...] = param(
         (0, 1, 2),
-        doc="one entry per sensor (thumb, index, middle): a device index, a video file, or an image folder",
+        doc="one entry per sensor (thumb, index, middle): a device index, a video file, or an image folder "
+        "(relative: to the graph file)",
         ge=0,
         min_len=1,
         max_len=3,
+        path=True,
     )
     fps: float = param(
         40.0, doc="frame rate of the output (graph time); each due frame reads every device", gt=0, le=1000

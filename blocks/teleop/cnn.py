@@ -353,7 +353,9 @@ class CnnForceConfig(Config):
 
     checkpoint: str | None = param(
         None,
-        doc="checkpoint (.pt) written by 'flowtact train-force'; null: the small model shipped with flowtact",
+        doc="checkpoint (.pt) written by 'flowtact train-force' (relative: to the graph file); null: the "
+        "small model shipped with flowtact",
+        path=True,
     )
     clip_negative: bool = param(
         True, doc="clip estimates below 0 N to 0 (a pressed fingertip pushes, never pulls)"

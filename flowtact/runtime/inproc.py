@@ -71,6 +71,8 @@ class RunSummary:
     """Real-time runs: the furthest any tick ran behind the wall clock (s)."""
     late_nodes: list[str] = field(default_factory=list)
     """Real-time runs that fell behind: the nodes that took most of the wall time then."""
+    notes: list[str] = field(default_factory=list)
+    """Things the run should tell (a played-back file that ended before the run did)."""
 
     @property
     def realtime_factor(self) -> float:
@@ -98,6 +100,7 @@ class RunSummary:
             "processes": self.processes,
             "streams": self.streams,
             "paths": self.paths,
+            "notes": self.notes,
         }
 
     def rate(self, stream: str) -> float:
@@ -151,6 +154,7 @@ class RunSummary:
                 )
         if self.pruned:
             lines.append(f"  not started: {', '.join(self.pruned)}")
+        lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
 
 

@@ -170,9 +170,10 @@ def test_csv_errors(tmp_path):
     p = tmp_path / "f.csv"
     p.write_text(CSV)
     with pytest.raises(
-        ConfigError, match=r"'stream' must name columns of .*f\.csv \(columns: t, fx, fy, fz\); got 'fq'"
+        ConfigError,
+        match=r"'stream' must name columns of .*f\.csv \(columns: t, fx, fy, fz\); got 'fzz' \(did you mean 'fz'\?\)",
     ):
-        Replay(path=str(p), stream=["fx", "fq"]).bind({})
+        Replay(path=str(p), stream=["fx", "fzz"]).bind({})
     with pytest.raises(
         SpecError, match=r"rate_hz 1000 given, but the time stamps of .*f\.csv step at 500 Hz"
     ):
@@ -180,16 +181,19 @@ def test_csv_errors(tmp_path):
     Replay(path=str(p), rate_hz=502.0).bind({})  # within 1 %
     no_t = tmp_path / "no_t.csv"
     no_t.write_text("time,x\n0,1\n")
-    with pytest.raises(ConfigError, match=r"no 't' column .*\(columns: time, x\)"):
+    with pytest.raises(SpecError, match=r"no 't' column .*\(columns: time, x\); if 'time' is the time") as e:
         Replay(path=str(no_t)).bind({})
+    assert e.value.where == (str(no_t), 1, 1)
     back = tmp_path / "back.csv"
     back.write_text("t,x\n0.0,1\n0.1,2\n0.05,3\n0.2,4\n")
-    with pytest.raises(SpecError, match=r"t decreases at sample 2 .*back\.csv \(0\.05 s after 0\.1 s\)"):
+    with pytest.raises(SpecError, match=r"time goes back: t = 0\.05 s after 0\.1 s") as e:
         Replay(path=str(back)).bind({})
+    assert e.value.where == (str(back), 4, 1)
     ragged = tmp_path / "ragged.csv"
     ragged.write_text("t,x\n0.0,1\n0.1,x\n")
-    with pytest.raises(SpecError, match="cannot read"):
+    with pytest.raises(SpecError, match="not a number in column 'x': 'x'") as e:
         Replay(path=str(ragged)).bind({})
+    assert e.value.where == (str(ragged), 3, 5)
 
 
 def test_h5_errors(recording, tmp_path):

@@ -1,0 +1,346 @@
+"""Play a file back in place of a node, on that node's own output ports: what ``--replay`` builds.
+
+``flowtact run graphs/touch.yaml --replay sensor=log.csv`` swaps node ``sensor`` (an
+``aunp_sensor``) for a stand-in that keeps the node's name and its output ports ``r`` and ``ref``,
+so edges, ``record:`` names and plots stay as they were. The stand-in's class is made per replaced
+block (its ports are that block's) and is reachable as ``flowtact.blocks.signal.replay_ports:BLOCK``,
+which is how graphs, workers and recordings name it.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import functools
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from flowtact.block import Block, Example, Source, SpecError
+from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
+from flowtact.blocks.signal.replay import SUFFIXES, Replay
+from flowtact.chunk import Chunk, StreamSpec
+from flowtact.params import Config, ConfigError, did_you_mean, param
+from flowtact.registry import UnknownBlockError, load_block
+from flowtact.replay_spec import parse_port_map
+
+__all__ = ["ReplayPorts", "ReplayPortsConfig", "stand_in_class"]
+
+#: Column names a port's channels may take in a CSV, tried in this order: r[0], r.0, r_0.
+INDEXED = ("{port}[{i}]", "{port}.{i}", "{port}_{i}")
+
+
+@dataclass(frozen=True)
+class ReplayPortsConfig(Config):
+    path: str = param(
+        doc="file to play back: a flowtact recording (.h5), a .npz or a .csv log (relative: to the graph file)",
+        path=True,
+    )
+    ports: str = param(
+        "",
+        doc="PORT=COLUMN[,COLUMN...];... : which columns (.csv), array (.npz) or stream (.h5) feed which "
+        "port; ports left out are found by name",
+    )
+    need: tuple[str, ...] = param((), doc="ports the file must provide (the graph consumes them)")
+
+    def check(self) -> None:
+        suffix = Path(self.path).suffix.lower()
+        if suffix not in SUFFIXES:
+            raise self.error("path", f"must name a {', '.join(SUFFIXES)} file; got {self.path!r}")
+        try:
+            parse_port_map(self.ports)
+        except ValueError as e:
+            raise self.error("ports", str(e)) from None
+
+
+class ReplayPorts:
+    """Play a file back in place of a node of another block, on that block's output ports.
+
+    Ports
+    -----
+    The replaced block's output ports, with their declared dtype, shape and units; the rate comes
+    from the file's time stamps (or the recording). A port the file does not provide emits nothing
+    and has no stream (recording it is skipped, with a note); one listed in ``need`` must be there.
+
+    Notes
+    -----
+    Finding a port's data, unless ``ports`` maps it: in a ``.h5`` recording the stream
+    ``<node>.<port>`` (the node's own recorded output); in a ``.npz`` the array named like the port;
+    in a ``.csv`` the column named like the port (one value per sample) or the columns ``port[0]``,
+    ``port[1]``, ... (also ``port.0`` or ``port_0``), one per channel. A CSV carries no units: the
+    port keeps the units its block declares. Each port plays like the ``replay`` block (the file's
+    own time stamps as graph time); after the file's end it emits nothing (no held value).
+
+    Example
+    -------
+    >>> from flowtact.blocks.signal.replay_ports import stand_in_class
+    >>> from flowtact.testing import run_source
+    >>> cls = stand_in_class("aunp_sensor")
+    >>> out = run_source(cls(**cls.example().params), 0.2)
+    >>> out["r"].data.shape, out["ref"].data.shape
+    ((200, 4), (200,))
+    """
+
+    config_cls = ReplayPortsConfig
+    replaces: ClassVar[type[Block]]
+    counter_docs: ClassVar[dict[str, str]] = {
+        "skipped_before_zero": "samples of the file whose time fell before graph time 0: not played",
+    }
+    node: str
+    config: Any
+    outputs: ClassVar[dict[str, Any]]
+    demanded: frozenset[str]
+    seed: int
+
+    def __init__(self, *args: Any, **kw: Any) -> None:
+        super().__init__(*args, **kw)  # type: ignore[call-arg]
+        self._players: dict[str, Replay] = {}
+
+    # -- compile time ------------------------------------------------------------------------
+    def specs(self, inputs: Any) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source
+        """The spec of every port the file provides, checked against the replaced block's ports."""
+        self.close()
+        self._players = {}
+        out = {}
+        for port, source in self._sources().items():
+            player = Replay(node=self.node, **self._player_params(port, source))
+            try:
+                spec = player.specs({})["y"]
+            except SpecError as e:
+                raise SpecError(None, f"port '{port}': {e}", where=e.where) from None
+            except ConfigError as e:
+                raise SpecError(None, f"port '{port}': '{e.field}' {e.rule}" if e.field else str(e)) from None
+            self._check(port, spec, source)
+            self._players[port] = player
+            out[port] = spec
+        return out
+
+    def _file(self) -> str:
+        return display(self.config.path)
+
+    def _sources(self) -> dict[str, str | tuple[str, ...]]:
+        """Port -> the file's column(s), array or stream feeding it."""
+        c = self.config
+        path = Path(c.path)
+        if not path.is_file():
+            where = "" if path.parent.is_dir() else " (no such folder)"
+            raise SpecError(None, f"no such file: {self._file()}{where}")
+        suffix = path.suffix.lower()
+        names = self._names(path, suffix)
+        what = {".csv": "column", ".npz": "array"}.get(suffix, "stream")
+        explicit = parse_port_map(c.ports)
+        sources: dict[str, str | tuple[str, ...]] = {}
+        for port, cols in explicit.items():
+            if port not in self.outputs:
+                raise SpecError(
+                    None,
+                    f"'{port}' is not an output of {self.replaces.name}{did_you_mean(port, self.outputs)}",
+                )
+            if suffix != ".csv" and len(cols) != 1:
+                raise SpecError(
+                    None, f"port '{port}': a {suffix} file feeds a port from one {what}; got {cols}"
+                )
+            for col in cols:
+                if col not in names:
+                    close = did_you_mean(col, names) if names else ""
+                    close = close if close.startswith(" (did") else ""
+                    raise SpecError(
+                        None,
+                        f"port '{port}': no {what} '{col}' in {self._file()}{close}"
+                        f" ({what}s: {', '.join(names) or 'none'})",
+                    )
+            sources[port] = cols if suffix == ".csv" else cols[0]
+        for port in self.outputs:
+            if port not in sources and (found := self._by_name(port, suffix, names)) is not None:
+                sources[port] = found
+        missing = [p for p in c.need if p not in sources]
+        if missing:
+            example = ";".join(f"{p}={self._placeholder(p, what)}" for p in missing)
+            raise SpecError(
+                None,
+                f"{self._file()} has no {what} for port{'s' if len(missing) > 1 else ''} "
+                f"{', '.join(repr(p) for p in missing)} of {self.replaces.name} ({what}s: "
+                f"{', '.join(names) or 'none'}); {'map them' if what == 'stream' else f'name {what}s after the ports or map them'}: "
+                f"--replay '{self.node}={self._file()}:{example}'",
+            )
+        return sources
+
+    def _placeholder(self, port: str, what: str) -> str:
+        """``C1,C2,C3,C4`` for a port of 4 channels, ``COLUMN`` for one value (in a hint)."""
+        shape = self.outputs[port].shape
+        if what == "column" and shape is not None and len(shape) == 1:
+            return ",".join(f"C{i + 1}" for i in range(shape[0]))
+        return what.upper()
+
+    def _names(self, path: Path, suffix: str) -> list[str]:
+        """The columns (without ``t``), arrays or streams the file holds."""
+        if suffix == ".csv":
+            try:
+                return list(read_csv_log(path).data_columns)
+            except CsvError as e:
+                raise SpecError(None, e.message, where=e.where) from None
+        if suffix == ".npz":
+            try:
+                with zipfile.ZipFile(path) as z:
+                    return sorted(n[:-4] for n in z.namelist() if n.endswith(".npy") and n != "t.npy")
+            except zipfile.BadZipFile:
+                raise SpecError(None, f"{self._file()} is not a .npz file (not a zip archive)") from None
+        from flowtact.record import stream_specs
+
+        try:
+            return list(stream_specs(path))
+        except (OSError, ValueError, KeyError) as e:
+            raise SpecError(None, f"{self._file()}: {e}") from None
+
+    def _by_name(self, port: str, suffix: str, names: list[str]) -> str | tuple[str, ...] | None:
+        if suffix in (".h5", ".hdf5"):
+            stream = f"{self.node}.{port}"
+            return stream if stream in names else None
+        if port in names:
+            return (port,) if suffix == ".csv" else port
+        if suffix != ".csv":
+            return None
+        for style in INDEXED:
+            cols = []
+            while (col := style.format(port=port, i=len(cols))) in names:
+                cols.append(col)
+            if cols:
+                return tuple(cols)
+        return None
+
+    def _player_params(self, port: str, source: str | tuple[str, ...]) -> dict[str, Any]:
+        declared = self.outputs[port]
+        params: dict[str, Any] = {"path": self.config.path}
+        # CSV columns: one column gives a value per sample, unless the port is a vector
+        if isinstance(source, tuple):
+            one = len(source) == 1 and (declared.shape is None or tuple(declared.shape) == ())
+            params["stream"] = source[0] if one else list(source)
+        else:
+            params["stream"] = source
+        if Path(self.config.path).suffix.lower() in (".csv", ".npz"):
+            params["units"] = declared.units or "1"
+        return params
+
+    def _check(self, port: str, spec: StreamSpec, source: str | tuple[str, ...]) -> None:
+        """The played stream must be what the replaced block's port declares (rate aside)."""
+        declared = self.outputs[port]
+        block = self.replaces.name
+        given = f"{', '.join(source)}" if isinstance(source, tuple) else source
+        given = f"'{given}' in {self._file()}"
+        if declared.events != spec.events:
+            kind = "an event stream" if declared.events else "a sample stream"
+            hint = "; replay it from a .h5 recording" if declared.events else ""
+            raise SpecError(None, f"port '{port}' of {block} is {kind}, {given} is not{hint}")
+        if declared.shape is not None and tuple(declared.shape) != tuple(spec.shape):
+            n = int(np.prod(declared.shape)) if declared.shape else 1
+            cols = (
+                f" ({n} column{'s' if n != 1 else ''})"
+                if isinstance(source, tuple) and len(declared.shape) < 2
+                else ""
+            )
+            raise SpecError(
+                None,
+                f"port '{port}' of {block} takes samples of shape {tuple(declared.shape)}{cols}; "
+                f"{given} gives {tuple(spec.shape)}",
+            )
+        if declared.dtype is not None and declared.dtype != spec.dtype:
+            raise SpecError(
+                None, f"port '{port}' of {block} carries {declared.dtype}; {given} is {spec.dtype}"
+            )
+        if declared.units is not None and declared.units != spec.units:
+            raise SpecError(
+                None, f"port '{port}' of {block} is in '{declared.units}'; {given} is in '{spec.units}'"
+            )
+
+    def ends_at(self) -> float | None:
+        """The latest end of the played ports (None: nothing to play)."""
+        ends = [e for p, r in self._players.items() if p in self.demanded and (e := r.ends_at()) is not None]
+        return max(ends, default=None)
+
+    # -- run time ----------------------------------------------------------------------------
+    def reset(self) -> None:
+        for port, player in self._players.items():
+            if port in self.demanded:
+                player.bind({}, seed=self.seed)
+                self.count("skipped_before_zero", player.counters.get("skipped_before_zero", 0))  # type: ignore[attr-defined]
+
+    def open(self) -> None:
+        """Open the file for each played port (an .h5 stays open, read slice by slice)."""
+        for port, player in self._players.items():
+            if port in self.demanded:
+                player.open()
+
+    def close(self) -> None:
+        """Close what ``open`` opened."""
+        for player in getattr(self, "_players", {}).values():
+            player.close()
+
+    def step(self, now: float) -> dict[str, Chunk]:
+        return {p: r(now)["y"] for p, r in self._players.items() if p in self.demanded}
+
+    @classmethod
+    def example(cls) -> Example:
+        return Example(params={"path": str(_example_csv(cls.replaces))}, rate_hz=1000.0, duration_s=0.4)
+
+
+@functools.cache
+def stand_in_class(block: str) -> type[Source]:
+    """The replay class standing in for nodes of ``block`` (a registered name or ``module:Class``)."""
+    replaced = load_block(block)
+    if issubclass(replaced, ReplayPorts):  # replaying a replay: the same ports, the same class
+        return replaced
+    ports = ", ".join(replaced.outputs) or "none"
+    return type(
+        f"ReplayAs{replaced.__name__}",
+        (ReplayPorts, Source),
+        {
+            "__module__": __name__,
+            "__doc__": f"Play a file back in place of a node of {replaced.name}, on its ports ({ports}).\n"
+            + (ReplayPorts.__doc__ or "").partition("\n")[2],
+            "outputs": dict(replaced.outputs),
+            "replaces": replaced,
+            "name": "replay",
+        },
+    )
+
+
+def __getattr__(name: str) -> type[Source]:
+    """``replay_ports:aunp_sensor`` (as the graph names the stand-in) -> its class."""
+    if name.startswith("__"):
+        raise AttributeError(name)
+    try:
+        return stand_in_class(name)
+    except UnknownBlockError as e:
+        raise AttributeError(f"no stand-in replay for block '{name}': {e}") from None
+
+
+def _example_csv(block: type[Block]) -> Path:
+    """0.4 s at 1 kHz of every fixed-shape sample port of ``block``, columns named as found by default."""
+    path = Path(tempfile.gettempdir()) / f"flowtact-replay-ports-{block.name}-v1-{os.getpid()}.csv"
+    if not path.exists():
+        t = np.arange(400) / 1000.0
+        cols: dict[str, np.ndarray] = {"t": t}
+        for k, (port, p) in enumerate(block.outputs.items()):
+            if p.events or p.shape is None or len(p.shape) > 1:
+                continue
+            n = p.shape[0] if p.shape else 0
+            for i in range(max(n, 1)):
+                name = f"{port}[{i}]" if n else port
+                cols[name] = np.round(np.sin(2 * np.pi * (3 + k) * t + i), 6)
+        tmp = path.with_name(f"{path.name}.tmp")
+        np.savetxt(
+            tmp, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments=""
+        )
+        os.replace(tmp, path)
+        atexit.register(_remove_quietly, path)
+    return path
+
+
+def _remove_quietly(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        path.unlink()
