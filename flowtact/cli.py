@@ -307,7 +307,7 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
 
 
 def _cmd_graph(args: argparse.Namespace) -> int:
-    from flowtact.draw_graph import FORMATS, draw_plan
+    from flowtact.pictures.graph_figure import FORMATS, draw_plan
 
     suffix = Path(args.output).suffix
     if suffix not in FORMATS:  # a usage error: say so before loading anything
@@ -322,7 +322,7 @@ def _cmd_graph(args: argparse.Namespace) -> int:
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from flowtact.plot_recording import plot_recording
+    from flowtact.pictures.recording_figure import plot_recording
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     try:

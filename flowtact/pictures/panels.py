@@ -5,7 +5,7 @@ channel in their units (a heat map beyond :data:`MAX_LINES` channels; channels w
 another unit get their own panel); categorical samples -> steps named on the axis; frames -> a
 thumbnail strip; spike events -> raster and firing rate; stimulation pulses (events with
 ``unit, amplitude, width`` columns) -> amplitude per pulse and a raster of channels. Readers come
-from :mod:`flowtact.plot_read`, so memory stays bounded.
+from :mod:`flowtact.pictures.bounded_read`, so memory stays bounded.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.plot_read import (
+from flowtact.pictures.bounded_read import (
     StreamSource,
     binned_event_counts,
     change_points,
@@ -25,7 +25,7 @@ from flowtact.plot_read import (
     index_range,
     sample_envelope,
 )
-from flowtact.plot_units import label_unit, pretty_units
+from flowtact.pictures.units import label_unit, pretty_units
 
 __all__ = [
     "MAX_LINES",

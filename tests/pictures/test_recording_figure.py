@@ -10,12 +10,12 @@ import pytest
 
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.cli import main
-from flowtact.plot_recording import DPI, binned_rates, plot_recording, recording_figure
+from flowtact.pictures.recording_figure import DPI, binned_rates, plot_recording, recording_figure
 from flowtact.record import Recorder
 
 pytest.importorskip("matplotlib")
 
-ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
 
 
 def _axes(fig, name):
@@ -270,7 +270,7 @@ def test_paper_figure_refuses_a_recording_without_force_or_spikes(recording, tmp
 
 def test_envelope_and_change_points_read_block_by_block(tmp_path, monkeypatch):
     """Buckets cut across read blocks give the same min, max and mean as the whole array at once."""
-    import flowtact.plot_read as pr
+    import flowtact.pictures.bounded_read as pr
 
     rng = np.random.default_rng(3)
     n = 50_003
@@ -358,7 +358,7 @@ def test_missing_file_and_missing_matplotlib(tmp_path, monkeypatch):
 _PEAK = textwrap.dedent(
     """
     import sys
-    from flowtact.plot_recording import plot_recording
+    from flowtact.pictures.recording_figure import plot_recording
     plot_recording(sys.argv[1], sys.argv[2])
     # VmHWM: this process's own peak (ru_maxrss would carry the parent's across fork + exec)
     status = open("/proc/self/status").read()
@@ -426,7 +426,7 @@ def test_categories_are_stored_in_the_recording_and_cross_processes(recording):
 
 
 def test_too_many_events_for_ticks_become_counts_that_add_up(recording, monkeypatch):
-    import flowtact.plot_panels as pp
+    import flowtact.pictures.panels as pp
 
     monkeypatch.setattr(pp, "MAX_EVENT_TICKS", 100)
     ax = _one(recording_figure(recording, streams=["pop.spikes"]), "pop.spikes", "raster")

@@ -1,4 +1,4 @@
-"""Draw a compiled graph: Graphviz DOT text, or an SVG/PNG/PDF laid out by flowtact.graph_layout.
+"""Draw a compiled graph: Graphviz DOT text, or an SVG/PNG/PDF laid out by flowtact.pictures.graph_layout.
 
 Pruned nodes and edges that carry nothing are drawn grey and dashed, so a user sees at a glance
 what the compiler skipped; delayed (feedback) edges are purple and dashed. No Graphviz installation
@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from flowtact.compile import Plan
-from flowtact.graph_layout import EdgeIn, Layout, Rect, layout
+from flowtact.pictures.graph_layout import EdgeIn, Layout, Rect, layout
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

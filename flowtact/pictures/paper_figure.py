@@ -3,7 +3,7 @@ a spike raster per afferent population and their firing rates, stacked on one ti
 
 Streams are picked by what they are, not by name alone: the force is ``force.f`` or the first
 sample stream in N, its derivative the first in N/s, the afferents every spike event stream
-(pulse streams excluded). Reading goes through :mod:`flowtact.plot_read` (bounded memory).
+(pulse streams excluded). Reading goes through :mod:`flowtact.pictures.bounded_read` (bounded memory).
 """
 
 from __future__ import annotations
@@ -12,9 +12,15 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.plot_panels import MAX_EVENT_TICKS, channel_names, rate_bin_s
-from flowtact.plot_read import StreamSource, binned_event_counts, event_points, index_range, sample_envelope
-from flowtact.plot_units import pretty_units
+from flowtact.pictures.bounded_read import (
+    StreamSource,
+    binned_event_counts,
+    event_points,
+    index_range,
+    sample_envelope,
+)
+from flowtact.pictures.panels import MAX_EVENT_TICKS, channel_names, rate_bin_s
+from flowtact.pictures.units import pretty_units
 
 __all__ = ["paper_figure", "paper_streams"]
 

@@ -13,11 +13,11 @@ from matplotlib.transforms import Bbox
 
 from flowtact.cli import main
 from flowtact.compile import compile_graph
-from flowtact.draw_graph import FEEDBACK, GREY, graph_figure
 from flowtact.graph import load_graph
 from flowtact.launch import load_plan
+from flowtact.pictures.graph_figure import FEEDBACK, GREY, graph_figure
 
-GRAPH_DIR = Path(__file__).resolve().parent.parent / "graphs"
+GRAPH_DIR = Path(__file__).resolve().parents[2] / "graphs"
 GRAPHS = sorted(p.stem for p in GRAPH_DIR.glob("*.yaml"))
 TOL = 0.5  # pixels
 

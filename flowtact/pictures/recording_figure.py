@@ -2,9 +2,9 @@
 
 Vector samples are labelled lines per channel in their units, categorical streams steps named on
 the axis, spike events rasters with firing rates, stimulation pulses pulse trains, frames a strip
-of thumbnails (see :mod:`flowtact.plot_panels`). The file is read block by block
-(:mod:`flowtact.plot_read`), so memory stays bounded whatever its size. ``paper=True`` draws the
-compact touch/slip figure instead (:mod:`flowtact.plot_paper`). matplotlib is the optional
+of thumbnails (see :mod:`flowtact.pictures.panels`). The file is read block by block
+(:mod:`flowtact.pictures.bounded_read`), so memory stays bounded whatever its size. ``paper=True`` draws the
+compact touch/slip figure instead (:mod:`flowtact.pictures.paper_figure`). matplotlib is the optional
 ``plot`` extra, imported only here, with its Agg canvas (no GUI, no global backend switch).
 """
 
@@ -14,8 +14,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from flowtact.plot_panels import Panel, binned_rates, draw_frames, draw_panel, plan_panels
-from flowtact.plot_read import StreamSource, open_recording
+from flowtact.pictures.bounded_read import StreamSource, open_recording
+from flowtact.pictures.panels import Panel, binned_rates, draw_frames, draw_panel, plan_panels
 
 __all__ = ["DPI", "binned_rates", "need_matplotlib", "plot_recording", "recording_figure", "time_span"]
 
@@ -94,7 +94,7 @@ def recording_figure(
             raise ValueError(f"{path}: nothing to plot (the recording holds no streams)")
         t0, t1 = time_span(sources, t_range)
         if paper:
-            from flowtact.plot_paper import paper_figure
+            from flowtact.pictures.paper_figure import paper_figure
 
             fig = paper_figure(Figure, sources, t0, t1)
             FigureCanvasAgg(fig)

@@ -5,7 +5,7 @@ from itertools import pairwise
 
 import pytest
 
-from flowtact.graph_layout import EdgeIn, Layout, Rect, layout, segment_points
+from flowtact.pictures.graph_layout import EdgeIn, Layout, Rect, layout, segment_points
 
 LABEL = (30.0, 10.0)
 
