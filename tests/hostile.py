@@ -20,7 +20,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 TOUCH = str(ROOT / "graphs" / "touch.yaml")
 
-# the child: run the CLI, then print its own peak resident set size (ru_maxrss is in KiB on Linux)
+# the child: run the CLI, then print its own peak resident set size: VmHWM, which starts afresh at
+# exec (ru_maxrss would carry the parent's peak across fork + exec, e.g. a 1 GB pytest process)
 _CHILD = (
     "import resource, sys\n"
     "resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))  # a backstop: fail, never swap\n"
@@ -29,7 +30,8 @@ _CHILD = (
     "    rc = main(sys.argv[1:])\n"
     "except SystemExit as e:\n"
     "    rc = e.code\n"
-    "print(f'peak_rss_kib={resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}', file=sys.stderr)\n"
+    "hwm = next(x for x in open('/proc/self/status') if x.startswith('VmHWM:')).split()[1]\n"
+    "print(f'peak_rss_kib={hwm}', file=sys.stderr)\n"
     "sys.exit(rc)\n"
 )
 

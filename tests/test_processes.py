@@ -129,7 +129,7 @@ def test_latest_policy_is_declared_per_edge_and_checked():
     with pytest.raises(GraphErrors) as e:
         load_graph("g.yaml", text=text)
     assert "edge policy must be one of block, latest; got 'newest'" in str(e.value)
-    assert "edge queue must be an integer >= 1" in str(e.value)
+    assert "edge queue must be an integer from 1 to" in str(e.value)
 
 
 def test_kill_9_of_a_worker_ends_the_run_naming_it_and_keeps_the_recording(tmp_path):

@@ -63,5 +63,5 @@ def test_a_graph_may_set_its_tick_and_a_bad_one_is_refused(tmp_path: Path):
     assert load_graph(str(ok)).tick_s == 0.002
     bad = tmp_path / "bad.yaml"
     bad.write_text(LOOP + "tick_s: -1\n")
-    with pytest.raises(GraphErrors, match="'tick_s' must be a positive number"):
+    with pytest.raises(GraphErrors, match="'tick_s' must be a number of seconds > 0"):
         load_graph(str(bad))
