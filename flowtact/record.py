@@ -415,11 +415,12 @@ class Recorder:
                     self._manifest.note_dataset(d_ds)
                 if math.isfinite(b.end_s) and g.attrs["end_s"] != b.end_s:
                     g.attrs["end_s"] = b.end_s
-                    self._manifest.note_attrs(g)
+                    self._manifest.note_attr(g, "end_s")
             if self._summary is not None:
                 f.attrs["summary"] = self._summary
                 f.attrs["error"] = self._error
-                self._manifest.note_attrs(f)
+                self._manifest.note_attr(f, "summary")
+                self._manifest.note_attr(f, "error")
             self._manifest.store(f)
 
     def _swap(self) -> None:

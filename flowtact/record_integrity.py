@@ -113,6 +113,10 @@ class Manifest:
         """Record the digests of ``obj``'s attributes, read back from the file."""
         self.attrs[obj.name] = {k: attr_digest(v) for k, v in _raw_attrs(obj).items()}
 
+    def note_attr(self, obj: h5py.HLObject, name: str) -> None:
+        """Record the digest of one attribute of ``obj`` (after the writer changed it)."""
+        self.attrs.setdefault(obj.name, {})[name] = attr_digest(obj.attrs[name])
+
     def note_dataset(self, ds: h5py.Dataset) -> None:
         """Record ``ds``'s dtype and shape."""
         self.datasets[ds.name] = _dataset_facts(ds)
