@@ -51,7 +51,8 @@ three renames with a moment where ``path`` is missing; the work copy is then sti
 Process death is covered; power loss is not (no fsync). Between flushes data is held in memory.
 
 Compression is off by default: recording is on the speed-critical path and every sample is
-written twice. ``compression="gzip"`` (level 1, with shuffle) is offered for frame-heavy
+written twice. Checksums are always on: Fletcher-32 makes a flush re-read and re-checksum the
+partly filled chunk it appends to, and the manifest is rewritten at each flush. ``compression="gzip"`` (level 1, with shuffle) is offered for frame-heavy
 recordings; MATLAB reads gzip natively. ``h5repack -f GZIP=4 in.h5 out.h5`` compresses after.
 """
 
@@ -531,6 +532,12 @@ def open_recording(path: str | Path) -> CheckedFile:
         f.close()
         raise
     return f
+
+
+def _open(path: str | Path) -> h5py.File:
+    """The raw h5py file of :func:`open_recording` (manifest and root attributes verified), for
+    readers that walk the file themselves; HDF5 still checks each chunk's Fletcher-32 on read."""
+    return open_recording(path).file
 
 
 def _select(f: CheckedFile, streams: Iterable[str] | None) -> list[str]:
