@@ -535,9 +535,19 @@ def open_recording(path: str | Path) -> CheckedFile:
 
 
 def _open(path: str | Path) -> h5py.File:
-    """The raw h5py file of :func:`open_recording` (manifest and root attributes verified), for
-    readers that walk the file themselves; HDF5 still checks each chunk's Fletcher-32 on read."""
-    return open_recording(path).file
+    """The raw h5py file, for readers that walk it themselves (the plots): every checksum is
+    verified first, chunk by chunk (memory bounded), so a damaged file is refused naming the
+    dataset or attribute before anything is read from it; the caller closes the file."""
+    f = open_recording(path)
+    try:
+        problems = f.problems()
+    except BaseException:
+        f.close()
+        raise
+    if problems:
+        f.close()
+        raise RecordingCorrupted(f.path, problems[0].where, problems[0].what)
+    return f.file
 
 
 def _select(f: CheckedFile, streams: Iterable[str] | None) -> list[str]:

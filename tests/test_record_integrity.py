@@ -10,7 +10,7 @@ import pytest
 
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
-from flowtact.record import Recorder, open_stream, read_recording, stream_specs
+from flowtact.record import Recorder, _open, open_stream, read_recording, stream_specs
 from flowtact.record_integrity import CheckedFile, RecordingCorrupted, RecordingError
 
 FORCE = StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz"))
@@ -272,3 +272,17 @@ def test_verify_reads_a_few_chunks_at_a_time(good, monkeypatch):
         c.verify(ds, max_bytes=100_000)
     chunk_bytes = 2730 * 3 * 8
     assert len(sizes) == 3 and max(sizes) <= chunk_bytes  # 6000 rows = 3 chunks, one per read
+
+
+def test_raw_file_for_readers_that_walk_it_is_verified_first(good, tmp_path):
+    """_open (the plots read the raw h5py file) refuses damage before handing the file out."""
+    f = _open(good)
+    try:
+        assert isinstance(f, h5py.File) and f["streams/force.f/data"].shape == (6000, 3)
+    finally:
+        f.close()
+    bad = flip(good, tmp_path / "bad.h5", chunk_offset(good, "/streams/cam.frame/data", chunk=1))
+    with pytest.raises(
+        RecordingCorrupted, match=r"bad\.h5: /streams/cam\.frame/data: checksum mismatch in samples"
+    ):
+        _open(bad)

@@ -133,11 +133,12 @@ def test_flipped_byte_in_provenance(touch, tmp_path, capsys):
         ["run", str(bad), "--fast", "--duration", "1", "--inproc"],
         ["run", TOUCH, "--replay", f"sensor={bad}", "--fast", "--duration", "1", "--inproc"],
     ):
-        assert main(cmd) == 1, cmd
+        assert main(cmd) != 0, cmd  # 1 as a run error, or 2 where the replay is refused as the graph loads
         err = capsys.readouterr().err
         assert (
             "badprov.h5: /: attribute 'graph_yaml' does not match its checksum (the file is corrupted)" in err
         )
+        assert "Traceback" not in err
 
 
 def test_truncated_and_foreign_files_one_line(touch, tmp_path, capsys):
@@ -150,9 +151,10 @@ def test_truncated_and_foreign_files_one_line(touch, tmp_path, capsys):
     assert captured.err.count("\n") == 1 and "cut.h5: truncated:" in captured.err
     (tmp_path / "notes.h5").write_text("just text\n")
     assert main(["info", str(tmp_path / "notes.h5")]) == 1
-    assert (
-        capsys.readouterr().err
-        == f"flowtact: error: {tmp_path / 'notes.h5'}: not a readable HDF5 file (it has no HDF5 signature)\n"
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith(
+        f"flowtact: error: {tmp_path / 'notes.h5'}: not a readable HDF5 file (it has no HDF5 signature)"
     )
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f["x"] = 1
