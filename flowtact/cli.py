@@ -123,6 +123,9 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="compact touch/slip figure: force, dF/dt, rasters, rates (one column)",
     )
+    info = sub.add_parser("info", help="describe a recording and verify its checksums")
+    info.add_argument("recording", help="an .h5 file written by flowtact run --record")
+    info.add_argument("--json", action="store_true", help="print the report as JSON")
     bench = sub.add_parser("bench", help="run a benchmark of bench/ (in a source checkout)")
     bench.add_argument("name", nargs="?", help="benchmark name (bench/NAME.py); none lists them")
     bench.add_argument(
@@ -336,6 +339,14 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_info(args: argparse.Namespace) -> int:
+    from flowtact.recording_info import format_info, inspect_recording
+
+    info = inspect_recording(args.recording)
+    print(json.dumps(info.to_dict(), indent=2) if args.json else format_info(info))
+    return 0 if info.ok else EXIT_RUN_ERROR
+
+
 def _bench_dir() -> Path | None:
     for base in (Path.cwd(), Path(__file__).resolve().parent.parent):
         if (base / "bench").is_dir() and any((base / "bench").rglob("*.py")):
@@ -380,6 +391,7 @@ COMMANDS = {
     "blocks": _cmd_blocks,
     "graph": _cmd_graph,
     "plot": _cmd_plot,
+    "info": _cmd_info,
     "bench": _cmd_bench,
     "worker": _cmd_worker,
     "keys": _cmd_keys,

@@ -1,16 +1,25 @@
 """Crash-safe HDF5 recordings of a run's streams, with the provenance needed to re-create it.
 
-Layout of a recording (one ``.h5`` file)::
+Layout of a recording (one ``.h5`` file; docs/recordings.md documents it with Python and MATLAB)::
 
     /                          root attributes: the provenance bundle (flowtact_version, graph_yaml,
-                               params, seeds, graph_seed, versions, command, created_utc, ...),
-                               format = "flowtact-recording", format_version = 1, and at close
-                               summary (JSON: what the executor reports + samples per stream)
+                               params, seeds, graph_seed, versions, command, created_utc, host, ...),
+                               format = "flowtact-recording", format_version = 2, and at close
+                               summary (JSON: what the executor reports + samples per stream) and
+                               error ("" when the run ended well)
     /streams/<node>.<port>/t      float64 (n,)   sample times, or spike times for event streams
     /streams/<node>.<port>/data   (n, *shape)    samples, frames, or the unit index of each event
-        attributes: units, rate_hz (NaN for events), events (0/1), n_units (-1: none), labels
-        and categories (JSON lists or "null"; categories[i] names sample value i), dtype, shape (JSON list), end_s (last time the stream reached)
+        attributes: kind (samples/frames/events/pulses), units, rate_hz (NaN for events), events
+        (0/1), n_units (-1: none), sample_shape (int64 array), channel_labels (string array, when
+        the channels are named), labels and categories (JSON lists or "null"; categories[i] names
+        sample value i), dtype, shape (JSON list), end_s (last time the stream reached)
     /provenance/<key>          only for provenance values too long for an attribute (> 60 kB)
+    /integrity                 the checksum manifest (flowtact.record_integrity)
+
+Every dataset carries HDF5's Fletcher-32 checksum; the manifest holds the SHA-256 of every
+attribute and the shape of every dataset, so the readers here refuse a damaged file naming the
+dataset or attribute (:class:`flowtact.record_integrity.RecordingCorrupted`). Recordings of
+format_version 1 (no checksums) still read.
 
 Values that were not strings (dicts, lists) are stored as JSON text and listed in the root
 attribute ``json_attrs``; :func:`read_recording` decodes them. Strings are stored verbatim.
@@ -42,7 +51,8 @@ three renames with a moment where ``path`` is missing; the work copy is then sti
 Process death is covered; power loss is not (no fsync). Between flushes data is held in memory.
 
 Compression is off by default: recording is on the speed-critical path and every sample is
-written twice. ``compression="gzip"`` (level 1, with shuffle) is offered for frame-heavy
+written twice. Checksums are always on: Fletcher-32 makes a flush re-read and re-checksum the
+partly filled chunk it appends to, and the manifest is rewritten at each flush. ``compression="gzip"`` (level 1, with shuffle) is offered for frame-heavy
 recordings; MATLAB reads gzip natively. ``h5repack -f GZIP=4 in.h5 out.h5`` compresses after.
 """
 
@@ -67,6 +77,7 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.record_integrity import CheckedFile, Manifest, NotARecording, RecordingCorrupted
 
 __all__ = [
     "FORMAT",
@@ -74,13 +85,18 @@ __all__ = [
     "RecordedStream",
     "Recorder",
     "Recording",
+    "StreamHeader",
+    "open_recording",
+    "open_stream",
     "package_versions",
     "read_recording",
+    "stream_header",
+    "stream_kind",
     "stream_specs",
 ]
 
 FORMAT = "flowtact-recording"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: Fletcher-32 on every dataset and the /integrity manifest
 #: Target bytes per HDF5 chunk: whole chunks are re-read and re-written when a flush appends to a
 #: partly filled one, so they stay small; a 240x320 uint8 frame makes one chunk of its own.
 CHUNK_BYTES = 64 * 1024
@@ -110,6 +126,7 @@ def _default_provenance() -> dict[str, Any]:
         "versions": package_versions(),
         "command": " ".join(sys.argv),
         "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "host": platform.node(),
     }
 
 
@@ -136,8 +153,21 @@ def _remove(path: Path) -> None:
         os.remove(path)
 
 
+def stream_kind(spec: StreamSpec) -> str:
+    """What a stream holds: "pulses" (events whose columns start with the unit), "events",
+    "frames" (samples of two or more dimensions) or "samples"."""
+    if spec.events:
+        labels = spec.labels or ()
+        return "pulses" if len(spec.shape) == 1 and labels and labels[0] == "unit" else "events"
+    return "frames" if len(spec.shape) >= 2 else "samples"
+
+
 def _spec_attrs(spec: StreamSpec) -> dict[str, Any]:
+    extra: dict[str, Any] = {}
+    if spec.labels is not None:  # plain strings, for MATLAB's h5readatt (no jsondecode)
+        extra["channel_labels"] = np.array([str(x) for x in spec.labels], dtype=h5py.string_dtype())
     return {
+        "kind": stream_kind(spec),
         "units": spec.units,
         "rate_hz": float(spec.rate_hz) if (spec.rate_hz is not None and not spec.events) else math.nan,
         "events": np.int8(bool(spec.events)),
@@ -146,6 +176,8 @@ def _spec_attrs(spec: StreamSpec) -> dict[str, Any]:
         "categories": _dumps(list(spec.categories) if spec.categories is not None else None),
         "dtype": np.dtype(spec.dtype).name,
         "shape": _dumps(list(spec.shape)),
+        "sample_shape": np.array(spec.shape, dtype=np.int64),
+        **extra,
         "end_s": math.nan,
     }
 
@@ -274,9 +306,13 @@ class Recorder:
                 if not isinstance(value, str):
                     value = _dumps(value)
                     json_keys.append(key)
-                if len(value.encode()) > MAX_ATTR_BYTES:
+                raw = value.encode()
+                if len(raw) > MAX_ATTR_BYTES:  # one fixed-length UTF-8 string, so Fletcher-32 covers it
                     ds = f.require_group("provenance").create_dataset(
-                        key, data=value, dtype=h5py.string_dtype()
+                        key,
+                        data=np.array([raw], dtype=h5py.string_dtype("utf-8", len(raw))),
+                        chunks=(1,),
+                        fletcher32=True,
                     )
                     ds.attrs["json"] = np.int8(key in json_keys)
                 else:
@@ -288,9 +324,9 @@ class Recorder:
                 for k, v in _spec_attrs(buf.spec).items():
                     g.attrs[k] = v
                 row = buf.dtype.itemsize * int(np.prod(buf.shape, dtype=np.int64))
-                opts: dict[str, Any] = {}
+                opts: dict[str, Any] = {"fletcher32": True}
                 if self.compression:
-                    opts = {"compression": "gzip", "compression_opts": 1, "shuffle": buf.dtype.itemsize > 1}
+                    opts |= {"compression": "gzip", "compression_opts": 1, "shuffle": buf.dtype.itemsize > 1}
                 g.create_dataset("t", (0,), np.float64, maxshape=(None,), chunks=(_chunk_rows(8),), **opts)
                 g.create_dataset(
                     "data",
@@ -300,6 +336,9 @@ class Recorder:
                     chunks=(_chunk_rows(row), *buf.shape),
                     **opts,
                 )
+            self._manifest = Manifest()
+            self._manifest.note_all(f)
+            self._manifest.store(f)
 
     # -- writing ----------------------------------------------------------------------------
     def write(self, stream: str, chunk: Chunk) -> None:
@@ -376,10 +415,17 @@ class Recorder:
                     t_ds[have:] = t
                     d_ds.resize((b.n, *b.shape))
                     d_ds[have:] = d
-                if math.isfinite(b.end_s):
+                    self._manifest.note_dataset(t_ds)
+                    self._manifest.note_dataset(d_ds)
+                if math.isfinite(b.end_s) and g.attrs["end_s"] != b.end_s:
                     g.attrs["end_s"] = b.end_s
+                    self._manifest.note_attr(g, "end_s")
             if self._summary is not None:
                 f.attrs["summary"] = self._summary
+                f.attrs["error"] = self._error
+                self._manifest.note_attr(f, "summary")
+                self._manifest.note_attr(f, "error")
+            self._manifest.store(f)
 
     def _swap(self) -> None:
         """Make the freshly written work copy the file at ``path``, and the old one the work copy."""
@@ -407,6 +453,7 @@ class Recorder:
             "wall_s": round(time.monotonic() - self._t0, 6),
         }
         self._summary = _dumps({**dict(summary or {}), "recorder": own})
+        self._error = str((summary or {}).get("error") or "")
         try:
             self._commit(force=True)
         finally:
@@ -476,58 +523,132 @@ class Recording:
         return json.loads(value) if isinstance(value, str) else value
 
 
-def _open(path: str | Path) -> h5py.File:
-    p = Path(path)
-    if not p.exists():
-        raise FileNotFoundError(f"recording not found: {p}")
+def open_recording(path: str | Path) -> CheckedFile:
+    """Open a recording with its checksums, refusing a non-HDF5, truncated or damaged file: the
+    root attributes (the provenance) are verified here, whatever the reader goes on to read."""
+    f = CheckedFile(path)
     try:
-        f = h5py.File(p, "r")
-    except OSError as e:
-        raise OSError(f"{p}: not a readable HDF5 file ({e})") from None
-    if "streams" not in f:
+        if "streams" not in f.file:
+            raise NotARecording(f"{f.path}: not a flowtact recording (no /streams group)")
+        f.attrs(f.file)
+    except BaseException:
         f.close()
-        raise ValueError(f"{p}: not a flowtact recording (no /streams group)")
+        raise
     return f
 
 
-def _select(f: h5py.File, path: str | Path, streams: Iterable[str] | None) -> list[str]:
-    available = list(f["streams"])
+def _open(path: str | Path) -> h5py.File:
+    """The raw h5py file, for readers that walk it themselves (the plots): every checksum is
+    verified first, chunk by chunk (memory bounded), so a damaged file is refused naming the
+    dataset or attribute before anything is read from it; the caller closes the file."""
+    f = open_recording(path)
+    try:
+        problems = f.problems()
+    except BaseException:
+        f.close()
+        raise
+    if problems:
+        f.close()
+        raise RecordingCorrupted(f.path, problems[0].where, problems[0].what)
+    return f.file
+
+
+def _select(f: CheckedFile, streams: Iterable[str] | None) -> list[str]:
+    available = list(f.group("/streams"))
     if streams is None:
         return available
     names = list(streams)
     for name in names:
-        if name not in f["streams"]:
-            raise KeyError(f"{path}: no stream '{name}' (available: {', '.join(available) or 'none'})")
+        if name not in available:
+            raise KeyError(f"{f.path}: no stream '{name}' (available: {', '.join(available) or 'none'})")
     return names
 
 
+@dataclass(frozen=True)
+class StreamHeader:
+    """A stream's group, its verified attributes, datasets and sample count (no data read)."""
+
+    attrs: dict[str, Any]
+    t: h5py.Dataset
+    data: h5py.Dataset
+    spec: StreamSpec
+
+    @property
+    def n(self) -> int:
+        return int(min(self.t.shape[0], self.data.shape[0]))
+
+
+def stream_header(f: CheckedFile, name: str) -> StreamHeader:
+    where = f"/streams/{name}"
+    g = f.group(where)
+    attrs = f.attrs(g)
+    t, data = f.group(f"{where}/t"), f.group(f"{where}/data")
+    try:
+        spec = _spec_from_attrs(attrs, data)
+    except (ValueError, TypeError, KeyError) as e:  # only unchecksummed (old) files get here
+        raise RecordingCorrupted(f.path, where, f"attributes do not describe a stream ({e})") from None
+    return StreamHeader(attrs, t, data, spec)
+
+
 def stream_specs(path: str | Path) -> dict[str, tuple[StreamSpec, int]]:
-    """Each stream's spec and sample count, read from the file header only (no data)."""
-    with _open(path) as f:
-        return {
-            name: (_spec_from_attrs(g.attrs, g["data"]), int(min(g["t"].shape[0], g["data"].shape[0])))
-            for name, g in f["streams"].items()
-        }
+    """Each stream's spec and sample count, read from the file header only (no data).
+
+    Attributes and dataset shapes are checked against the file's checksums; the data is not read.
+    """
+    with open_recording(path) as f:
+        out = {}
+        for name in _select(f, None):
+            h = stream_header(f, name)
+            out[name] = (h.spec, h.n)
+        return out
+
+
+def open_stream(path: str | Path, name: str) -> tuple[CheckedFile, StreamHeader]:
+    """Open one stream for reading slice by slice, after verifying every checksum of its datasets
+    chunk by chunk (memory bounded): a damaged file is refused before anything is played."""
+    f = open_recording(path)
+    try:
+        h = stream_header(f, _select(f, [name])[0])
+        f.verify(h.t)
+        f.verify(h.data)
+    except BaseException:
+        f.close()
+        raise
+    return f, h
 
 
 def read_recording(path: str | Path, streams: Iterable[str] | None = None) -> Recording:
-    """Read a recording (all streams, or the named ones); copes with a killed run (no summary)."""
-    with _open(path) as f:
+    """Read a recording (all streams, or the named ones); copes with a killed run (no summary).
+
+    Every attribute and chunk read is checked against the file's checksums: a damaged recording
+    raises :class:`flowtact.record_integrity.RecordingCorrupted` naming the dataset.
+    """
+    with open_recording(path) as f:
         out = {}
-        for name in _select(f, path, streams):
-            g = f["streams"][name]
-            n = int(min(g["t"].shape[0], g["data"].shape[0]))
-            attrs = {k: _attr(v) for k, v in g.attrs.items()}
-            out[name] = RecordedStream(g["t"][:n], g["data"][:n], _spec_from_attrs(g.attrs, g["data"]), attrs)
-        root = {k: _attr(v) for k, v in f.attrs.items()}
+        for name in _select(f, streams):
+            h = stream_header(f, name)
+            out[name] = RecordedStream(
+                f.read(h.t, slice(0, h.n)), f.read(h.data, slice(0, h.n)), h.spec, h.attrs
+            )
+        root = f.attrs(f.file)
         json_keys = set(json.loads(root.pop("json_attrs", "[]")))
         summary = root.pop("summary", None)
+        root.pop("error", None)  # the summary's error, repeated as plain text for MATLAB
         provenance: dict[str, Any] = {}
         for key, value in root.items():
             if isinstance(value, np.generic):
                 value = value.item()
             provenance[key] = json.loads(value) if key in json_keys else value
-        for key, ds in f.get("provenance", {}).items():
-            text = _attr(ds[()])
-            provenance[key] = json.loads(text) if int(ds.attrs.get("json", 0)) else text
+        if "provenance" in f.file:
+            for key in f.group("/provenance"):
+                ds = f.group(f"/provenance/{key}")
+                text = _provenance_text(f.read(ds))
+                provenance[key] = json.loads(text) if int(f.attrs(ds).get("json", 0)) else text
     return Recording(Path(path), out, provenance, json.loads(summary) if summary is not None else None)
+
+
+def _provenance_text(value: Any) -> str:
+    """A /provenance dataset's text: one fixed-length UTF-8 string (v2) or a scalar string (v1)."""
+    if isinstance(value, np.ndarray):
+        value = value.reshape(-1)[0]
+    return value.decode() if isinstance(value, bytes) else str(value)

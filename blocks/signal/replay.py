@@ -358,15 +358,13 @@ class Replay(Source):
         self._src = src
         path = Path(self.config.path)
         if src.h5_stream is not None and src.h5_file is None:
-            import h5py
+            from flowtact.record import open_stream
 
-            f = h5py.File(path, "r")
-            g = f["streams"][src.h5_stream]
-            n = int(min(g["t"].shape[0], g["data"].shape[0]))
-            t = np.asarray(g["t"][:n], np.float64)
+            f, h = open_stream(path, src.h5_stream)  # every checksum verified: damage refused up front
+            t = np.asarray(f.read(h.t, slice(0, h.n)), np.float64)
             self._check_times(t, path)
-            end = float(g.attrs.get("end_s", math.nan))
-            src.h5_file, src.t, src.data, src.end_s = f, t, g["data"], (end if math.isfinite(end) else None)
+            end = float(h.attrs.get("end_s", math.nan))
+            src.h5_file, src.t, src.data, src.end_s = f, t, h.data, (end if math.isfinite(end) else None)
         elif isinstance(src.data, tuple):  # npz, not read yet
             with np.load(src.data[0]) as npz:
                 src.data = np.asarray(npz[src.data[1]])
@@ -449,13 +447,12 @@ class Replay(Source):
 
 def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
     """The last time stamp of a recorded stream and its recorded end watermark (None if absent)."""
-    import h5py
+    from flowtact.record import open_recording, stream_header
 
-    with h5py.File(path, "r") as f:
-        g = f["streams"][stream]
-        n = int(min(g["t"].shape[0], g["data"].shape[0]))
-        last = float(g["t"][n - 1]) if n else None
-        end = float(g.attrs.get("end_s", math.nan))
+    with open_recording(path) as f:  # checked reads: damage is refused naming the dataset
+        h = stream_header(f, stream)
+        last = float(f.read(h.t, h.n - 1)) if h.n else None
+        end = float(h.attrs.get("end_s", math.nan))
     return last, (end if math.isfinite(end) else None)
 
 
