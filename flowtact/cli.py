@@ -428,11 +428,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
     except Exception as e:  # noqa: BLE001 — every failure: one line naming it, the traceback with --debug
-        from flowtact.runtime.inproc import NodeError
-        from flowtact.runtime.security import SecurityError
-        from flowtact.runtime.supervisor import WorkerFailed
+        from flowtact.errors import FlowtactError
 
-        known = (NodeError, WorkerFailed, SecurityError, FileNotFoundError, ValueError, ImportError, OSError)
+        known = (FlowtactError, FileNotFoundError, ValueError, ImportError, OSError)  # say what, not the type
         what = str(e) if isinstance(e, known) else f"{type(e).__name__}: {e}"
         print_error(f"flowtact: error: {what}", e, debug)
         return EXIT_RUN_ERROR

@@ -18,11 +18,12 @@ import numpy as np
 
 from flowtact.block import Block, Source, SpecError
 from flowtact.chunk import StreamSpec
+from flowtact.errors import FlowtactError
 from flowtact.extras import missing_extras
 from flowtact.graph import Edge, Graph, GraphError, GraphErrors, Loc
 from flowtact.params import ConfigError
 
-__all__ = ["Plan", "compile_graph", "node_seed"]
+__all__ = ["BlockSpecsFailed", "Plan", "compile_graph", "node_seed"]
 
 Stream = tuple[str, str]
 
@@ -179,6 +180,15 @@ def _recordable(
     return kept, notes
 
 
+class BlockSpecsFailed(FlowtactError, RuntimeError):
+    """A block's ``specs()`` raised something other than a SpecError: a bug in the block, not in
+    the graph. Names the node and keeps the exception (``cause``) for ``--debug``."""
+
+    def __init__(self, loc: Loc, node: str, block: str, cause: BaseException) -> None:
+        self.node, self.block, self.cause = node, block, cause
+        super().__init__(f"{loc}: node '{node}' ({block}): specs() raised {type(cause).__name__}: {cause}")
+
+
 def _stream_specs(
     graph: Graph,
     order: list[str],
@@ -207,6 +217,8 @@ def _stream_specs(
             )
             broken.add(n)
             continue
+        except Exception as err:  # a bug in the block: name its node, keep the traceback (--debug)
+            raise BlockSpecsFailed(graph.nodes[n].loc, n, graph.nodes[n].cls.name, err) from err
         for port, spec in out.items():
             specs[(n, port)] = spec
     return specs, broken, list(delayed)

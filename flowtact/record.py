@@ -88,6 +88,7 @@ __all__ = [
     "StreamHeader",
     "open_recording",
     "open_stream",
+    "open_verified",
     "package_versions",
     "read_recording",
     "stream_header",
@@ -537,8 +538,8 @@ def open_recording(path: str | Path) -> CheckedFile:
     return f
 
 
-def _open(path: str | Path) -> h5py.File:
-    """The raw h5py file, for readers that walk it themselves (the plots): every checksum is
+def open_verified(path: str | Path) -> h5py.File:
+    """The raw h5py file, for readers that walk it themselves (plots, training): every checksum is
     verified first, chunk by chunk (memory bounded), so a damaged file is refused naming the
     dataset or attribute before anything is read from it; the caller closes the file."""
     f = open_recording(path)

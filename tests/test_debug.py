@@ -88,6 +88,7 @@ def test_validate_a_graph_whose_block_has_a_bug(tmp_path):
     )
     code, _, err = run("validate", str(path))
     assert code == 1 and err.strip().endswith(HINT) and "Traceback" not in err, err
+    assert f"error: {path}:3:3: node 'bad' (bad_specs): specs() raised ZeroDivisionError" in err, err
     code, _, err = run("validate", str(path), "--debug")
     assert code == 1 and "in specs" in err and "1 // 0" in err
 

@@ -10,7 +10,7 @@ import pytest
 
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
-from flowtact.record import Recorder, _open, open_stream, read_recording, stream_specs
+from flowtact.record import Recorder, open_stream, open_verified, read_recording, stream_specs
 from flowtact.record_integrity import CheckedFile, RecordingCorrupted, RecordingError
 
 FORCE = StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz"))
@@ -275,8 +275,8 @@ def test_verify_reads_a_few_chunks_at_a_time(good, monkeypatch):
 
 
 def test_raw_file_for_readers_that_walk_it_is_verified_first(good, tmp_path):
-    """_open (the plots read the raw h5py file) refuses damage before handing the file out."""
-    f = _open(good)
+    """open_verified (the plots read the raw h5py file) refuses damage before handing the file out."""
+    f = open_verified(good)
     try:
         assert isinstance(f, h5py.File) and f["streams/force.f/data"].shape == (6000, 3)
     finally:
@@ -285,4 +285,4 @@ def test_raw_file_for_readers_that_walk_it_is_verified_first(good, tmp_path):
     with pytest.raises(
         RecordingCorrupted, match=r"bad\.h5: /streams/cam\.frame/data: checksum mismatch in samples"
     ):
-        _open(bad)
+        open_verified(bad)

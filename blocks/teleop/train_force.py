@@ -220,9 +220,7 @@ def load_recording_pairs(
 
     Frames are read and cropped slice by slice, so the whole-frame stream never sits in memory.
     """
-    import h5py
-
-    from flowtact.record import stream_specs
+    from flowtact.record import open_verified, stream_specs
 
     path = Path(path)
     specs = stream_specs(path)
@@ -243,7 +241,7 @@ def load_recording_pairs(
     hw = (int(fspec.shape[1]), int(fspec.shape[2]))
     window = TrainConfig(crop=crop).resolve_crop(hw)
     pre = Preprocess(hw, window)
-    with h5py.File(path, "r") as f:
+    with open_verified(path) as f:  # every checksum first: a damaged file is refused naming the dataset
         g_frames, g_force = f["streams"][frames_stream], f["streams"][force_stream]
         n = int(min(g_frames["t"].shape[0], g_frames["data"].shape[0]))
         m = int(min(g_force["t"].shape[0], g_force["data"].shape[0]))

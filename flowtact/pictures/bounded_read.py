@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import StreamSpec
-from flowtact.record import _open, _spec_from_attrs
+from flowtact.record import _spec_from_attrs, open_verified
 
 __all__ = [
     "BLOCK_BYTES",
@@ -54,7 +54,7 @@ class StreamSource:
 
 def open_recording(path: str | Path) -> tuple[h5py.File, dict[str, StreamSource], dict[str, object]]:
     """The open file, its streams (in recorded order) and its root attributes; the caller closes it."""
-    f = _open(path)
+    f = open_verified(path)
     out = {}
     for name, g in f["streams"].items():
         n = int(min(g["t"].shape[0], g["data"].shape[0]))
