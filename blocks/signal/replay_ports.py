@@ -10,7 +10,6 @@ which is how graphs, workers and recordings name it.
 from __future__ import annotations
 
 import atexit
-import contextlib
 import functools
 import os
 import tempfile
@@ -23,7 +22,7 @@ import numpy as np
 
 from flowtact.block import Block, Example, Source, SpecError
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
-from flowtact.blocks.signal.replay import SUFFIXES, Replay
+from flowtact.blocks.signal.replay import SUFFIXES, Replay, _remove_quietly
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, ConfigError, did_you_mean, param
 from flowtact.registry import UnknownBlockError, load_block
@@ -339,8 +338,3 @@ def _example_csv(block: type[Block]) -> Path:
         os.replace(tmp, path)
         atexit.register(_remove_quietly, path)
     return path
-
-
-def _remove_quietly(path: Path) -> None:
-    with contextlib.suppress(OSError):
-        path.unlink()
