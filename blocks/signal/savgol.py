@@ -140,7 +140,6 @@ def _timing_faults(t: np.ndarray, prev: float, period: float, tol: float) -> tup
     return gaps, irregular
 
 
-
 @njit(cache=True)
 def savgol_apply(coef: np.ndarray, tail: np.ndarray, x: np.ndarray) -> np.ndarray:
     """FIR ``y[i] = Σ_k coef[k]·ext[i+k]`` over ``ext = tail ++ x``; updates ``tail`` in place.
