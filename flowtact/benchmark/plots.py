@@ -56,10 +56,16 @@ def draw_tradeoff(t: Tradeoff) -> Plot:
             ax.plot([p.time], [p.error], "*", ms=16, mfc="none", mec="k", mew=1.5)
             ax.annotate("shipped default", (p.time, p.error), fontsize=8, weight="bold",
                         textcoords="offset points", xytext=(6, -12))  # fmt: skip
-        if t.log_time:
-            ax.set_xscale("log")
-        if t.log_error:
-            ax.set_yscale("log")
+        from matplotlib.ticker import FuncFormatter, NullFormatter
+
+        for on, axis, scale in (
+            (t.log_time, ax.xaxis, ax.set_xscale),
+            (t.log_error, ax.yaxis, ax.set_yscale),
+        ):
+            if on:
+                scale("log")
+                axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+                axis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(t.time_label)
         ax.set_ylabel(t.error_label)
         ax.set_title(t.title, fontsize=10)
