@@ -56,14 +56,16 @@ def draw_tradeoff(t: Tradeoff) -> Plot:
             ax.plot([p.time], [p.error], "*", ms=16, mfc="none", mec="k", mew=1.5)
             ax.annotate("shipped default", (p.time, p.error), fontsize=8, weight="bold",
                         textcoords="offset points", xytext=(6, -12))  # fmt: skip
-        from matplotlib.ticker import FuncFormatter, NullFormatter
+        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-        for on, axis, scale in (
-            (t.log_time, ax.xaxis, ax.set_xscale),
-            (t.log_error, ax.yaxis, ax.set_yscale),
+        xs, ys = [p.time for p in t.points], [p.error for p in t.points]
+        for on, vals, axis, scale in (
+            (t.log_time, xs, ax.xaxis, ax.set_xscale),
+            (t.log_error, ys, ax.yaxis, ax.set_yscale),
         ):
-            if on:
+            if on and min(vals) > 0 and max(vals) / min(vals) >= 10:  # a log axis only over a decade or more
                 scale("log")
+                axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
                 axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
                 axis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(t.time_label)

@@ -147,7 +147,7 @@ class Context:
         self.suite = suite
         self.quick = quick
         self.peers = peers
-        self.repeats = 3 if quick else 7
+        self.repeats = 5 if quick else 9
         """Default repeats of a timed figure (after one warm-up call)."""
         self.figures: dict[str, Figure] = {}
         self.tables: list[Table] = []
