@@ -1,54 +1,64 @@
-"""Hostile inputs: wall time and peak RSS of `flowtact validate` refusing each one (50 MB file, alias
-bomb, 5 000 nested lists, /dev/zero, a FIFO, a population of 1e14 neurons, ...).
+"""Suite ``hostile_input``: wall time and peak RSS of `flowtact validate` refusing each hostile input
+(50 MB file, alias bomb, 5 000 nested lists, /dev/zero, a FIFO, a population of 1e14 neurons, ...).
 
 Each case runs in a fresh child Python (interpreter start and flowtact's imports included), which
 reports its own peak resident set size. The cases are those of tests/test_hostile_input.py
-(tests/hostile.py), where the refusal, its place and the 500 MiB bound are asserted.
-
-    python bench/hostile_input.py [--repeats 3] [--json out.json]
+(bench/hostile_cases.py), where the refusal, its place and the 500 MiB bound are asserted. The
+baseline is the same child validating the shipped graphs/touch.yaml: what any `flowtact validate`
+costs.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the cases live with the tests
-from hostile import CASES, run_measured
+from flowtact.bench.hostile_cases import CASES, TOUCH, run_measured
+from flowtact.benchmark import Context, Suite
+
+PEAK_MIB = 500
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=3, help="runs per case (the slowest and largest are kept)")
-    ap.add_argument("--json", help="also write the figures as JSON")
-    args = ap.parse_args(argv)
-    rows = {}
-    print(f"{'case':<22} {'exit':>4} {'max wall s':>10} {'max peak MiB':>12}  refusal")
+def run(ctx: Context) -> None:
+    repeats = 1 if ctx.quick else 3
+    ctx.step("baseline: validate touch.yaml")
+    base = [run_measured(["validate", TOUCH]) for _ in range(repeats)]
+    if any(m.returncode != 0 for m in base):
+        raise RuntimeError(f"flowtact validate {TOUCH} failed: {base[0].stderr.strip()[-500:]}")
+    ctx.figure("validate touch.yaml (benign)", [m.seconds for m in base], "s wall", "lower", is_baseline=True)
+    ctx.figure(
+        "validate touch.yaml (benign), peak RSS", [m.peak_mib for m in base], "MiB", "lower", is_baseline=True
+    )
+    rows = []
     for name, case in CASES.items():
+        ctx.step(name)
         runs = []
-        for _ in range(args.repeats):
+        for _ in range(repeats):
             with tempfile.TemporaryDirectory() as folder:
                 cli_args, expect = case(Path(folder))
                 m = run_measured(cli_args)
                 runs.append((m, expect in m.stderr))
-        worst_s = max(m.seconds for m, _ in runs)
-        worst_mib = max(m.peak_mib for m, _ in runs)
         ok = all(found and m.returncode == 2 for m, found in runs)
+        ctx.figure(
+            name, [m.seconds for m, _ in runs], "s wall", "lower", baseline="validate touch.yaml (benign)"
+        )
+        peak = ctx.figure(f"{name}, peak RSS", [m.peak_mib for m, _ in runs], "MiB", "lower",
+                          baseline="validate touch.yaml (benign), peak RSS")  # fmt: skip
         first = runs[0][0].stderr.splitlines()[0] if runs[0][0].stderr else ""
-        rows[name] = {"seconds": worst_s, "peak_mib": worst_mib, "refused_as_expected": ok}
-        print(f"{name:<22} {runs[0][0].returncode:>4} {worst_s:>10.2f} {worst_mib:>12.1f}  {first[:90]}")
-    print(
-        f"max over cases: {max(r['seconds'] for r in rows.values()):.2f} s, "
-        f"{max(r['peak_mib'] for r in rows.values()):.1f} MiB peak RSS; "
-        f"all refused as expected: {all(r['refused_as_expected'] for r in rows.values())}"
-    )
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=2))
-    return 0 if all(r["refused_as_expected"] for r in rows.values()) else 1
+        rows.append([name, runs[0][0].returncode, first[:100]])
+        ctx.check(f"{name}: refused (exit 2) at its place", ok, first[:100])
+        ctx.check(f"{name}: peak RSS < {PEAK_MIB} MiB", peak.max < PEAK_MIB, f"{peak.max:.0f} MiB")
+    ctx.table("How each hostile input is refused", ["case", "exit", "first line of the refusal"], rows)
+    ctx.note("A ratio < 1 here means refusing the case costs more than validating a benign graph.")
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+SUITE = Suite(
+    name="hostile_input",
+    title="Hostile inputs: time and memory of a refusal",
+    measures="Wall time and peak RSS of `flowtact validate` (a fresh child Python) refusing each hostile "
+    "input of tests/test_hostile_input.py, and whether each was refused with exit 2 at its place.",
+    baseline="the same child validating the shipped graphs/touch.yaml",
+    run=run,
+    minutes_quick=0.5,
+    minutes_full=1.5,
+)

@@ -1,4 +1,4 @@
-"""Transport: flowtact's multi-process runtime against raw pyzmq (same framing) and, with --peers, Timeflux and ezmsg.
+"""Suite ``transport``: flowtact's multi-process runtime against raw pyzmq (same framing) and, with --peers, Timeflux and ezmsg.
 
 Measures, in one run, the same source -> stage -> sink pipeline (each in its own process):
   a. raw pyzmq with flowtact's wire format (bench/peers/raw.py): latency at 1 kHz (4 float64)
@@ -8,39 +8,29 @@ Measures, in one run, the same source -> stage -> sink pipeline (each in its own
   c. flowtact --fast (lossless backpressure) throughput of bench/graphs/fast.yaml, small and image;
   d. with --peers: the pipeline in Timeflux and ezmsg (bench/peers/), each pip-installed into a
      throw-away venv under ~/.cache/flowtact-bench/ (made on first use, then reused).
-Prints every figure, the ratios flowtact/raw and issue 3's targets as pass/fail.
-
-    python bench/transport.py [--quick] [--json out.json] [--peers] [--only raw|flowtact|peers]
+Records every figure with its ratio to raw pyzmq, and issue 3's targets as pass/fail.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import os
-import platform
 import shutil
 import signal
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+import numpy as np
+
+from flowtact.bench.peers import raw
+from flowtact.bench.peers.measure import CpuSampler, summarize
+from flowtact.benchmark import Context, Suite
 
 BENCH = Path(__file__).resolve().parent
-ROOT = BENCH.parent
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-
-import numpy as np  # noqa: E402
-import zmq  # noqa: E402
-from peers import raw  # noqa: E402
-from peers.measure import CpuSampler, summarize  # noqa: E402
-
 CHAIN = BENCH / "graphs" / "chain.yaml"
 FAST = BENCH / "graphs" / "fast.yaml"
 PEER_DIR = BENCH / "peers"
@@ -71,7 +61,7 @@ def durations(quick: bool) -> dict[str, float]:
 # -- a. raw pyzmq -----------------------------------------------------------------------------
 
 
-def bench_raw(quick: bool) -> dict[str, Any]:
+def bench_raw(quick: bool, step: Any = print) -> dict[str, Any]:
     """The raw baseline: paced small and image, the one-way floor, flat-out small and image."""
     d = durations(quick)
     out = {}
@@ -82,7 +72,7 @@ def bench_raw(quick: bool) -> dict[str, Any]:
         "small_flat": ("small", d["flat"], None, 1),
         "image_flat": ("image", d["flat"], None, 1),
     }.items():
-        print(f"   raw {key} ...", flush=True)
+        step(f"raw {key}")
         out[key] = raw.run_pipeline(args[0], args[1], args[2], stages=args[3])
     return out
 
@@ -100,10 +90,9 @@ def flowtact_run(
     for s in sets:
         cmd += ["--set", s]
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(BENCH), env.get("PYTHONPATH", "")) if p)
     env["NUMBA_NUM_THREADS"] = "1"
     try:
-        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout_s)
+        proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"flowtact run {graph.name} did not finish within {timeout_s:.0f} s") from None
     if proc.returncode != 0:
@@ -243,7 +232,7 @@ def peer_python(name: str) -> Path | None:
         and subprocess.run([py, "-c", f"import {spec['module']}"], capture_output=True).returncode == 0
     ):
         return py
-    print(f"   creating {venv} (pip install {' '.join(spec['packages'])}) ...", flush=True)
+    print(f"   creating {venv} (pip install {' '.join(spec['packages'])}) ...", file=sys.stderr, flush=True)
     shutil.rmtree(venv, ignore_errors=True)
     venv.parent.mkdir(parents=True, exist_ok=True)
     steps = [
@@ -254,7 +243,11 @@ def peer_python(name: str) -> Path | None:
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
             tail = "\n".join((r.stderr or r.stdout).strip().splitlines()[-5:])
-            print(f"   {name}: '{' '.join(cmd[:4])} ...' failed, skipping {name}:\n{tail}", flush=True)
+            print(
+                f"   {name}: '{' '.join(cmd[:4])} ...' failed, skipping {name}:\n{tail}",
+                file=sys.stderr,
+                flush=True,
+            )
             return None
     return py
 
@@ -329,11 +322,9 @@ def bench_peers(quick: bool) -> dict[str, Any]:
             "small_flat": ("small", d["flat"], None),
             "image_flat": ("image", d["flat"], None),
         }.items():
-            print(f"   {name} {key} ...", flush=True)
             try:
                 res[key] = run_peer(py, name, payload, seconds, rate)
             except RuntimeError as e:
-                print(f"   {e}", flush=True)
                 res[key] = {"error": str(e)}
         out[name] = res
     return out
@@ -354,34 +345,6 @@ def _peer_versions(py: Path, name: str) -> dict[str, str]:
 
 
 # -- report -----------------------------------------------------------------------------------
-
-
-def _f(x: float | None, fmt: str = ".0f") -> str:
-    return "-" if x is None else format(x, fmt)
-
-
-def _lat_row(label: str, r: dict[str, Any]) -> str:
-    lat = r["latency_us"]
-    cpu = r.get("cpu_pct")
-    if isinstance(cpu, dict):
-        cpu_s = (
-            " ".join(f"{n} {_f(v, '.1f')}" for n, v in cpu.items())
-            + f" (sum {_f(r.get('cpu_total_pct'), '.1f')})"
-        )
-    else:
-        cpu_s = _f(cpu, ".1f")
-    return (
-        f"   {label:<34} {_f(lat['p50']):>7} {_f(lat['p99']):>7} {_f(lat['max']):>7} "
-        f"{_f(r['loss_pct'], '.2f'):>6}  {cpu_s}"
-    )
-
-
-def _thr_row(label: str, r: dict[str, Any]) -> str:
-    t = r["throughput"]
-    return (
-        f"   {label:<34} {t['delivered_msg_s']:>11,.0f} {t['sent_msg_s']:>11,.0f} "
-        f"{t['bytes_s'] / 1e6:>9,.1f} {t['loss_pct']:>6.2f} {_f(r['latency_us']['p50'] / 1e3, '.1f'):>8}"
-    )
 
 
 def ratios_and_targets(res: dict[str, Any]) -> dict[str, Any]:
@@ -434,160 +397,103 @@ def ratios_and_targets(res: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-_LAT_HEAD = f"   {'case':<34} {'p50 µs':>7} {'p99 µs':>7} {'max µs':>7} {'loss %':>6}  CPU % of one core"
-_THR_HEAD = f"   {'case':<34} {'deliv msg/s':>11} {'sent msg/s':>11} {'MB/s':>9} {'loss %':>6} {'p50 ms':>8}"
+def _lat(ctx: Context, label: str, r: dict[str, Any], base: str | None) -> None:
+    """p50 and p99 latency figures of one pipeline (the raw one as baseline when ``base`` is None)."""
+    for q in ("p50", "p99"):
+        v = r["latency_us"][q]
+        if v is None:
+            continue
+        ctx.figure(f"{label}, {q} latency", v, "µs", "lower", is_baseline=base is None,
+                   baseline=f"{base}, {q} latency" if base else None, params={"n": r["latency_us"].get("n")})  # fmt: skip
 
 
-def print_report(res: dict[str, Any]) -> None:
-    """Print every section the run measured, then the ratios and the targets."""
-    if "raw" in res:
-        _print_raw(res["raw"])
-    if "chain" in res:
-        _print_chain(res["chain"])
-    if "fast" in res:
-        _print_fast(res["fast"])
-    if "peers" in res:
-        _print_peers(res["peers"])
-    rt = res["ratios_targets"]
-    if rt["ratios"]:
-        print("\nratios flowtact / raw")
-        for k, v in rt["ratios"].items():
-            print(f"   {k:<40} {v:6.2f}")
-    if rt["targets"]:
-        print("\ntargets (issue 3)")
-        for k, v in rt["targets"].items():
-            print(_target_row(k, v))
-    if rt["targets"] and "raw" in res and "chain" in res:
-        print(
-            "   (flowtact's latencies are the runtime's own figures; the raw and peer ones drop the first 0.5 s)"
-        )
+def _thr(ctx: Context, label: str, rate: float, base: str | None, unit: str = "msg/s") -> None:
+    ctx.figure(label, rate, unit, "higher", is_baseline=base is None, baseline=base)
 
 
-def _print_raw(r: dict[str, Any]) -> None:
-    print("\na. raw pyzmq + flowtact framing (ipc PUSH/PULL, HWM 1000, blocking)")
-    print(_LAT_HEAD + " (per process)")
-    print(_lat_row("small @ 1 kHz (2 hops)", r["small_1khz"]))
-    print(_lat_row("image @ 40 Hz (2 hops)", r["image_40hz"]))
-    print(_lat_row("floor: small @ 1 kHz, 1 hop", r["floor_small_1khz"]))
-    print(_THR_HEAD + " (p50 latency under load)")
-    print(_thr_row("small, flat out", r["small_flat"]))
-    print(_thr_row("image, flat out", r["image_flat"]))
+def record_raw(ctx: Context, rw: dict[str, Any]) -> None:
+    _lat(ctx, "raw pyzmq, small @ 1 kHz, 2 hops", rw["small_1khz"], None)
+    _lat(ctx, "raw pyzmq, image @ 40 Hz, 2 hops", rw["image_40hz"], None)
+    _lat(ctx, "raw pyzmq, small @ 1 kHz, 1 hop (the floor)", rw["floor_small_1khz"], None)
+    _thr(ctx, "raw pyzmq, small, flat out", rw["small_flat"]["throughput"]["delivered_msg_s"], None)
+    _thr(ctx, "raw pyzmq, image, flat out", rw["image_flat"]["throughput"]["bytes_s"] / 1e6, None, "MB/s")
+    cpu = [v for v in rw["small_1khz"]["cpu_pct"].values() if v is not None]
+    if cpu:
+        ctx.figure("raw pyzmq, busiest process at 1 kHz", max(cpu), "% of a core", "lower", is_baseline=True)
 
 
-def _print_chain(c: dict[str, Any]) -> None:
-    print("\nb. flowtact chain.yaml at 1 kHz, real time, 3 processes (sensor+force | savgol | drive+nlif)")
-    for s, lat in c["hop_latency_us"].items():
-        print(
-            f"   {s:<40} p50 {_f(lat.get('p50')):>6} µs  p99 {_f(lat.get('p99')):>6} µs  max {_f(lat.get('max')):>6} µs"
-        )
-    cpu = "  ".join(f"{n} {_f(v, '.1f')}" for n, v in c["cpu_pct"].items())
-    print(f"   dropped {c['dropped']}, CPU % of one core per process: {cpu}")
+def record_flowtact(ctx: Context, chain: dict[str, Any], fast: dict[str, Any]) -> None:
+    _lat(
+        ctx,
+        "flowtact chain.yaml, 2 hops (savgol.y at the nlif process)",
+        chain,
+        "raw pyzmq, small @ 1 kHz, 2 hops",
+    )
+    if chain["cpu_max_pct"] is not None and "raw pyzmq, busiest process at 1 kHz" in ctx.figures:
+        ctx.figure("flowtact chain.yaml, busiest process at 1 kHz", chain["cpu_max_pct"], "% of a core", "lower",
+                   baseline="raw pyzmq, busiest process at 1 kHz")  # fmt: skip
+    _thr(ctx, "flowtact --fast, small", fast["small"]["samples_s"], "raw pyzmq, small, flat out")
+    _thr(ctx, "flowtact --fast, image", fast["image"]["bytes_s"] / 1e6, "raw pyzmq, image, flat out", "MB/s")
 
 
-def _print_fast(fast: dict[str, Any]) -> None:
-    print("\nc. flowtact --fast (lossless), source -> stage -> sink, 3 processes")
-    for payload, f in fast.items():
-        print(
-            f"   {payload:<6} {f['samples_s']:>11,.0f} samples/s  {f['bytes_s'] / 1e6:>9,.1f} MB/s  "
-            f"({f['delivered']:,} in {f['wall_s']:.2f} s wall, dropped {f['dropped']}; "
-            f"start-up free: {_f(f['marginal_samples_s'], ',.0f')}/s)"
-        )
-
-
-def _print_peers(peers: dict[str, Any]) -> None:
-    print("\nd. peers (same pipeline; CPU = whole process tree)")
-    print(_LAT_HEAD)
+def record_peers(ctx: Context, peers: dict[str, Any]) -> None:
     for name, p in peers.items():
         if "skipped" in p:
-            print(f"   {name}: skipped ({p['skipped']})")
+            ctx.note(f"{name}: skipped ({p['skipped']}).")
             continue
         v = ", ".join(f"{k} {x}" for k, x in p.get("versions", {}).items())
-        print(f"   {name} ({v})")
         if "latency_us" in p.get("small_1khz", {}):
-            print(_lat_row(f"{name} small @ 1 kHz", p["small_1khz"]))
-    print(_THR_HEAD)
-    for name, p in peers.items():
-        for key in ("small_flat", "image_flat"):
-            if "throughput" in p.get(key, {}):
-                print(_thr_row(f"{name} {key.replace('_flat', '')}, flat out", p[key]))
+            _lat(ctx, f"{name} ({v}), small @ 1 kHz", p["small_1khz"], "raw pyzmq, small @ 1 kHz, 2 hops")
+        for key, unit in (("small_flat", "msg/s"), ("image_flat", "MB/s")):
+            t = p.get(key, {}).get("throughput")
+            if t:
+                rate = t["delivered_msg_s"] if unit == "msg/s" else t["bytes_s"] / 1e6
+                _thr(ctx, f"{name}, {key.replace('_flat', '')}, flat out", rate,
+                     f"raw pyzmq, {key.replace('_flat', '')}, flat out", unit)  # fmt: skip
+            elif "error" in p.get(key, {}):
+                ctx.note(f"{name} {key}: {p[key]['error'].splitlines()[0]}")
 
 
-def _target_row(name: str, target: dict[str, Any]) -> str:
-    """``PASS``/``FAIL``, the target, its measured value with units and what it is compared with."""
-    key, val = next((key, x) for key, x in target.items() if key.startswith("value"))
-    if val is None:
-        shown = "-"
-    elif key == "value_bytes_s":
-        shown = f"{val / 1e6:,.1f} MB/s"
+def run(ctx: Context) -> None:
+    res: dict[str, Any] = {"durations_s": durations(ctx.quick)}
+    res["raw"] = bench_raw(ctx.quick, ctx.step)
+    record_raw(ctx, res["raw"])
+    ctx.step("flowtact chain.yaml at 1 kHz")
+    res["chain"] = bench_chain(ctx.quick)
+    res["fast"] = {}
+    for p in ("small", "image"):
+        ctx.step(f"flowtact --fast {p}")
+        res["fast"][p] = bench_fast(p, ctx.quick)
+    record_flowtact(ctx, res["chain"], res["fast"])
+    if ctx.peers:
+        ctx.step("peers (ezmsg, Timeflux)")
+        res["peers"] = bench_peers(ctx.quick)
+        record_peers(ctx, res["peers"])
     else:
-        unit = {"value_us": " µs", "value_pct": " %", "value_msg_s": " msg/s"}[key]
-        shown = (f"{val:,.0f}" if abs(val) >= 100 else f"{val:.1f}") + unit
-    extra = ""
-    if "bound_us" in target:
-        peers = ", ".join(f"{n} {x:.0f}" for n, x in target["peers_p99_us"].items()) or "not run"
-        extra = f" (bound {target['bound_us']:.0f} µs; peers' p99: {peers})"
-    elif "raw_bytes_s" in target:
-        extra = f" (raw {target['raw_bytes_s'] / 1e6:,.1f} MB/s)"
-    return f"   {'PASS' if target['pass'] else 'FAIL'}  {name}: {shown}{extra}"
+        ctx.note("Timeflux and ezmsg were not measured: run with --peers (each is pip-installed into a throw-away "
+                 "venv under ~/.cache/flowtact-bench/ on first use).")  # fmt: skip
+    rt = ratios_and_targets(res)
+    for name, t in rt["targets"].items():
+        detail = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in t.items()
+                           if k != "pass" and not isinstance(v, dict) and v != "")  # fmt: skip
+        ctx.check(name, t["pass"], detail)
+    ctx.data["ratios"] = rt["ratios"]
+    for part in ("chain", "fast"):  # the runtime's whole summaries are large; keep the figures
+        for r in [res[part]] if part == "chain" else res[part].values():
+            r.pop("summary", None)
+    ctx.data.update(res)
+    ctx.note("flowtact's latencies are the runtime's own figures (data that left its source in the first second "
+             "dropped: JIT-compiled kernels load then); the raw and peer ones drop the first 0.5 s.")  # fmt: skip
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "--quick", action="store_true", help="3 s paced and 2 s flat-out runs (instead of 10 s and 5 s)"
-    )
-    ap.add_argument("--json", help="write every figure to this file")
-    ap.add_argument("--peers", action="store_true", help="also measure Timeflux and ezmsg (throw-away venvs)")
-    ap.add_argument("--only", choices=["raw", "flowtact", "peers"], help="run one part only")
-    args = ap.parse_args()
-    parts = {args.only} if args.only else {"raw", "flowtact"} | ({"peers"} if args.peers else set())
-    res: dict[str, Any] = {
-        "machine": {
-            "cpus": os.cpu_count(),
-            "python": platform.python_version(),
-            "pyzmq": zmq.__version__,
-            "libzmq": zmq.zmq_version(),
-            "numpy": np.__version__,
-            "platform": platform.platform(),
-        },
-        "quick": args.quick,
-        "durations_s": durations(args.quick),
-        "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-    }
-    m = res["machine"]
-    print(
-        f"transport bench: {m['cpus']} CPUs, Python {m['python']}, pyzmq {m['pyzmq']} (libzmq {m['libzmq']}), "
-        f"{'quick' if args.quick else 'full'} runs"
-    )
-    if "raw" in parts:
-        print("a. raw pyzmq baseline")
-        res["raw"] = bench_raw(args.quick)
-    if "flowtact" in parts:
-        print("b/c. flowtact")
-        try:
-            res["chain"] = bench_chain(args.quick)
-            res["fast"] = {p: bench_fast(p, args.quick) for p in ("small", "image")}
-        except (ContractError, RuntimeError) as e:
-            print(f"   flowtact: {e}", flush=True)
-            res["flowtact_error"] = str(e)
-    if "peers" in parts:
-        print("d. peers")
-        res["peers"] = bench_peers(args.quick)
-    res["ratios_targets"] = ratios_and_targets(res)
-    print_report(res)
-    if args.json:
-        Path(args.json).write_text(json.dumps(res, indent=2, default=_json_default))
-        print(f"\nwrote {args.json}")
-    return 1 if "flowtact_error" in res else 0
-
-
-def _json_default(x: Any) -> Any:
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    raise TypeError(type(x).__name__)
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+SUITE = Suite(
+    name="transport",
+    title="Transport: processes over ZeroMQ against raw pyzmq (and, with --peers, ezmsg and Timeflux)",
+    measures="The same source → stage → sink pipeline, each stage in its own process: latency p50/p99 at 1 kHz "
+    "(emission to arrival two hops later), CPU of the busiest process, and lossless flat-out throughput of "
+    "small samples and 240×320 frames; flowtact's bench/graphs/chain.yaml and fast.yaml.",
+    baseline="raw pyzmq with flowtact's wire format (ipc PUSH/PULL, HWM 1000, blocking), bench/peers/raw.py",
+    run=run,
+    minutes_quick=1.5,
+    minutes_full=3.0,
+)

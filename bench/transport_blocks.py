@@ -1,7 +1,7 @@
 """Bench-only blocks for bench/transport.py: the source -> stage -> sink pipeline of the transport bench.
 
-Graphs name them ``transport_blocks:BenchSource`` (and ``BenchStage``, ``BenchSink``); the bench
-puts bench/ on the PYTHONPATH of ``flowtact run``. They carry the same payloads and do the same
+Graphs name them ``flowtact.bench.transport_blocks:BenchSource`` (and ``BenchStage``,
+``BenchSink``), importable wherever flowtact is installed. They carry the same payloads and do the same
 work as the raw pyzmq baseline and the peer pipelines (bench/peers/), so that the bench compares
 transports, not blocks: 4 float64 per sample (``small``) or one 240x320 uint8 frame (``image``),
 ``y = 2 x`` or ``y = 255 - x``. They are not run by this file: it only defines them.

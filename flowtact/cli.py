@@ -126,11 +126,23 @@ def _parser() -> argparse.ArgumentParser:
     info = sub.add_parser("info", help="describe a recording and verify its checksums")
     info.add_argument("recording", help="an .h5 file written by flowtact run --record")
     info.add_argument("--json", action="store_true", help="print the report as JSON")
-    bench = sub.add_parser("bench", help="run a benchmark of bench/ (in a source checkout)")
-    bench.add_argument("name", nargs="?", help="benchmark name (bench/NAME.py); none lists them")
-    bench.add_argument(
-        "args", nargs=argparse.REMAINDER, help="arguments for the benchmark (e.g. --quick --json out.json)"
+    bench = sub.add_parser(
+        "bench",
+        help="run the benchmark suites and write results/*.json, plots and REPORT.md",
+        description="Run benchmark suites (all when none is named): warm-up, repeats, median and spread, "
+        "ratios to a baseline measured in the same run, the machine and its load. Writes "
+        "OUT/results/<suite>.json, OUT/plots/*.png and OUT/REPORT.md.",
     )
+    bench.add_argument("suites", nargs="*", metavar="SUITE", help="suites to run (see --list)")
+    bench.add_argument("--list", action="store_true", help="list the suites and exit")
+    bench.add_argument(
+        "--quick", action="store_true", help="shorter runs, fewer repeats (all suites < 5 min)"
+    )
+    bench.add_argument("--peers", action="store_true", help="also measure peers that need extra packages")
+    bench.add_argument(
+        "--json", action="store_true", help="print the run summary as JSON (progress on stderr)"
+    )
+    bench.add_argument("--out", default="bench-report", help="output folder (default: ./bench-report)")
     p.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     for sp in list(sub.choices.values()):  # also after the command: flowtact run --debug GRAPH
         sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
@@ -347,42 +359,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0 if info.ok else EXIT_RUN_ERROR
 
 
-def _bench_dir() -> Path | None:
-    for base in (Path.cwd(), Path(__file__).resolve().parent.parent):
-        if (base / "bench").is_dir() and any((base / "bench").rglob("*.py")):
-            return base / "bench"
-    return None
-
-
 def _cmd_bench(args: argparse.Namespace) -> int:
-    import runpy
+    from flowtact.benchmark.runner import list_suites, run_suites
 
-    folder = _bench_dir()
-    if folder is None:
-        print("flowtact: no bench/ folder here: benchmarks run from a source checkout", file=sys.stderr)
-        return EXIT_RUN_ERROR
-    scripts = {
-        p.stem: p
-        for p in sorted(folder.rglob("*.py"), key=lambda p: p.stem)
-        # a benchmark is a script; packages (bench/peers/) hold what the scripts import or start
-        if not p.stem.startswith("_")
-        and not (p.parent / "__init__.py").exists()
-        and '__name__ == "__main__"' in p.read_text()
-    }
-    if not args.name:
-        for name, path in scripts.items():
-            doc = (path.read_text().split('"""')[1].strip().splitlines() or [""])[0]
-            print(f"{name:<12} {doc}")
-        return 0
-    if args.name not in scripts:
-        from flowtact.params import did_you_mean
-
-        print(f"flowtact: unknown benchmark '{args.name}'{did_you_mean(args.name, scripts)}", file=sys.stderr)
-        return EXIT_GRAPH_ERROR
-    sys.argv = [str(scripts[args.name]), *args.args]
-    sys.path.insert(0, str(folder))  # as `python bench/NAME.py` does: the benchmarks share bench/_*.py
-    runpy.run_path(str(scripts[args.name]), run_name="__main__")
-    return 0
+    if args.list:
+        return list_suites()
+    return run_suites(args.suites, args.quick, args.peers, Path(args.out), as_json=args.json)
 
 
 COMMANDS = {

@@ -1,4 +1,4 @@
-"""The transport bench's machinery (bench/transport.py and bench/peers/): measurement, raw pipeline, blocks.
+"""The transport suite's machinery (bench/transport.py and bench/peers/): measurement, raw pipeline, blocks.
 
 The figures themselves are the bench's business; these tests check that what produces them
 measures what it claims: every message is delivered and checked, latencies and CPU figures are
@@ -6,31 +6,20 @@ computed over the right window, a runtime summary missing a key fails loudly, an
 blocks obey the block contract. No timing is asserted.
 """
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from flowtact.bench import transport
+from flowtact.bench import transport_blocks as tb
+from flowtact.bench.peers import measure
 from flowtact.compile import compile_graph
 from flowtact.graph import load_graph
 from flowtact.testing import CHECKS, run_offline, run_source
 
-BENCH = Path(__file__).resolve().parent.parent / "bench"
-
-
-def _load_transport():
-    spec = importlib.util.spec_from_file_location("bench_transport", BENCH / "transport.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)  # puts bench/ on sys.path (peers, transport_blocks)
-    return module
-
-
-transport = _load_transport()
-measure = sys.modules["peers.measure"]
+BENCH = Path(transport.__file__).resolve().parent  # bench/, wherever flowtact.bench is installed
 raw = transport.raw
-import transport_blocks as tb  # noqa: E402  (importable once bench/ is on sys.path)
 
 MS = 1_000_000
 

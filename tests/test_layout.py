@@ -115,3 +115,29 @@ def test_every_block_class_is_registered_under_its_name():
         if c.name not in block_names() or load_block(c.name) is not c
     ]
     assert not unregistered, f"add these to [project.entry-points.'flowtact.blocks']: {unregistered}"
+
+
+def test_the_framework_never_imports_the_benchmark_suites():
+    bad = [
+        f"{path.relative_to(ROOT)} imports {m}"
+        for path, pkg in _sources("flowtact", "flowtact")
+        for m in _imports(path, pkg)
+        if m == "flowtact.bench" or m.startswith("flowtact.bench.")
+    ]
+    assert not bad, bad
+
+
+def test_every_benchmark_suite_in_bench_is_registered_under_its_name():
+    from flowtact.benchmark import Suite, suites
+
+    registered = suites()
+    defined = []
+    for path, pkg in _sources("bench", "flowtact.bench"):
+        if "SUITE = Suite(" not in path.read_text():
+            continue
+        module = import_module(pkg + "." + path.stem if path.stem != "__init__" else pkg)
+        defined.append(module.SUITE)
+    assert len(defined) >= 9
+    missing = [f"{s.name} ({s.run.__module__})" for s in defined if registered.get(s.name) is not s]
+    assert not missing, f"add these to [project.entry-points.'flowtact.bench']: {missing}"
+    assert all(isinstance(s, Suite) for s in registered.values())

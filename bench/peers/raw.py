@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 import zmq
 
+from flowtact.bench.peers.measure import STEADY_WINDOW, CpuSampler, Pacer, summarize
 from flowtact.chunk import Chunk
 from flowtact.runtime.wire import END, recv_message, send_message
-from peers.measure import STEADY_WINDOW, CpuSampler, Pacer, summarize
 
 __all__ = ["PAYLOADS", "make_payload", "run_pipeline"]
 

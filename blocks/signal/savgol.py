@@ -265,7 +265,7 @@ class SavGol(Block):
     against true values of a few N/s and ~200 N/s² for tactile forces: **F' is noise-dominated
     and F'' pure noise** (consistent with the zero F'' weights of Table I). For cleaner
     derivatives use a longer window and a lower order (e.g. 21/2: 0.38 N/s at 10 samples latency;
-    ``python bench/savgol.py`` prints the error-vs-latency table).
+    ``flowtact bench savgol`` reports the error-vs-latency table).
 
     Timing: the weights assume samples exactly one nominal period apart; the block does not
     resample. It checks the timestamps and counts what breaks that assumption: ``sample_gaps`` (an

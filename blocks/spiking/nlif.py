@@ -368,7 +368,7 @@ class Nlif(Block):
         the first step (``exp_interp`` only); ``v_out``: (T, n) to receive the membrane, if wanted.
         Returns the spikes as (step indices, offsets inside their steps in s — ``exp_interp`` only,
         else None — neuron indices), sorted by step then neuron. The block's steps and the bare-kernel
-        baseline of bench/nlif.py use it.
+        baseline of the nlif suite (`flowtact bench nlif`) use it.
         """
         v_out = self._no_v if v_out is None else v_out
         if self._interp:

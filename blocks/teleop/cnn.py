@@ -390,7 +390,7 @@ class CnnForce(Block):
     the paper's width), and one call per frame keeps the output bit-for-bit independent of how
     frames are chunked. The network's float32 output is de-standardised in float64
     (``y = z·label_std + label_mean``) and, with ``clip_negative``, clipped at 0 N. Stateless
-    across frames; latency: one forward pass (``python bench/force_estimation.py`` measures it per
+    across frames; latency: one forward pass (``flowtact bench force_estimation`` measures it per
     width: ≈ 0.7 ms per 3-frame call for the shipped w16 on one core of the project machine).
 
     The shipped model (w16, 13 585 parameters, 22×60 input: the 90×240 crop pooled by 4) was trained

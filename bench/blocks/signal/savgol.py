@@ -1,11 +1,9 @@
-"""Benchmark of the savgol block: throughput vs chunk size, and derivative error vs latency.
-
-    python bench/blocks/signal/savgol.py [--quick] [--json out.json] [--plot out.png]
+"""Suite ``savgol``: the Savitzky–Golay block's throughput vs chunk size, and derivative error vs latency.
 
 (1) Throughput through the block's ``__call__`` (what an executor pays: read-only views, bad-data
     screen, numba kernel, output chunk) for chunks of 1 … 10 000 samples, 1 and 3 channels, both
     modes, against ``scipy.signal.lfilter`` with ``zi`` on the same chunks in the same run (the
-    causal filter; ratio > 1 = the block is faster). One core (threads pinned), median of repeats.
+    causal filter, streaming; ratio > 1 = the block is faster).
 (2) NUMERICS.md §1.3: RMS error of F' and F'' for windows 5…21 × orders 2…4 × causal/centred on
     a tactile-band force (0.5–8 Hz components, ~1 N) plus σ = 0.01 N white noise, 10 s at 1 kHz,
     against the analytic derivative at each output's timestamp. "Latency" is the effective delay
@@ -15,29 +13,13 @@
 
 from __future__ import annotations
 
-import os
-import sys
-from pathlib import Path
+import math
 
-for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_var] = "1"
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import math  # noqa: E402
-import platform  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-BENCH = Path(__file__).resolve().parents[2]  # bench/: its shared helpers (_timing)
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-
-from _timing import median_time  # noqa: E402
-from scipy import signal  # noqa: E402  (bench-only baseline)
-
-from flowtact import Chunk, StreamSpec  # noqa: E402
-from flowtact.blocks.signal.savgol import SavGol, savgol_coeffs  # noqa: E402
+from flowtact import Chunk, StreamSpec
+from flowtact.benchmark import Context, Suite
+from flowtact.blocks.signal.savgol import SavGol, savgol_coeffs
 
 RATE = 1000.0
 CHUNKS = (1, 10, 100, 1000, 10_000)
@@ -47,18 +29,31 @@ BAR_SAMPLES_PER_S = 4e7  # brief: >= 4e7 samples/s at chunk 1000 through __call_
 # -- (1) throughput ---------------------------------------------------------------------------------
 
 
-def throughput(quick: bool) -> list[dict]:
-    repeats = 3 if quick else 7
-    rows = []
+def throughput(ctx: Context) -> None:
+    """Samples/s through the block (both modes) and through lfilter + zi, per channel count and chunk."""
+    from scipy import signal  # the baseline (dev extra)
+
+    chunk_sizes = (1, 100, 1000) if ctx.quick else CHUNKS
     for channels in (1, 3):
         shape: tuple[int, ...] = () if channels == 1 else (channels,)
-        for chunk in CHUNKS:
-            n = {1: 5_000, 10: 20_000}.get(chunk, 200_000) // (4 if quick else 1)
+        for chunk in chunk_sizes:
+            n = {1: 5_000, 10: 20_000}.get(chunk, 200_000) // (4 if ctx.quick else 1)
             n = max(n, chunk)
             x = np.random.default_rng(0).normal(size=(n, *shape))
             t = np.arange(n) / RATE
             chunks = [Chunk(t[i : i + chunk], x[i : i + chunk]) for i in range(0, n, chunk)]
-            row = {"channels": channels, "chunk": chunk, "samples": n}
+            case = f"{channels} ch, chunk {chunk}"
+            b = signal.savgol_coeffs(5, 4, deriv=1, delta=1 / RATE, pos=4, use="conv")
+            datas = [c.data for c in chunks]
+
+            def run_lfilter(b=b, datas=datas, shape=shape) -> None:
+                zi = np.zeros((4, *shape))
+                for d in datas:
+                    _, zi = signal.lfilter(b, [1.0], d, axis=0, zi=zi)
+
+            base = f"lfilter+zi, {case}"
+            params = {"channels": channels, "chunk": chunk}
+            ctx.speed(base, run_lfilter, n, "samples/s", is_baseline=True, params=params)
             for mode in ("causal", "centred"):
                 block = SavGol(window=5, order=4, deriv=1, mode=mode)
                 block.bind({"x": StreamSpec(shape=shape, units="N", rate_hz=RATE)})
@@ -68,39 +63,11 @@ def throughput(quick: bool) -> list[dict]:
                     for c in chunks:
                         block(x=c)
 
-                run()  # warm-up (numba compile / cache load)
-                row[f"block_{mode}"] = n / median_time(run, repeats)
-            b = signal.savgol_coeffs(5, 4, deriv=1, delta=1 / RATE, pos=4, use="conv")
-            datas = [c.data for c in chunks]
-
-            def run_lfilter(b=b, datas=datas, shape=shape) -> None:
-                zi = np.zeros((4, *shape))
-                for d in datas:
-                    _, zi = signal.lfilter(b, [1.0], d, axis=0, zi=zi)
-
-            run_lfilter()
-            row["lfilter_zi"] = n / median_time(run_lfilter, repeats)
-            row["ratio_causal"] = row["block_causal"] / row["lfilter_zi"]
-            row["ratio_centred"] = row["block_centred"] / row["lfilter_zi"]
-            rows.append(row)
-    return rows
-
-
-def print_throughput(rows: list[dict]) -> None:
-    print("\n(1) savgol 5/4 F' throughput, samples/s through SavGol.__call__ (one core, median)")
-    print(
-        f"{'ch':>3} {'chunk':>6} | {'causal':>9} {'centred':>9} | {'lfilter+zi':>10} | {'causal/lf':>9} {'centred/lf':>10}"
-    )
-    for r in rows:
-        print(
-            f"{r['channels']:>3} {r['chunk']:>6} | {r['block_causal']:9.3g} {r['block_centred']:9.3g} | "
-            f"{r['lfilter_zi']:10.3g} | {r['ratio_causal']:9.1f} {r['ratio_centred']:10.1f}"
-        )
-    at1000 = [r for r in rows if r["chunk"] == 1000]
-    for r in at1000:
-        worst = min(r["block_causal"], r["block_centred"])
-        ok = "meets" if worst >= BAR_SAMPLES_PER_S else "MISSES"
-        print(f"chunk 1000, {r['channels']} channel(s): {worst:.3g} samples/s (slower mode) {ok} the 4e7 bar")
+                fig = ctx.speed(f"block {mode}, {case}", run, n, "samples/s", baseline=base,
+                                params={**params, "mode": mode})  # fmt: skip
+                if chunk == 1000:
+                    ctx.check(f"{mode}, {case}: >= 4e7 samples/s", fig.median >= BAR_SAMPLES_PER_S,
+                              f"{fig.median:.3g} samples/s")  # fmt: skip
 
 
 # -- (2) error vs latency ---------------------------------------------------------------------------
@@ -176,85 +143,71 @@ def error_table(quick: bool, sigma: float = 0.01, duration_s: float = 10.0) -> l
     return rows
 
 
-def print_errors(rows: list[dict]) -> None:
-    d1_err, d2_err = "F' err", 'F" err'
-    print(
-        f"\n(2) RMS error vs latency, σ = 0.01 N, 10 s at 1 kHz; true RMS F' = {rows[0]['true_rms_d1']:.2f} N/s, "
-        f"F'' = {rows[0]['true_rms_d2']:.0f} N/s²"
+def error_rows(rows: list[dict]) -> list[list]:
+    return [
+        [f"{r['window']}/{r['order']}", r["mode"], r["d1_latency"], r["d1_rms"], r["d1_noise_pred"], r["d1_bias_rms"],
+         r["d2_latency"], r["d2_rms"], r["d2_noise_pred"], r["d2_bias_rms"]]
+        for r in rows
+    ]  # fmt: skip
+
+
+def draw_errors(rows: list[dict]):
+    def draw(fig) -> None:  # type: ignore[no-untyped-def]
+        axes = fig.subplots(1, 2)
+        fig.set_size_inches(11, 4.2)
+        for ax, d, unit in ((axes[0], 1, "N/s"), (axes[1], 2, "N/s²")):
+            for mode, marker in (("centred", "o"), ("causal", "s")):
+                for order, color in ((2, "C0"), (3, "C1"), (4, "C2")):
+                    sel = [r for r in rows if r["mode"] == mode and r["order"] == order]
+                    if sel:
+                        ax.plot([r[f"d{d}_latency"] for r in sel], [r[f"d{d}_rms"] for r in sel], marker=marker,
+                                color=color, linestyle="-" if mode == "centred" else "--",
+                                label=f"order {order}, {mode}")  # fmt: skip
+            for r in rows:
+                if r["mode"] == "centred" and r["order"] == 2:
+                    ax.annotate(f"N={r['window']}", (r[f"d{d}_latency"], r[f"d{d}_rms"]), fontsize=7,
+                                textcoords="offset points", xytext=(3, -10))  # fmt: skip
+            ax.axhline(rows[0][f"true_rms_d{d}"], color="k", lw=0.8, ls=":", label="true RMS of the signal")
+            ax.set_yscale("log")
+            ax.set_xlabel("effective latency (samples at 1 kHz)")
+            ax.set_ylabel(f"RMS error ({unit})")
+            ax.set_title(
+                ("F'" if d == 1 else "F''") + " — σ = 0.01 N (causal: all at latency 0)", fontsize=10
+            )
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0].legend(fontsize=7)
+
+    return draw
+
+
+def run(ctx: Context) -> None:
+    throughput(ctx)
+    ctx.step("error vs latency")
+    rows = error_table(ctx.quick)
+    ctx.data["error_vs_latency"] = rows
+    ctx.table(
+        f"RMS error vs latency, σ = 0.01 N, 10 s at 1 kHz; true RMS F' = {rows[0]['true_rms_d1']:.2f} N/s, "
+        f"F'' = {rows[0]['true_rms_d2']:.0f} N/s²",
+        ["N/p", "mode", "F' lat (samples)", "F' RMS err (N/s)", "F' σ‖c‖", "F' bias", "F'' lat", "F'' RMS err (N/s²)",
+         "F'' σ‖c‖", "F'' bias"],
+        error_rows(rows),
+        "lat: effective latency in samples; err: RMS error; σ‖c‖: predicted noise; bias: error without noise. "
+        "The paper's 5/4 filter is exact interpolation, so its F' is noise-dominated and F'' pure noise.",
+    )  # fmt: skip
+    ctx.plot(
+        "error_vs_latency", draw_errors(rows), "Savitzky–Golay F' and F'' RMS error against effective latency"
     )
-    print(
-        f"{'N/p':>5} {'mode':>8} | {'lat':>5} {d1_err:>8} {'σ‖c‖':>8} {'bias':>7} | "
-        f"{'lat':>5} {d2_err:>9} {'σ‖c‖':>9} {'bias':>7}"
-    )
-    for r in rows:
-        print(
-            f"{r['window']:>2}/{r['order']:<2} {r['mode']:>8} | {r['d1_latency']:5.2f} {r['d1_rms']:8.3g} "
-            f"{r['d1_noise_pred']:8.3g} {r['d1_bias_rms']:7.2g} | {r['d2_latency']:5.2f} {r['d2_rms']:9.4g} "
-            f"{r['d2_noise_pred']:9.4g} {r['d2_bias_rms']:7.2g}"
-        )
-    print(
-        "lat: effective latency in samples; err: RMS error; σ‖c‖: predicted noise; bias: error without noise"
-    )
 
 
-def plot(rows: list[dict], path: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for ax, d, unit in ((axes[0], 1, "N/s"), (axes[1], 2, "N/s²")):
-        for mode, marker in (("centred", "o"), ("causal", "s")):
-            for order, color in ((2, "C0"), (3, "C1"), (4, "C2")):
-                sel = [r for r in rows if r["mode"] == mode and r["order"] == order]
-                if sel:
-                    ax.plot(
-                        [r[f"d{d}_latency"] for r in sel],
-                        [r[f"d{d}_rms"] for r in sel],
-                        marker=marker,
-                        color=color,
-                        linestyle="-" if mode == "centred" else "--",
-                        label=f"order {order}, {mode}",
-                    )
-        for r in rows:
-            if r["mode"] == "centred" and r["order"] == 2:
-                ax.annotate(
-                    f"N={r['window']}",
-                    (r[f"d{d}_latency"], r[f"d{d}_rms"]),
-                    fontsize=7,
-                    textcoords="offset points",
-                    xytext=(3, -10),
-                )
-        ax.axhline(rows[0][f"true_rms_d{d}"], color="k", lw=0.8, ls=":", label="true RMS of the signal")
-        ax.set_yscale("log")
-        ax.set_xlabel("effective latency (samples at 1 kHz)")
-        ax.set_ylabel(f"RMS error ({unit})")
-        ax.set_title(("F'" if d == 1 else "F''") + " — Savitzky–Golay, σ = 0.01 N (causal: all at latency 0)")
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    print(f"plot written to {path}")
-
-
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer samples, repeats and windows")
-    ap.add_argument("--json", metavar="OUT", help="write all figures to this JSON file")
-    ap.add_argument("--plot", metavar="PNG", help="draw RMS error vs latency")
-    args = ap.parse_args(argv)
-    print(f"savgol bench — {platform.python_version()}, numpy {np.__version__}, one core")
-    tp = throughput(args.quick)
-    print_throughput(tp)
-    err = error_table(args.quick)
-    print_errors(err)
-    if args.plot:
-        plot(err, args.plot)
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"throughput": tp, "error_vs_latency": err, "quick": args.quick}, fh, indent=1)
-
-
-if __name__ == "__main__":
-    main()
+SUITE = Suite(
+    name="savgol",
+    title="Savitzky–Golay block: throughput, and derivative error vs latency",
+    measures="Samples/s of the 5/4 first derivative through `SavGol.__call__` for chunks of 1 … 10 000 "
+    "samples (1 and 3 channels, causal and centred), and the RMS error of F' and F'' against latency for "
+    "windows 5…21 × orders 2…4 on a noisy known force (NUMERICS §1.3).",
+    baseline="`scipy.signal.lfilter` with `zi` running the same causal filter on the same chunks",
+    run=run,
+    needs=("scipy",),
+    minutes_quick=0.3,
+    minutes_full=1.0,
+)

@@ -1,4 +1,4 @@
-"""Speed and accuracy of the nlif block (NUMERICS §6 items 3–5).
+"""Suite ``nlif``: speed and accuracy of the nlif block (NUMERICS §6 items 3–5).
 
 Measures, in one run (one core, NUMBA_NUM_THREADS=1, median of repeats):
   1. throughput: neuron-steps/s vs N ∈ {1, 24, 1000, 100000} for each integrator, σ = 0 and σ > 0,
@@ -11,32 +11,20 @@ Measures, in one run (one core, NUMBA_NUM_THREADS=1, median of repeats):
      179 spikes) and µs of CPU per neuron per simulated second, per integrator and dt; the
      threshold-free max |v error| vs dt (orders 1 and 2);
   4. noise: stationary membrane sd vs dt (must be flat for exp) and noisy firing rate vs dt;
-  5. optionally (``--brian2``) Brian2's cython target at N = 1000 as the external comparison.
-
-    python bench/blocks/spiking/nlif.py [--quick] [--json out.json] [--plot out.png] [--brian2]
+  5. with ``--peers``, Brian2's cython target at N = 1000 as the external comparison (when installed).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
+import importlib.util
 import math
-import os
-import sys
-from pathlib import Path
-
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parents[2]  # bench/: its shared helpers (_timing)
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-
-from _timing import median_time  # noqa: E402  (bench/ is on sys.path now)
-
-from flowtact.blocks.spiking.nlif import Nlif  # noqa: E402
-from flowtact.chunk import Chunk, StreamSpec  # noqa: E402
+from flowtact.benchmark import Context, Suite
+from flowtact.benchmark.timing import spread, time_call
+from flowtact.blocks.spiking.nlif import Nlif
+from flowtact.chunk import Chunk, StreamSpec
 
 INTEGRATORS = ("exp", "euler", "exp_interp")
 TAU = 0.01
@@ -65,8 +53,18 @@ def make_block(n: int, integrator: str, sigma: float, rate: float, seed: int = 1
 
 
 def throughput(
-    n: int, integrator: str, sigma: float, duration_s: float, chunk: int, repeats: int, h: tuple = ()
-) -> dict:
+    ctx: Context,
+    label: str,
+    n: int,
+    integrator: str,
+    sigma: float,
+    duration_s: float,
+    chunk: int,
+    repeats: int | None = None,
+    h: tuple = (),
+) -> float:
+    """Neuron-steps/s of the block (figure ``label``) against the bare kernel on the same chunks
+    (figure ``label (kernel)``, its baseline); returns spikes per neuron-second."""
     rate = 1000.0
     n_t = round(duration_s * rate)
     t = np.arange(n_t) / rate
@@ -87,17 +85,20 @@ def throughput(
             blk.integrate(uc, first)
             first = uc[-1]
 
-    for _ in range(3):  # compile, then warm up (the first timed runs of a process are slower)
-        run_block(setup())
-        run_kernel(setup())
-    tb = median_time(run_block, repeats, setup)
-    tk = median_time(run_kernel, repeats, setup)
     steps = n * n_t
-    return {
-        "n": n, "integrator": integrator, "sigma": sigma, "chunk": chunk, "duration_s": duration_s,
-        "block_steps_per_s": steps / tb, "kernel_steps_per_s": steps / tk, "ratio": tk / tb,
-        "spikes_per_neuron_s": spikes[0] / n / duration_s, "h_weights": list(h),
-    }  # fmt: skip
+    params = {
+        "n": n,
+        "integrator": integrator,
+        "sigma": sigma,
+        "chunk": chunk,
+        "duration_s": duration_s,
+        "h_weights": list(h),
+    }
+    ctx.speed(f"{label} (kernel)", run_kernel, steps, "neuron-steps/s", is_baseline=True, setup=setup,
+              repeats=repeats, warmup=2, params=params)  # fmt: skip
+    ctx.speed(label, run_block, steps, "neuron-steps/s", baseline=f"{label} (kernel)", setup=setup,
+              repeats=repeats, warmup=2, params=params)  # fmt: skip
+    return spikes[0] / n / duration_s
 
 
 # -- 3: accuracy vs cost -------------------------------------------------------------------------
@@ -167,8 +168,7 @@ def accuracy(integrator: str, dt: float, ref: np.ndarray, cost_n: int, repeats: 
         for c in chunks:
             b(x=c)
 
-    run(setup())
-    cost = median_time(run, repeats, setup) / cost_n / 2.0 * 1e6
+    cost = spread(time_call(run, repeats, 1, setup)).median / cost_n / 2.0 * 1e6
     return {"integrator": integrator, "dt_ms": dt * 1e3, "dN": d_n, "mean_abs_dt_ms": err * 1e3, "max_dv": dv,
             "us_per_neuron_s": cost}  # fmt: skip
 
@@ -206,7 +206,8 @@ def noise_stats(integrator: str, dt: float, n_sd: int, n_rate: int) -> dict:
 # -- 5: Brian2 ---------------------------------------------------------------------------------------
 
 
-def brian2_throughput(n: int, duration_s: float, repeats: int) -> dict:
+def brian2_throughput(n: int, duration_s: float, repeats: int) -> list[float]:
+    """Seconds per run of the same population in Brian2 (cython target), every repeat's."""
     import brian2 as b2  # optional external comparison
 
     b2.prefs.codegen.target = "cython"
@@ -224,132 +225,102 @@ def brian2_throughput(n: int, duration_s: float, repeats: int) -> dict:
         net = b2.Network(g, b2.SpikeMonitor(g))
         net.run(duration_s * b2.second, namespace={})
 
-    run()  # cython compile (cached afterwards)
-    return {"n": n, "brian2_cython_steps_per_s": n * len(u) / median_time(run, repeats)}
+    return time_call(run, repeats, warmup=1)  # the warm-up compiles (cached afterwards)
 
 
-# -- report ------------------------------------------------------------------------------------------
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer sizes and repeats (a smoke run)")
-    ap.add_argument("--json", help="write the results here")
-    ap.add_argument("--plot", help="draw the curves into this PNG")
-    ap.add_argument("--brian2", action="store_true", help="also time Brian2 (cython) at N = 1000")
-    args = ap.parse_args()
-    quick = args.quick
-    reps = 3 if quick else 5
-    res: dict = {"throughput": [], "chunks": [], "accuracy": [], "noise": []}
-
-    print("1. throughput, 1000-sample chunks at 1 kHz, neuron-steps/s (block via __call__ / bare kernel)")
-    print(f"{'integrator':>11} {'sigma':>5} {'N':>7} {'block':>9} {'kernel':>9} {'ratio':>6} {'spk/s/n':>8}")
-    sizes = (1, 24, 1000, 100_000)
+def run_throughput(ctx: Context) -> None:
+    sizes = (1, 24, 1000) if ctx.quick else (1, 24, 1000, 100_000)
+    rows = []
     for integ in INTEGRATORS:
         for sigma in (0.0, 0.5):
             for n in sizes:
+                ctx.step(f"throughput {integ} sigma={sigma} N={n}")
                 # N = 1 and 24 always run 10 s (10 chunks): shorter runs time mostly the first call
-                dur = 2.0 if n == 100_000 else (2.0 if quick and n == 1000 else 10.0)
-                r = throughput(n, integ, sigma, dur, 1000, 3 if n == 100_000 else reps)
-                res["throughput"].append(r)
-                print(f"{integ:>11} {sigma:>5} {n:>7} {r['block_steps_per_s']:9.3g} {r['kernel_steps_per_s']:9.3g} "
-                      f"{r['ratio']:6.2f} {r['spikes_per_neuron_s']:8.1f}")  # fmt: skip
-
-    print("\n1b. post-spike current (4 raised cosines, ~140 taps) vs none, N = 1000, exp, sigma = 0")
-    res["history"] = []
+                dur = 2.0 if n == 100_000 else (2.0 if ctx.quick and n == 1000 else 10.0)
+                label = f"block {integ}, sigma={sigma:g}, N={n}"
+                rate = throughput(ctx, label, n, integ, sigma, dur, 1000, 3 if n == 100_000 else None)
+                rows.append([integ, sigma, n, ctx.figures[label].median, ctx.figures[label].ratio, rate])
+                if integ == "exp" and sigma == 0.0 and (n >= 1000 or n == 1):
+                    bar = 5e8 if n >= 1000 else 1e8
+                    fig = ctx.figures[label]
+                    ctx.check(
+                        f"exp, sigma 0, N={n}: >= {bar:.0e} neuron-steps/s",
+                        fig.median >= bar,
+                        f"{fig.median:.3g}",
+                    )
+    ctx.table("Throughput, 1000-sample chunks at 1 kHz", ["integrator", "σ", "N", "neuron-steps/s (block)",
+              "block / kernel", "spikes per neuron-s"], rows)  # fmt: skip
     for h in ((), (-0.3, -0.2, -0.1, -0.05)):
-        r = throughput(1000, "exp", 0.0, 2.0 if quick else 10.0, 1000, reps, h=h)
-        res["history"].append(r)
-        print(f"  h {'on ' if h else 'off'}: block {r['block_steps_per_s']:9.3g}  spikes/s/neuron "
-              f"{r['spikes_per_neuron_s']:.1f}")  # fmt: skip
+        throughput(ctx, f"post-spike current {'on' if h else 'off'}, exp, N=1000", 1000, "exp", 0.0,
+                   2.0 if ctx.quick else 10.0, 1000, h=h)  # fmt: skip
+    for chunk in (1, 10, 100, 1000) if ctx.quick else (1, 10, 100, 1000, 10_000):
+        dur = 1.0 if chunk < 100 else (2.0 if ctx.quick else 10.0)
+        throughput(ctx, f"chunk {chunk}, exp, N=1000", 1000, "exp", 0.0, dur, chunk)
 
-    print("\n2. throughput vs chunk size (N = 1000, exp, sigma = 0)")
-    for chunk in (1, 10, 100, 1000, 10_000):
-        dur = 1.0 if chunk < 100 else (2.0 if quick else 10.0)
-        r = throughput(1000, "exp", 0.0, dur, chunk, reps)
-        res["chunks"].append(r)
-        print(
-            f"  chunk {chunk:>6}: block {r['block_steps_per_s']:9.3g}  kernel {r['kernel_steps_per_s']:9.3g}"
-        )
 
-    print(
-        "\n3. accuracy vs cost (analytic oracle, 179 spikes in 2 s; cost: 1000 neurons, 1000-sample chunks)"
-    )
+def run_accuracy(ctx: Context) -> None:
+    ctx.step("accuracy vs cost")
     ref = analytic_spikes()
-    print(f"{'integrator':>11} {'dt ms':>6} {'dN':>4} {'mean|dt| ms':>12} {'max|dv|':>9} {'us/neuron-s':>12}")
-    dts = (1e-3, 2e-4, 1e-4) if quick else (1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5)
-    for integ in INTEGRATORS:
-        for dt in dts:
-            r = accuracy(integ, dt, ref, 100 if dt < 5e-5 else 1000, 3)
-            res["accuracy"].append(r)
-            print(f"{integ:>11} {r['dt_ms']:6.2f} {r['dN']:4d} {r['mean_abs_dt_ms']:12.5f} {r['max_dv']:9.2e} "
-                  f"{r['us_per_neuron_s']:12.3f}")  # fmt: skip
-
-    print("\n4. noise vs dt: stationary sd (sigma 2, theory for exact OU 0.1414) and rate (u 0.8, sigma 4)")
-    n_sd, n_rate = (100, 100) if quick else (200, 400)
-    for integ in INTEGRATORS:
-        for dt in dts:
-            r = noise_stats(integ, dt, n_sd, n_rate)
-            res["noise"].append(r)
-            print(f"{integ:>11} dt {r['dt_ms']:5.2f} ms: sd {r['sd']:.4f}  rate {r['rate_hz']:6.2f} /s")
-
-    if args.brian2:
-        r = brian2_throughput(1000, 2.0 if quick else 10.0, 3)
-        res["brian2"] = r
-        ours = next(
-            x for x in res["throughput"] if x["n"] == 1000 and x["integrator"] == "exp" and not x["sigma"]
-        )
-        print(f"\n5. Brian2 cython, N = 1000: {r['brian2_cython_steps_per_s']:.3g} neuron-steps/s "
-              f"(nlif exp block: {ours['block_steps_per_s'] / r['brian2_cython_steps_per_s']:.1f}x faster)")  # fmt: skip
-
-    print("\nbars (exp integrator, sigma = 0, 1000-sample chunks):")
-    for r in res["throughput"]:
-        if r["integrator"] == "exp" and r["sigma"] == 0.0 and (r["n"] >= 1000 or r["n"] == 1):
-            bar = 5e8 if r["n"] >= 1000 else 1e8
-            ok = "PASS" if r["block_steps_per_s"] >= bar else "FAIL"
-            print(f"  N = {r['n']:>6}: {r['block_steps_per_s']:.3g} >= {bar:.0e}  {ok}")
-
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(res, f, indent=1)
-    if args.plot:
-        plot(res, args.plot)
-
-
-def plot(res: dict, path: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(2, 2, figsize=(11, 8))
-    for integ in INTEGRATORS:
-        for sigma, ls in ((0.0, "-"), (0.5, "--")):
-            rows = [r for r in res["throughput"] if r["integrator"] == integ and r["sigma"] == sigma]
-            ax[0, 0].loglog([r["n"] for r in rows], [r["block_steps_per_s"] for r in rows], ls, marker="o",
-                            label=f"{integ} σ={sigma}")  # fmt: skip
-        rows = [r for r in res["accuracy"] if r["integrator"] == integ and r["dN"] == 0]
-        ax[0, 1].loglog([r["us_per_neuron_s"] for r in rows], [r["mean_abs_dt_ms"] for r in rows], marker="o",
-                        label=integ)  # fmt: skip
-        rows = [r for r in res["accuracy"] if r["integrator"] == integ]
-        ax[1, 0].loglog([r["dt_ms"] for r in rows], [r["max_dv"] for r in rows], marker="o", label=integ)
-        rows = [r for r in res["noise"] if r["integrator"] == integ]
-        ax[1, 1].semilogx(
-            [r["dt_ms"] for r in rows], [r["sd"] for r in rows], marker="o", label=f"sd {integ}"
-        )
-    ax[0, 0].axhline(5e8, color="k", lw=0.5)
-    ax[0, 0].set(xlabel="neurons", ylabel="neuron-steps/s (block)", title="throughput, 1000-sample chunks")
-    ax[0, 1].set(
-        xlabel="µs CPU per neuron-second", ylabel="mean |spike-time error| (ms)", title="accuracy vs cost"
+    dts = (1e-3, 2e-4, 1e-4) if ctx.quick else (1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5)
+    tradeoff = ctx.tradeoff(
+        "accuracy_vs_cost",
+        "NLIF: spike-time error against cost (analytic oracle, 179 spikes in 2 s)",
+        "CPU per neuron per simulated second (µs)",
+        "mean |spike-time error| (ms)",
     )
-    ax[1, 0].set(xlabel="dt (ms)", ylabel="max |v error|, threshold-free", title="membrane error vs dt")
-    ax[1, 1].axhline(2.0 * math.sqrt(TAU / 2), color="k", lw=0.5)
-    ax[1, 1].set(xlabel="dt (ms)", ylabel="stationary sd", title="noise sd vs dt (σ = 2)")
-    for a in ax.flat:
-        a.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    rows, lost = [], []
+    for integ in INTEGRATORS:
+        for dt in dts:
+            ctx.step(f"accuracy {integ} dt={dt * 1e3:g} ms")
+            r = accuracy(integ, dt, ref, 100 if dt < 5e-5 else 1000, 3)
+            rows.append([integ, r["dt_ms"], r["dN"], r["mean_abs_dt_ms"], r["max_dv"], r["us_per_neuron_s"]])
+            setting = f"{integ} {r['dt_ms']:g} ms"
+            if math.isfinite(r["mean_abs_dt_ms"]):
+                tradeoff.add(r["us_per_neuron_s"], r["mean_abs_dt_ms"], setting, default=integ == "exp" and dt == 1e-3,
+                             series=integ)  # fmt: skip
+            else:
+                lost.append(f"{setting} ({r['dN']:+d} spikes)")
+    ctx.table("Accuracy vs cost (cost: 1000 neurons, 1000-sample chunks)", ["integrator", "dt (ms)", "ΔN spikes",
+              "mean |Δt| (ms)", "max |Δv| threshold-free", "µs per neuron-s"], rows)  # fmt: skip
+    if lost:
+        ctx.note(f"Not plotted (spike count differs from the oracle, so no per-spike error): {', '.join(lost)}. "
+                 "The shipped default (exp at dt = 1 ms) is among them when listed here.")  # fmt: skip
+    ctx.step("noise vs dt")
+    n_sd, n_rate = (100, 100) if ctx.quick else (200, 400)
+    noise = [noise_stats(integ, dt, n_sd, n_rate) for integ in INTEGRATORS for dt in dts]
+    ctx.table("Noise vs dt: stationary sd (σ = 2; exact OU theory 0.1414) and rate (u = 0.8, σ = 4)",
+              ["integrator", "dt (ms)", "sd", "rate (1/s)"],
+              [[r["integrator"], r["dt_ms"], r["sd"], r["rate_hz"]] for r in noise])  # fmt: skip
+    ctx.data["noise"] = noise
 
 
-if __name__ == "__main__":
-    main()
+def run(ctx: Context) -> None:
+    run_throughput(ctx)
+    run_accuracy(ctx)
+    if not ctx.peers:
+        ctx.note("Brian2 (cython) was not timed: run with --peers.")
+    elif importlib.util.find_spec("brian2") is None:
+        ctx.note("Brian2 was not timed: it is not installed (pip install brian2).")
+    else:
+        ctx.step("Brian2")
+        secs = brian2_throughput(1000, 2.0 if ctx.quick else 10.0, 3)
+        steps = 1000 * (2.0 if ctx.quick else 10.0) * 1000
+        ctx.figure(
+            "Brian2 cython, N=1000", [steps / s for s in secs], "neuron-steps/s", "higher", is_baseline=True
+        )
+        ctx.figure("block exp, N=1000 vs Brian2", ctx.figures["block exp, sigma=0, N=1000"].samples, "neuron-steps/s",
+                   "higher", baseline="Brian2 cython, N=1000")  # fmt: skip
+
+
+SUITE = Suite(
+    name="nlif",
+    title="NLIF population: throughput and accuracy against cost",
+    measures="Neuron-steps/s of the `nlif` block for N = 1 … 100 000, every integrator, with and without "
+    "noise, against chunk size and with a post-spike current; spike-time error against an analytic "
+    "oracle and CPU per neuron-second for each integrator and dt; membrane noise sd vs dt.",
+    baseline="the block's bare numba kernel on the same chunks (block / kernel: what the block's "
+    "bookkeeping costs); with --peers, Brian2's cython target",
+    run=run,
+    minutes_quick=1.5,
+    minutes_full=6.0,
+)

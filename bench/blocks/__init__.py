@@ -1,0 +1,1 @@
+"""Suites about the blocks of flowtact.blocks, one folder per room (signal, spiking, teleop)."""

@@ -1,0 +1,167 @@
+"""``flowtact bench``: run suites, one after another, and write results/*.json, plots/*.png and REPORT.md."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import shlex
+import sys
+import time
+import traceback
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from flowtact.benchmark.machine import THREAD_VARS, load_average, machine_info
+from flowtact.benchmark.plots import draw_tradeoff, save_plot
+from flowtact.benchmark.progress import Progress
+from flowtact.benchmark.registry import Unavailable, suites
+from flowtact.benchmark.suite import Context, Suite, SuiteSkipped
+
+__all__ = ["command_line", "list_suites", "run_suites"]
+
+
+def pin_threads() -> None:
+    """One thread per kernel (numba, BLAS) for every suite: figures are one core's. Set before any
+    suite imports numba (the runner imports suites lazily); an explicit environment wins."""
+    for var in THREAD_VARS:
+        os.environ.setdefault(var, "1")
+
+
+def command_line(names: Sequence[str], quick: bool, peers: bool) -> str:
+    """The command that reproduces a suite or a run."""
+    return shlex.join(
+        ["flowtact", "bench", *names, *(["--quick"] if quick else []), *(["--peers"] if peers else [])]
+    )
+
+
+def list_suites(out: Any = None) -> int:
+    out = out or sys.stdout
+    for name, s in suites().items():
+        if isinstance(s, Unavailable):
+            print(f"{name:<18} (unavailable: {s.reason})", file=out)
+        else:
+            print(
+                f"{name:<18} {s.title}  [~{s.minutes_quick:g} min quick, ~{s.minutes_full:g} min full]",
+                file=out,
+            )
+    return 0
+
+
+def _missing(suite: Suite) -> list[str]:
+    return [m for m in suite.needs if importlib.util.find_spec(m) is None]
+
+
+def run_one(
+    suite: Suite | Unavailable, quick: bool, peers: bool, out: Path, progress: Progress
+) -> dict[str, Any]:
+    """Run one suite and write results/<name>.json (and its plots); never raises but KeyboardInterrupt."""
+    name = suite.name
+    rec: dict[str, Any] = {
+        "suite": name,
+        "quick": quick,
+        "peers": peers,
+        "command": command_line([name], quick, peers),
+    }
+    rec["load_before"] = load_average()
+    rec["started"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    t0 = time.perf_counter()
+    ctx: Context | None = None
+    if isinstance(suite, Unavailable):
+        rec["status"] = "skipped" if suite.missing_module else "failed"
+        rec["reason" if suite.missing_module else "error"] = suite.reason
+    else:
+        rec.update(title=suite.title, measures=suite.measures, baseline=suite.baseline)
+        missing = _missing(suite)
+        if missing:
+            rec["status"], rec["reason"] = (
+                "skipped",
+                f"needs {', '.join(missing)} (pip install 'flowtact[dev]')",
+            )
+        else:
+            ctx = Context(suite, quick, peers, on_step=progress.step)
+            try:
+                suite.run(ctx)
+                rec["status"] = "ok"
+            except SuiteSkipped as e:
+                rec["status"], rec["reason"] = "skipped", str(e)
+            except Exception as e:  # noqa: BLE001 — a failing suite is reported; the others still run
+                rec["status"] = "failed"
+                rec["error"] = f"{type(e).__name__}: {e}"
+                rec["traceback"] = traceback.format_exc()
+    rec["wall_s"] = round(time.perf_counter() - t0, 3)
+    rec["load_after"] = load_average()
+    if ctx is not None:
+        rec.update(ctx.to_dict())
+        rec["plots"] = _write_plots(ctx, out)
+    (out / "results").mkdir(parents=True, exist_ok=True)
+    (out / "results" / f"{name}.json").write_text(json.dumps(rec, indent=1, default=_json_default))
+    why = rec.get("reason") or rec.get("error") or f"{len(rec.get('figures', {}))} figures"
+    progress.end(f"{name}: {rec['status']} in {rec['wall_s']:.1f} s ({why.splitlines()[0]})")
+    return rec
+
+
+def _write_plots(ctx: Context, out: Path) -> list[dict[str, Any]]:
+    plots = list(ctx.plots) + [draw_tradeoff(t) for t in ctx.tradeoffs if t.points]
+    written = []
+    for p in plots:
+        ctx.step(f"plot {p.name}")
+        try:
+            save_plot(p, out / "plots" / f"{ctx.suite.name}-{p.name}.png")
+        except Exception as e:  # noqa: BLE001 — a broken drawing loses that plot, not the suite's figures
+            p.error = f"drawing failed: {type(e).__name__}: {e}"
+        rel = str(Path(p.path).relative_to(out)) if p.path else None
+        written.append({"name": p.name, "caption": p.caption, "path": rel, "error": p.error})
+    return written
+
+
+def run_suites(
+    names: Sequence[str], quick: bool, peers: bool, out: Path, as_json: bool = False, bar: bool | None = None
+) -> int:
+    """Run the named suites (all when none) into ``out``; 0 all ran, 1 one failed, 2 an unknown name."""
+    from flowtact.benchmark.report import write_report
+    from flowtact.params import did_you_mean
+
+    pin_threads()
+    available = suites()
+    for n in names:
+        if n not in available:
+            print(f"flowtact: unknown benchmark suite '{n}'{did_you_mean(n, available)}", file=sys.stderr)
+            return 2
+    chosen = list(dict.fromkeys(names)) or list(available)
+    out.mkdir(parents=True, exist_ok=True)
+    run: dict[str, Any] = {
+        "command": command_line(names, quick, peers),
+        "quick": quick,
+        "peers": peers,
+        "machine": machine_info(),
+        "load_before": load_average(),
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+    t0 = time.perf_counter()
+    records = []
+    stream = sys.stderr if as_json else sys.stdout
+    with Progress(len(chosen), stream, bar) as progress:
+        for n in chosen:
+            progress.begin(n)
+            records.append(run_one(available[n], quick, peers, out, progress))
+    run["wall_s"] = round(time.perf_counter() - t0, 3)
+    run["load_after"] = load_average()
+    run["suites"] = {r["suite"]: r["status"] for r in records}
+    (out / "results").mkdir(parents=True, exist_ok=True)
+    (out / "results" / "run.json").write_text(json.dumps(run, indent=1))
+    report = write_report(out, run, records)
+    if as_json:
+        print(json.dumps({**run, "report": str(report), "results": str(out / "results")}, indent=1))
+    else:
+        print(f"report: {report} ({run['wall_s']:.0f} s)")
+    return 1 if any(r["status"] == "failed" for r in records) else 0
+
+
+def _json_default(x: Any) -> Any:
+    if hasattr(x, "item"):  # numpy scalars
+        return x.item()
+    if hasattr(x, "tolist"):
+        return x.tolist()
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")

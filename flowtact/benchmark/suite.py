@@ -1,0 +1,309 @@
+"""What a benchmark suite is, and the context it records its figures, tables, plots and verdicts in.
+
+A suite is a :class:`Suite`: a name, what it measures, the baseline it is compared with (measured
+in the same run), and ``run(ctx)``. ``run`` measures through its :class:`Context`:
+
+* ``ctx.speed(key, fn, work=..., unit="samples/s", baseline=KEY)`` times ``fn`` (warm-up, repeats,
+  raw samples) and records ``work / seconds``; ``ctx.duration(...)`` records seconds scaled to a
+  unit (µs per call, ...); ``ctx.figure(...)`` records values measured some other way (latencies
+  of a subprocess). A figure naming a ``baseline`` (another figure of the suite) also carries the
+  ratio to it, oriented so that > 1 means flowtact does better;
+* ``ctx.table``, ``ctx.note``, ``ctx.check`` (a bar or target, pass/fail), ``ctx.plot`` (a
+  matplotlib drawing function) and ``ctx.tradeoff`` (run time against error, one point per
+  setting, the shipped default marked).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
+
+from flowtact.benchmark.timing import spread, time_call
+
+__all__ = [
+    "Check",
+    "Context",
+    "Figure",
+    "Plot",
+    "Suite",
+    "SuiteSkipped",
+    "Table",
+    "Tradeoff",
+    "TradeoffPoint",
+]
+
+Better = Literal["higher", "lower"]
+
+
+class SuiteSkipped(Exception):
+    """Raised by ``ctx.skip(reason)``: the suite cannot run here (a missing package, no --peers)."""
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A registered benchmark suite (published under the entry-point group ``flowtact.bench``)."""
+
+    name: str
+    title: str
+    measures: str
+    """What it measures, in a sentence or a short paragraph (Markdown): the report's introduction."""
+    baseline: str
+    """What every ratio of the suite is relative to, measured in the same run."""
+    run: Callable[[Context], None]
+    needs: tuple[str, ...] = ()
+    """Importable modules the suite needs; without one it is skipped with a line saying so."""
+    minutes_quick: float = 0.5
+    minutes_full: float = 2.0
+    """Rough budgets on 2 cores, shown by ``--list``."""
+
+
+@dataclass
+class Figure:
+    """One measured quantity: its raw samples, median and spread, and its ratio to a baseline."""
+
+    key: str
+    unit: str
+    better: Better
+    samples: list[float]
+    median: float
+    q1: float
+    q3: float
+    min: float
+    max: float
+    params: dict[str, Any] = field(default_factory=dict)
+    baseline: str | None = None
+    is_baseline: bool = False
+    ratio: float | None = None
+    """Baseline-relative performance, > 1: better than the baseline (faster, lower latency)."""
+    ratio_range: tuple[float, float] | None = None
+    """The ratio from the worse to the better ends of the two interquartile ranges."""
+    seconds: list[float] | None = None
+    """Raw wall seconds per repeat, when the figure was timed here."""
+
+
+@dataclass
+class Table:
+    title: str
+    header: list[str]
+    rows: list[list[Any]]
+    note: str = ""
+
+
+@dataclass
+class Check:
+    """A bar or target with its verdict."""
+
+    name: str
+    passed: bool
+    detail: str = ""
+
+
+@dataclass
+class Plot:
+    name: str
+    caption: str
+    draw: Callable[[Any], None] | None = None
+    """``draw(fig)`` fills a matplotlib Figure; dropped once the PNG is written."""
+    path: str | None = None
+    error: str | None = None
+
+
+@dataclass
+class TradeoffPoint:
+    time: float
+    error: float
+    setting: str
+    default: bool = False
+    series: str = "flowtact"
+
+
+@dataclass
+class Tradeoff:
+    """A run-time-against-error plot: one point per setting, the shipped default marked."""
+
+    name: str
+    title: str
+    time_label: str
+    error_label: str
+    log_time: bool = True
+    log_error: bool = True
+    points: list[TradeoffPoint] = field(default_factory=list)
+
+    def add(
+        self, time: float, error: float, setting: str, default: bool = False, series: str = "flowtact"
+    ) -> None:
+        """One setting's cost and error; ``default`` marks the shipped default (a star in the plot)."""
+        self.points.append(TradeoffPoint(float(time), float(error), setting, default, series))
+
+
+class Context:
+    """What a suite's ``run`` measures through; the runner turns it into JSON, tables and plots."""
+
+    def __init__(
+        self, suite: Suite, quick: bool, peers: bool = False, on_step: Callable[[str], None] | None = None
+    ):
+        self.suite = suite
+        self.quick = quick
+        self.peers = peers
+        self.repeats = 5 if quick else 9
+        """Default repeats of a timed figure (after one warm-up call)."""
+        self.figures: dict[str, Figure] = {}
+        self.tables: list[Table] = []
+        self.notes: list[str] = []
+        self.checks: list[Check] = []
+        self.plots: list[Plot] = []
+        self.tradeoffs: list[Tradeoff] = []
+        self.data: dict[str, Any] = {}
+        """Anything else worth keeping in results/<suite>.json (raw rows, configurations)."""
+        self._on_step = on_step
+
+    # -- progress and verdicts ------------------------------------------------------------------
+
+    def step(self, text: str) -> None:
+        """Say what the suite is doing now (the progress line)."""
+        if self._on_step:
+            self._on_step(text)
+
+    def skip(self, reason: str) -> None:
+        raise SuiteSkipped(reason)
+
+    def note(self, text: str) -> None:
+        """A plain statement for the report (a limitation, a reading hint, a part not run)."""
+        self.notes.append(text)
+
+    def check(self, name: str, passed: bool, detail: str = "") -> None:
+        self.checks.append(Check(name, bool(passed), detail))
+
+    def table(self, title: str, header: list[str], rows: list[list[Any]], note: str = "") -> None:
+        self.tables.append(Table(title, list(header), [list(r) for r in rows], note))
+
+    def plot(self, name: str, draw: Callable[[Any], None], caption: str) -> None:
+        """A PNG made by ``draw(fig)`` on a matplotlib Figure (label the axes with units)."""
+        self.plots.append(Plot(name, caption, draw))
+
+    def tradeoff(
+        self,
+        name: str,
+        title: str,
+        time_label: str,
+        error_label: str,
+        log_time: bool = True,
+        log_error: bool = True,
+    ) -> Tradeoff:
+        """A run-time-against-error plot to add points to (``.add(time, error, setting, default)``)."""
+        t = Tradeoff(name, title, time_label, error_label, log_time, log_error)
+        self.tradeoffs.append(t)
+        return t
+
+    # -- figures --------------------------------------------------------------------------------
+
+    def speed(
+        self,
+        key: str,
+        fn: Callable[..., Any],
+        work: float,
+        unit: str,
+        *,
+        baseline: str | None = None,
+        is_baseline: bool = False,
+        setup: Callable[[], Any] | None = None,
+        repeats: int | None = None,
+        warmup: int = 1,
+        params: dict[str, Any] | None = None,
+    ) -> Figure:
+        """Time ``fn`` and record ``work / seconds`` in ``unit`` (higher is better)."""
+        self.step(key)
+        secs = time_call(fn, repeats or self.repeats, warmup, setup)
+        return self._add(key, unit, "higher", [work / s for s in secs], baseline, is_baseline, params, secs)
+
+    def duration(
+        self,
+        key: str,
+        fn: Callable[..., Any],
+        *,
+        scale: float = 1e6,
+        unit: str = "µs per call",
+        baseline: str | None = None,
+        is_baseline: bool = False,
+        setup: Callable[[], Any] | None = None,
+        repeats: int | None = None,
+        warmup: int = 1,
+        params: dict[str, Any] | None = None,
+    ) -> Figure:
+        """Time ``fn`` and record ``seconds * scale`` in ``unit`` (lower is better)."""
+        self.step(key)
+        secs = time_call(fn, repeats or self.repeats, warmup, setup)
+        return self._add(key, unit, "lower", [s * scale for s in secs], baseline, is_baseline, params, secs)
+
+    def figure(
+        self,
+        key: str,
+        samples: float | list[float],
+        unit: str,
+        better: Better,
+        *,
+        baseline: str | None = None,
+        is_baseline: bool = False,
+        params: dict[str, Any] | None = None,
+    ) -> Figure:
+        """Record values measured some other way (one value, or every repeat's)."""
+        values = [float(samples)] if isinstance(samples, (int, float)) else [float(s) for s in samples]
+        return self._add(key, unit, better, values, baseline, is_baseline, params, None)
+
+    def _add(
+        self,
+        key: str,
+        unit: str,
+        better: Better,
+        samples: list[float],
+        baseline: str | None,
+        is_baseline: bool,
+        params: dict[str, Any] | None,
+        seconds: list[float] | None,
+    ) -> Figure:
+        if key in self.figures:
+            raise ValueError(f"suite {self.suite.name!r}: figure {key!r} recorded twice")
+        s = spread(samples)
+        fig = Figure(key, unit, better, samples, s.median, s.q1, s.q3, s.min, s.max, dict(params or {}),
+                     baseline, is_baseline, seconds=seconds)  # fmt: skip
+        if baseline is not None:
+            base = self.figures.get(baseline)
+            if base is None:
+                raise ValueError(
+                    f"suite {self.suite.name!r}: figure {key!r} names baseline {baseline!r}, which is not "
+                    f"(yet) recorded; have {sorted(self.figures)}"
+                )
+            if base.better != better:
+                raise ValueError(
+                    f"suite {self.suite.name!r}: {key!r} and its baseline {baseline!r} disagree on 'better'"
+                )
+            fig.ratio, fig.ratio_range = _ratio(fig, base)
+        self.figures[key] = fig
+        return fig
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "figures": {k: asdict(f) for k, f in self.figures.items()},
+            "tables": [asdict(t) for t in self.tables],
+            "notes": list(self.notes),
+            "checks": [asdict(c) for c in self.checks],
+            "tradeoffs": [asdict(t) for t in self.tradeoffs],
+            "data": self.data,
+        }
+
+
+def _ratio(fig: Figure, base: Figure) -> tuple[float | None, tuple[float, float] | None]:
+    """fig relative to base, > 1 when fig is better; the range spans both interquartile ranges."""
+
+    def div(a: float, b: float) -> float:
+        return a / b if b and math.isfinite(a) and math.isfinite(b) else float("nan")
+
+    if fig.better == "higher":
+        r, lo, hi = div(fig.median, base.median), div(fig.q1, base.q3), div(fig.q3, base.q1)
+    else:
+        r, lo, hi = div(base.median, fig.median), div(base.q1, fig.q3), div(base.q3, fig.q1)
+    if not math.isfinite(r):
+        return None, None
+    return r, (lo, hi)

@@ -1,0 +1,174 @@
+"""``flowtact bench``: the harness (flowtact/benchmark/) on toy suites registered here, and one real suite
+end to end. No timing is asserted: only that what is measured is recorded, compared and reported."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import pytest
+
+from flowtact.benchmark import Suite, register, unregister
+from flowtact.benchmark.suite import Context
+from flowtact.cli import main
+
+
+def _toy(ctx: Context) -> None:
+    ctx.speed("loop", lambda: sum(range(2000)), 2000, "items/s", is_baseline=True)
+    ctx.speed("builtin", lambda: sum(range(200)), 200, "items/s", baseline="loop")
+    ctx.figure("latency base", [10.0, 12.0, 11.0], "µs", "lower", is_baseline=True)
+    ctx.figure("latency ours", [20.0, 22.0, 21.0], "µs", "lower", baseline="latency base")
+    ctx.table("a toy table", ["setting", "error"], [["a", 0.5], ["b", 0.25]])
+    ctx.check("toy bar", True, "met")
+    ctx.plot("line", lambda fig: fig.add_subplot(1, 1, 1).plot([0, 1], [1, 2]), "a toy line")
+    t = ctx.tradeoff("cost", "toy trade-off", "time per sample (µs)", "RMS error (N)")
+    t.add(1.0, 0.1, "fine")
+    t.add(0.1, 1.0, "coarse", default=True)
+
+
+TOY = Suite("toy_suite", "a toy", "Sums of ranges.", "a plain Python loop", _toy)
+
+
+def _broken(ctx: Context) -> None:
+    ctx.figure("before the crash", 1.0, "s", "lower")
+    raise ZeroDivisionError("the toy divided by zero")
+
+
+BROKEN = Suite("broken_suite", "raises", "Nothing.", "none", _broken)
+
+
+@pytest.fixture
+def suites():  # the toy and the broken suite, registered for one test
+    register(TOY)
+    register(BROKEN)
+    yield
+    unregister(TOY.name)
+    unregister(BROKEN.name)
+
+
+@pytest.mark.usefixtures("suites")
+def test_a_run_records_machine_load_samples_ratios_and_writes_the_report(tmp_path, capsys):
+    assert main(["bench", "toy_suite", "--quick", "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "results" / "toy_suite.json").read_text())
+    assert res["status"] == "ok"
+    for key in ("cpu", "cores", "versions", "git_commit"):
+        assert key in json.loads((tmp_path / "results" / "run.json").read_text())["machine"]
+    run = json.loads((tmp_path / "results" / "run.json").read_text())
+    assert {"numpy", "numba", "flowtact", "python"} <= set(run["machine"]["versions"])
+    assert len(res["load_before"]) == len(res["load_after"]) == len(run["load_before"]) == 3
+    loop, ours = res["figures"]["loop"], res["figures"]["builtin"]
+    assert len(loop["samples"]) == len(loop["seconds"]) == 5  # quick: 5 repeats after the warm-up
+    assert loop["median"] == pytest.approx(sorted(loop["samples"])[2])
+    assert ours["ratio"] == pytest.approx(ours["median"] / loop["median"])
+    lat = res["figures"]["latency ours"]
+    assert lat["ratio"] == pytest.approx(11.0 / 21.0)  # lower is better: > 1 would mean faster than the base
+    assert lat["ratio_range"] == pytest.approx([10.5 / 21.5, 11.5 / 20.5])
+    report = (tmp_path / "REPORT.md").read_text()
+    assert "`flowtact bench toy_suite --quick`" in report
+    assert "| a | 0.5 |" in report and "PASS toy bar" in report
+    assert "**latency ours** is slower than its baseline (latency base): 0.524×" in report
+    for png in ("toy_suite-line.png", "toy_suite-cost.png"):
+        assert (tmp_path / "plots" / png).stat().st_size > 1000
+        assert f"(plots/{png})" in report
+    assert "shipped default (coarse)" in report
+    assert "load average" in report.lower()
+    assert "toy_suite: ok" in capsys.readouterr().out  # one line per suite off a terminal
+
+
+@pytest.mark.usefixtures("suites")
+def test_list_names_registered_and_installed_suites(capsys):
+    assert main(["bench", "--list"]) == 0
+    listed = {line.split()[0] for line in capsys.readouterr().out.splitlines()}
+    assert {
+        "toy_suite",
+        "savgol",
+        "nlif",
+        "ssim",
+        "teleop",
+        "force_estimation",
+        "transport",
+        "executor",
+    } <= listed
+    assert {"record", "hostile_input"} <= listed
+    assert not listed & {"ezmsg_pipe", "timeflux_pipe", "raw", "measure", "transport_blocks", "hostile_cases"}
+
+
+@pytest.mark.usefixtures("suites")
+def test_an_unknown_suite_is_a_usage_error_with_a_suggestion(tmp_path, capsys):
+    assert main(["bench", "toy_suit", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown benchmark suite 'toy_suit'" in err and "toy_suite" in err
+    assert not (tmp_path / "REPORT.md").exists()
+
+
+@pytest.mark.usefixtures("suites")
+def test_a_failing_suite_is_reported_and_the_others_still_run(tmp_path):
+    assert main(["bench", "broken_suite", "toy_suite", "--quick", "--out", str(tmp_path)]) == 1
+    broken = json.loads((tmp_path / "results" / "broken_suite.json").read_text())
+    assert broken["status"] == "failed" and "ZeroDivisionError: the toy divided by zero" in broken["error"]
+    assert "before the crash" in broken["figures"]  # what it measured before failing is kept
+    assert json.loads((tmp_path / "results" / "toy_suite.json").read_text())["status"] == "ok"
+    report = (tmp_path / "REPORT.md").read_text()
+    assert "Status: **FAILED**" in report and "the toy divided by zero" in report
+    assert "| [toy_suite](#toy_suite) | ok |" in report
+
+
+def test_a_suite_missing_a_package_is_skipped_not_failed(tmp_path):
+    register(Suite("needy_suite", "needs", "Nothing.", "none", _toy, needs=("no_such_module_xyz",)))
+    try:
+        assert main(["bench", "needy_suite", "--out", str(tmp_path)]) == 0
+    finally:
+        unregister("needy_suite")
+    res = json.loads((tmp_path / "results" / "needy_suite.json").read_text())
+    assert res["status"] == "skipped" and "no_such_module_xyz" in res["reason"]
+    assert "Skipped: needs no_such_module_xyz" in (tmp_path / "REPORT.md").read_text()
+
+
+def test_a_figure_naming_a_missing_baseline_fails_the_suite(tmp_path):
+    def bad(ctx: Context) -> None:
+        ctx.figure("x", 1.0, "s", "lower", baseline="nothing")
+
+    register(Suite("bad_baseline", "bad", "Nothing.", "none", bad))
+    try:
+        assert main(["bench", "bad_baseline", "--out", str(tmp_path)]) == 1
+    finally:
+        unregister("bad_baseline")
+    assert (
+        "names baseline 'nothing'"
+        in json.loads((tmp_path / "results" / "bad_baseline.json").read_text())["error"]
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.cli
+def test_a_real_suite_runs_end_to_end_from_the_installed_package(tmp_path):
+    cmd = [
+        sys.executable,
+        "-m",
+        "flowtact.cli",
+        "bench",
+        "savgol",
+        "--quick",
+        "--json",
+        "--out",
+        str(tmp_path),
+    ]
+    start = time.monotonic()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=tmp_path)  # not the checkout
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(proc.stdout)
+    assert summary["suites"] == {"savgol": "ok"} and summary["quick"]
+    assert "savgol: ok" in proc.stderr  # progress goes to stderr with --json
+    res = json.loads((tmp_path / "results" / "savgol.json").read_text())
+    assert res["baseline"].startswith("`scipy.signal.lfilter`")
+    measured = [f for f in res["figures"].values() if not f["is_baseline"]]
+    assert measured and all(f["ratio"] > 0 for f in measured)
+    assert res["wall_s"] <= time.monotonic() - start
+    report = (tmp_path / "REPORT.md").read_text()
+    assert (
+        "(plots/savgol-error_vs_latency.png)" in report
+        and (tmp_path / "plots" / "savgol-error_vs_latency.png").exists()
+    )
+    assert "`flowtact bench savgol --quick`" in report
