@@ -200,8 +200,9 @@ SHIPPED_MODE = "causal"
 
 def sweep(ctx: Context, rows: list[dict], sigma: float = 0.01, duration_s: float = 10.0) -> list[dict]:
     """Per (window, order, mode) of ``rows``: µs per sample of F' through the block (the whole run
-    in one chunk, then flush), and, centred, ``scipy.signal.savgol_filter`` on the same data in the
-    same run: its time (the baseline) and its largest difference from the block's output."""
+    in one chunk, then flush), and scipy on the same data in the same run (centred:
+    ``savgol_filter``; causal: ``savgol_coeffs(pos=N−1)`` through ``lfilter``): its time (the
+    baseline) and its largest difference from the block's output."""
     from scipy import signal
 
     from flowtact.bench.agreement import EPS, fir_agreement
@@ -225,22 +226,30 @@ def sweep(ctx: Context, rows: list[dict], sigma: float = 0.01, duration_s: float
 
         params = {"window": window, "order": order, "mode": mode}
         row = {**params, "d1_rms": r["d1_rms"], "group_delay_ms": r["d1_latency"] / RATE * 1e3}
+        pos = (window - 1) // 2 if mode == "centred" else window - 1
+        sp_coef = signal.savgol_coeffs(window, order, deriv=1, delta=1 / RATE, pos=pos, use="dot")
         if mode == "centred":
 
             def with_scipy(window=window, order=order) -> np.ndarray:
                 return signal.savgol_filter(noisy, window, order, deriv=1, delta=1 / RATE, mode="constant")
 
             base = f"savgol_filter, {setting}"
-            sp = ctx.duration(base, with_scipy, scale=1e6 / n, unit="µs per sample", is_baseline=True,
-                              params=params, repeats=repeats)  # fmt: skip
-            coef = savgol_coeffs(window, order, 1, rate_hz=RATE)
-            agree = fir_agreement(through_block(), with_scipy(), coef, noisy, (window - 1) // 2)
-            sp_coef = signal.savgol_coeffs(window, order, deriv=1, delta=1 / RATE, use="dot")
-            coef_eps = float(np.max(np.abs(sp_coef - coef)) / (EPS * np.max(np.abs(coef))))
-            row.update(scipy_us=sp.median, agree_max_abs=agree["max_abs"], agree_eps=agree["eps_units"],
-                       scipy_coef_eps=coef_eps)  # fmt: skip
+        else:  # scipy has no causal savgol_filter: its causal coefficients through lfilter (zero initial state)
+            b_causal = sp_coef[::-1].copy()  # lfilter's taps: newest sample first
+
+            def with_scipy(b=b_causal) -> np.ndarray:
+                return signal.lfilter(b, [1.0], noisy)
+
+            base = f"savgol_coeffs(pos=N-1) + lfilter, {setting}"
+        sp = ctx.duration(base, with_scipy, scale=1e6 / n, unit="µs per sample", is_baseline=True,
+                          params=params, repeats=repeats)  # fmt: skip
+        coef = savgol_coeffs(window, order, 1, pos=pos, rate_hz=RATE)
+        agree = fir_agreement(through_block(), with_scipy(), coef, noisy, pos)
+        coef_eps = float(np.max(np.abs(sp_coef - coef)) / (EPS * np.max(np.abs(coef))))
+        row.update(scipy_us=sp.median, agree_max_abs=agree["max_abs"], agree_eps=agree["eps_units"],
+                   scipy_coef_eps=coef_eps)  # fmt: skip
         fig = ctx.duration(f"block, {setting}", through_block, scale=1e6 / n, unit="µs per sample",
-                           baseline=base if mode == "centred" else None, params=params, repeats=repeats)  # fmt: skip
+                           baseline=base, params=params, repeats=repeats)  # fmt: skip
         row["block_us"] = fig.median
         row["ratio"] = fig.ratio
         out.append(row)
@@ -262,9 +271,13 @@ def draw_sweep(rows: list[dict]):
             sc = ax.scatter([r["block_us"] for r in sel], [r["d1_rms"] for r in sel], c=[r["group_delay_ms"] for r in sel],
                             cmap="viridis", norm=norm, marker=marker, s=46, edgecolors="k", linewidths=0.4,
                             label=f"flowtact savgol, {mode}", zorder=3)  # fmt: skip
-        sp = [r for r in rows if "scipy_us" in r]
-        ax.scatter([r["scipy_us"] for r in sp], [r["d1_rms"] for r in sp], marker="x", color="0.45", s=30,
-                   label="scipy savgol_filter (centred, offline)", zorder=2)  # fmt: skip
+        for mode, marker, what in (
+            ("centred", "x", "savgol_filter (centred)"),
+            ("causal", "+", "lfilter (causal)"),
+        ):
+            sp = [r for r in rows if r["mode"] == mode]
+            ax.scatter([r["scipy_us"] for r in sp], [r["d1_rms"] for r in sp], marker=marker, color="0.45", s=34,
+                       label=f"scipy {what}", zorder=2)  # fmt: skip
         for r in rows:
             ax.annotate(f"{r['window']}/{r['order']}" + ("" if r["mode"] == "centred" else " c"),
                         (r["block_us"], r["d1_rms"]), fontsize=7, textcoords="offset points", xytext=(4, 3))  # fmt: skip
@@ -290,24 +303,27 @@ def draw_sweep(rows: list[dict]):
 def report_sweep(ctx: Context, rows: list[dict]) -> None:
     ctx.data["sweep"] = rows
     ctx.table(
-        "F' (σ = 0.01 N, 10 s at 1 kHz): cost through the block vs `scipy.signal.savgol_filter` on the same data",
+        "F' (σ = 0.01 N, 10 s at 1 kHz): cost through the block vs scipy on the same data (savgol_filter centred, "
+        "lfilter causal)",
         ["N/p", "mode", "group delay (ms)", "F' RMS err (N/s)", "block µs/sample", "scipy µs/sample",
          "speed ratio (>1: block faster)", "max |block − scipy| (N/s)", "… in eps·Σ|c·x|", "scipy coef err (eps·max|c|)"],
         [[f"{r['window']}/{r['order']}", r["mode"], r["group_delay_ms"], r["d1_rms"], r["block_us"],
           r.get("scipy_us", "—"), r["ratio"] if r["ratio"] is not None else "—",
           r.get("agree_max_abs", "—"), r.get("agree_eps", "—"), r.get("scipy_coef_eps", "—")] for r in rows],
-        "scipy has no causal mode (its filter is offline): causal rows have no scipy figure. Agreement: the block's "
-        "centred output over the whole run (flush included, zero padding) against savgol_filter(mode='constant'); "
+        "scipy's savgol_filter has no causal mode: causal rows compare with scipy's causal coefficients "
+        "(savgol_coeffs(pos=N−1)) through lfilter. Agreement: the block's output over the whole run (flush included, "
+        "zero padding) against scipy's (savgol_filter(mode='constant') centred); "
         "eps·Σ|c·x| is the float64 rounding scale of each output's dot product. The block's coefficients are the "
         "correctly rounded exact least-squares weights; scipy's come from a float lstsq and differ from them by the "
         "last column (in eps of the largest weight), which accounts for the larger disagreements.",
     )  # fmt: skip
     ctx.plot("cost_vs_error", draw_sweep(rows), "Savitzky–Golay F': µs per sample against RMS error, colour = group "
-             "delay; the paper's 5/4 starred (red: causal, as shipped in touch.yaml/slip.yaml); grey ×: scipy")  # fmt: skip
-    centred = [r for r in rows if "agree_eps" in r]
-    worst = max(centred, key=lambda r: r["agree_eps"])
-    ctx.check("block centred == savgol_filter within 1000 eps·Σ|c·x|", worst["agree_eps"] <= 1000,
-              f"worst {worst['agree_eps']:.3g} at {worst['window']}/{worst['order']}")  # fmt: skip
+             "delay; the paper's 5/4 starred (red: causal, as shipped in touch.yaml/slip.yaml); grey × and +: scipy")  # fmt: skip
+    worst = max(rows, key=lambda r: r["agree_eps"] / (100 + 3 * r["scipy_coef_eps"]))
+    ctx.check("block == scipy within 100 + 3 × scipy's coefficient error, in eps·Σ|c·x| (every setting)",
+              worst["agree_eps"] <= 100 + 3 * worst["scipy_coef_eps"],
+              f"tightest {worst['agree_eps']:.3g} (coef err {worst['scipy_coef_eps']:.3g}) at "
+              f"{worst['window']}/{worst['order']} {worst['mode']}; a different filter is ~1e10")  # fmt: skip
     shipped = next(r for r in rows if (r["window"], r["order"], r["mode"]) == (*PAPER_SETTING, SHIPPED_MODE))
     best = min((r for r in rows if r["mode"] == "causal"), key=lambda r: r["d1_rms"])
     ctx.note(f"The shipped F' filter (5/4 causal, touch.yaml/slip.yaml) has the largest error of this sweep: "
@@ -315,12 +331,12 @@ def report_sweep(ctx: Context, rows: list[dict]) -> None:
              f"{best['window']}/{best['order']} causal at the same zero group delay and "
              f"{best['block_us'] / shipped['block_us']:.2g}× its cost; the graphs use 5/4 because it is the paper's filter.")  # fmt: skip
     slower = [
-        f"{r['window']}/{r['order']} (×{r['ratio']:.2f})"
-        for r in centred
+        f"{r['window']}/{r['order']} {r['mode']} (×{r['ratio']:.2f})"
+        for r in rows
         if r["ratio"] is not None and r["ratio"] < 1
     ]
     if slower:
-        ctx.note("The block (one chunk + flush, centred) is slower than scipy's savgol_filter on the whole array for "
+        ctx.note("The block (one chunk + flush) is slower than scipy on the whole array for "
                  f"{', '.join(slower)}; the block streams (state, time stamps, bad-data screen), scipy does not.")  # fmt: skip
 
 
