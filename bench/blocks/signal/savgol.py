@@ -9,6 +9,10 @@
     against the analytic derivative at each output's timestamp. "Latency" is the effective delay
     in samples: the stamping delay ((N−1)/2 centred, 0 causal) plus the filter's lag on a ramp of
     the derivative (a causal order-2 F'' is a centre estimate in disguise: (N−1)/2).
+(3) Per window × order × mode: µs per sample of F' through the block (10 s in one chunk + flush)
+    against its RMS error (2) and group delay (its effective latency in ms), the paper's 5/4
+    starred; centred, ``scipy.signal.savgol_filter`` on the same data in the same run: speed ratio,
+    and the largest difference from the block's output in units of eps × Σ|c·x| (bench/agreement.py).
 """
 
 from __future__ import annotations
@@ -98,12 +102,18 @@ def effective_lag(window: int, order: int, deriv: int, mode: str) -> float:
     return round((window - 1 - pos) - bias, 9) + 0.0  # + 0.0: no '-0.00'
 
 
-def error_table(quick: bool, sigma: float = 0.01, duration_s: float = 10.0) -> list[dict]:
+def noisy_force(sigma: float = 0.01, duration_s: float = 10.0) -> tuple[np.ndarray, ...]:
+    """Times, the clean force, its F' and F'', and the force plus white noise of ``sigma`` N (seeded)."""
     rng = np.random.default_rng(11)
     n = int(duration_s * RATE)
     t = np.arange(n) / RATE
     force, d1, d2 = tactile_force(t, rng.uniform(0, 2 * math.pi, len(_FREQS_HZ)))
-    noisy = force + rng.normal(0.0, sigma, n)
+    return t, force, d1, d2, force + rng.normal(0.0, sigma, n)
+
+
+def error_table(quick: bool, sigma: float = 0.01, duration_s: float = 10.0) -> list[dict]:
+    t, force, d1, d2, noisy = noisy_force(sigma, duration_s)
+    n = len(t)
     truth = {1: d1, 2: d2}
     windows = (5, 11, 21) if quick else (5, 7, 11, 15, 21)
     rows = []
@@ -180,6 +190,156 @@ def draw_errors(rows: list[dict]):
     return draw
 
 
+# -- (3) cost vs error vs group delay; scipy.signal.savgol_filter side by side ----------------------
+
+#: The paper's filter (Rager et al.): window 5, order 4. The shipped graphs (touch.yaml, slip.yaml)
+#: run it causal; the block's default mode is centred.
+PAPER_SETTING = (5, 4)
+SHIPPED_MODE = "causal"
+
+
+def sweep(ctx: Context, rows: list[dict], sigma: float = 0.01, duration_s: float = 10.0) -> list[dict]:
+    """Per (window, order, mode) of ``rows``: µs per sample of F' through the block (the whole run
+    in one chunk, then flush), and scipy on the same data in the same run (centred:
+    ``savgol_filter``; causal: ``savgol_coeffs(pos=N−1)`` through ``lfilter``): its time (the
+    baseline) and its largest difference from the block's output."""
+    from scipy import signal
+
+    from flowtact.bench.agreement import EPS, fir_agreement
+
+    t, _, _, _, noisy = noisy_force(sigma, duration_s)
+    n = len(t)
+    chunk = Chunk(t, noisy)
+    repeats = 3 * ctx.repeats  # a run is ~0.1 ms: cheap, and noisy on a shared machine
+    out = []
+    for r in rows:
+        window, order, mode = r["window"], r["order"], r["mode"]
+        setting = f"{window}/{order} {mode}"
+        block = SavGol(window=window, order=order, deriv=1, mode=mode)
+        block.bind({"x": StreamSpec(units="N", rate_hz=RATE)})
+
+        def through_block(block=block) -> np.ndarray:
+            block.restart()
+            y = block(x=chunk)["y"].data
+            tail = block.flush().get("y")
+            return np.concatenate([y, tail.data]) if tail else y
+
+        params = {"window": window, "order": order, "mode": mode}
+        row = {**params, "d1_rms": r["d1_rms"], "group_delay_ms": r["d1_latency"] / RATE * 1e3}
+        pos = (window - 1) // 2 if mode == "centred" else window - 1
+        sp_coef = signal.savgol_coeffs(window, order, deriv=1, delta=1 / RATE, pos=pos, use="dot")
+        if mode == "centred":
+
+            def with_scipy(window=window, order=order) -> np.ndarray:
+                return signal.savgol_filter(noisy, window, order, deriv=1, delta=1 / RATE, mode="constant")
+
+            base = f"savgol_filter, {setting}"
+        else:  # scipy has no causal savgol_filter: its causal coefficients through lfilter (zero initial state)
+            b_causal = sp_coef[::-1].copy()  # lfilter's taps: newest sample first
+
+            def with_scipy(b=b_causal) -> np.ndarray:
+                return signal.lfilter(b, [1.0], noisy)
+
+            base = f"savgol_coeffs(pos=N-1) + lfilter, {setting}"
+        sp = ctx.duration(base, with_scipy, scale=1e6 / n, unit="µs per sample", is_baseline=True,
+                          params=params, repeats=repeats)  # fmt: skip
+        coef = savgol_coeffs(window, order, 1, pos=pos, rate_hz=RATE)
+        agree = fir_agreement(through_block(), with_scipy(), coef, noisy, pos)
+        coef_eps = float(np.max(np.abs(sp_coef - coef)) / (EPS * np.max(np.abs(coef))))
+        row.update(scipy_us=sp.median, agree_max_abs=agree["max_abs"], agree_eps=agree["eps_units"],
+                   scipy_coef_eps=coef_eps)  # fmt: skip
+        fig = ctx.duration(f"block, {setting}", through_block, scale=1e6 / n, unit="µs per sample",
+                           baseline=base, params=params, repeats=repeats)  # fmt: skip
+        row["block_us"] = fig.median
+        row["ratio"] = fig.ratio
+        out.append(row)
+    return out
+
+
+def draw_sweep(rows: list[dict]):
+    """Cost against F' RMSE, colour = group delay, the paper's 5/4 starred, scipy beside the centred points."""
+
+    def draw(fig) -> None:  # type: ignore[no-untyped-def]
+        import matplotlib as mpl
+
+        ax = fig.add_subplot(1, 1, 1)
+        fig.set_size_inches(9, 5.2)
+        delays = [r["group_delay_ms"] for r in rows]
+        norm = mpl.colors.Normalize(vmin=min(delays), vmax=max(delays))
+        for mode, marker in (("centred", "o"), ("causal", "s")):
+            sel = [r for r in rows if r["mode"] == mode]
+            sc = ax.scatter([r["block_us"] for r in sel], [r["d1_rms"] for r in sel], c=[r["group_delay_ms"] for r in sel],
+                            cmap="viridis", norm=norm, marker=marker, s=46, edgecolors="k", linewidths=0.4,
+                            label=f"flowtact savgol, {mode}", zorder=3)  # fmt: skip
+        for mode, marker, what in (
+            ("centred", "x", "savgol_filter (centred)"),
+            ("causal", "+", "lfilter (causal)"),
+        ):
+            sp = [r for r in rows if r["mode"] == mode]
+            ax.scatter([r["scipy_us"] for r in sp], [r["d1_rms"] for r in sp], marker=marker, color="0.45", s=34,
+                       label=f"scipy {what}", zorder=2)  # fmt: skip
+        for r in rows:
+            ax.annotate(f"{r['window']}/{r['order']}" + ("" if r["mode"] == "centred" else " c"),
+                        (r["block_us"], r["d1_rms"]), fontsize=7, textcoords="offset points", xytext=(4, 3))  # fmt: skip
+        for r in rows:
+            if (r["window"], r["order"]) == PAPER_SETTING:
+                shipped = r["mode"] == SHIPPED_MODE
+                ax.plot([r["block_us"]], [r["d1_rms"]], "*", ms=18 if shipped else 14, mfc="none",
+                        mec="r" if shipped else "k", mew=1.5, zorder=4)  # fmt: skip
+                text = "5/4 causal: shipped (touch/slip.yaml)" if shipped else "5/4 centred: block default"
+                ax.annotate(text, (r["block_us"], r["d1_rms"]), fontsize=8, weight="bold",
+                            textcoords="offset points", xytext=(8, -4 if shipped else 6))  # fmt: skip
+        fig.colorbar(sc, ax=ax, label="group delay of F' (ms at 1 kHz; causal F': 0)")
+        ax.set_yscale("log")
+        ax.set_xlabel("cost (µs per sample, 10 s at 1 kHz in one chunk, one core)")
+        ax.set_ylabel("F' RMS error vs analytic (N/s)")
+        ax.set_title("Savitzky–Golay F': cost vs error vs group delay (σ = 0.01 N)", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+
+    return draw
+
+
+def report_sweep(ctx: Context, rows: list[dict]) -> None:
+    ctx.data["sweep"] = rows
+    ctx.table(
+        "F' (σ = 0.01 N, 10 s at 1 kHz): cost through the block vs scipy on the same data (savgol_filter centred, "
+        "lfilter causal)",
+        ["N/p", "mode", "group delay (ms)", "F' RMS err (N/s)", "block µs/sample", "scipy µs/sample",
+         "speed ratio (>1: block faster)", "max |block − scipy| (N/s)", "… in eps·Σ|c·x|", "scipy coef err (eps·max|c|)"],
+        [[f"{r['window']}/{r['order']}", r["mode"], r["group_delay_ms"], r["d1_rms"], r["block_us"],
+          r.get("scipy_us", "—"), r["ratio"] if r["ratio"] is not None else "—",
+          r.get("agree_max_abs", "—"), r.get("agree_eps", "—"), r.get("scipy_coef_eps", "—")] for r in rows],
+        "scipy's savgol_filter has no causal mode: causal rows compare with scipy's causal coefficients "
+        "(savgol_coeffs(pos=N−1)) through lfilter. Agreement: the block's output over the whole run (flush included, "
+        "zero padding) against scipy's (savgol_filter(mode='constant') centred); "
+        "eps·Σ|c·x| is the float64 rounding scale of each output's dot product. The block's coefficients are the "
+        "correctly rounded exact least-squares weights; scipy's come from a float lstsq and differ from them by the "
+        "last column (in eps of the largest weight), which accounts for the larger disagreements.",
+    )  # fmt: skip
+    ctx.plot("cost_vs_error", draw_sweep(rows), "Savitzky–Golay F': µs per sample against RMS error, colour = group "
+             "delay; the paper's 5/4 starred (red: causal, as shipped in touch.yaml/slip.yaml); grey × and +: scipy")  # fmt: skip
+    worst = max(rows, key=lambda r: r["agree_eps"] / (100 + 3 * r["scipy_coef_eps"]))
+    ctx.check("block == scipy within 100 + 3 × scipy's coefficient error, in eps·Σ|c·x| (every setting)",
+              worst["agree_eps"] <= 100 + 3 * worst["scipy_coef_eps"],
+              f"tightest {worst['agree_eps']:.3g} (coef err {worst['scipy_coef_eps']:.3g}) at "
+              f"{worst['window']}/{worst['order']} {worst['mode']}; a different filter is ~1e10")  # fmt: skip
+    shipped = next(r for r in rows if (r["window"], r["order"], r["mode"]) == (*PAPER_SETTING, SHIPPED_MODE))
+    best = min((r for r in rows if r["mode"] == "causal"), key=lambda r: r["d1_rms"])
+    ctx.note(f"The shipped F' filter (5/4 causal, touch.yaml/slip.yaml) has the largest error of this sweep: "
+             f"{shipped['d1_rms']:.3g} N/s RMS at σ = 0.01 N, against {best['d1_rms']:.3g} N/s for "
+             f"{best['window']}/{best['order']} causal at the same zero group delay and "
+             f"{best['block_us'] / shipped['block_us']:.2g}× its cost; the graphs use 5/4 because it is the paper's filter.")  # fmt: skip
+    slower = [
+        f"{r['window']}/{r['order']} {r['mode']} (×{r['ratio']:.2f})"
+        for r in rows
+        if r["ratio"] is not None and r["ratio"] < 1
+    ]
+    if slower:
+        ctx.note("The block (one chunk + flush) is slower than scipy on the whole array for "
+                 f"{', '.join(slower)}; the block streams (state, time stamps, bad-data screen), scipy does not.")  # fmt: skip
+
+
 def run(ctx: Context) -> None:
     throughput(ctx)
     ctx.step("error vs latency")
@@ -197,6 +357,8 @@ def run(ctx: Context) -> None:
     ctx.plot(
         "error_vs_latency", draw_errors(rows), "Savitzky–Golay F' and F'' RMS error against effective latency"
     )
+    ctx.step("cost vs error vs scipy")
+    report_sweep(ctx, sweep(ctx, rows))
 
 
 SUITE = Suite(
@@ -204,8 +366,11 @@ SUITE = Suite(
     title="Savitzky–Golay block: throughput, and derivative error vs latency",
     measures="Samples/s of the 5/4 first derivative through `SavGol.__call__` for chunks of 1 … 10 000 "
     "samples (1 and 3 channels, causal and centred), and the RMS error of F' and F'' against latency for "
-    "windows 5…21 × orders 2…4 on a noisy known force (NUMERICS §1.3).",
-    baseline="`scipy.signal.lfilter` with `zi` running the same causal filter on the same chunks",
+    "windows 5…21 × orders 2…4 on a noisy known force (NUMERICS §1.3); per window × order × mode, µs per "
+    "sample against F' RMS error and group delay, side by side with `scipy.signal.savgol_filter` (speed ratio, "
+    "and its largest difference from the block in float64 rounding units).",
+    baseline="`scipy.signal.lfilter` with `zi` running the same causal filter on the same chunks (throughput); "
+    "`scipy.signal.savgol_filter` on the same whole run (cost vs error)",
     run=run,
     needs=("scipy",),
     minutes_quick=0.3,
