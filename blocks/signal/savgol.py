@@ -41,6 +41,9 @@ __all__ = [
 
 #: The defaults: Savitzky–Golay, polynomial order 4, frame of 5 samples (the filter of Rager et al.).
 DEFAULT_WINDOW, DEFAULT_ORDER = 5, 4
+#: A sample interval further than this fraction of the nominal period from it counts as irregular
+#: (``irregular_dt``); one longer than 1.5 periods is a gap (``sample_gaps``): the fit assumes uniform sampling.
+DT_TOL = 0.01
 
 
 # -- helpers -------------------------------------------------------------------------------------
@@ -116,6 +119,25 @@ def savgol_coeffs(
 
 
 # -- streaming kernel (numba) and its numpy twin -------------------------------------------------
+
+
+@njit(cache=True)
+def _timing_faults(t: np.ndarray, prev: float, period: float, tol: float) -> tuple[int, int]:
+    """(gaps, irregular): intervals from ``prev`` (NaN: none) through ``t`` longer than 1.5 periods,
+    and the others off the period by more than ``tol`` of it. One pass, no temporaries."""
+    gaps = 0
+    irregular = 0
+    for i in range(len(t)):
+        if i == 0 and prev != prev:
+            prev = t[0]
+            continue
+        d = t[i] - prev
+        prev = t[i]
+        if d > 1.5 * period:
+            gaps += 1
+        elif abs(d / period - 1.0) > tol:
+            irregular += 1
+    return gaps, irregular
 
 
 @njit(cache=True)
@@ -245,7 +267,14 @@ class SavGol(Block):
     derivatives use a longer window and a lower order (e.g. 21/2: 0.38 N/s at 10 samples latency;
     ``flowtact bench savgol`` reports the error-vs-latency table).
 
-    ``on_bad_data: drop`` removes samples; the filter then treats their neighbours as adjacent.
+    Timing: the weights assume samples exactly one nominal period apart; the block does not
+    resample. It checks the timestamps and counts what breaks that assumption: ``sample_gaps`` (an
+    interval longer than 1.5 periods: samples missing, including those ``on_bad_data: drop``
+    removed — the filter then treats their neighbours as adjacent) and ``irregular_dt`` (an
+    interval off the period by more than :data:`DT_TOL`, 1 %: jitter). Estimates whose window spans
+    such an interval are wrong (a 20 % jitter gives ~10 % RMS error on F'; a 5-sample gap, errors
+    of several times the signal's derivative, docs/numerical-stress.md): resample upstream, or
+    treat a non-zero count as a fault.
 
     Example
     -------
@@ -264,7 +293,13 @@ class SavGol(Block):
         "x": Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="signal, shape () or (channels,)")
     }
     outputs = {"y": Port(dtype="float64", doc="smoothed signal or its derivative, per second")}
-    counter_docs = nonfinite_counter_docs("samples on 'x'")
+    counter_docs = {
+        **nonfinite_counter_docs("samples on 'x'"),
+        "sample_gaps": "intervals between samples longer than 1.5 periods (missing or dropped samples): the "
+        "estimates whose window spans one are wrong (the filter assumes uniform sampling)",
+        "irregular_dt": "intervals off the nominal period by more than 1 % (timestamp jitter): the "
+        "estimates whose window spans one are inexact (the filter assumes uniform sampling)",
+    }
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         x = inputs["x"]
@@ -291,6 +326,18 @@ class SavGol(Block):
         self._t_hist = np.empty(0)  # stamps of the last <= h samples (centred)
         self._last: np.ndarray | None = None
         self._started = False  # has a sample arrived (padding: hold primes the history with it)
+        self._period = 1.0 / float(spec.rate_hz)  # type: ignore[arg-type]
+        self._t_last: float | None = None  # time of the last sample filtered (timing checks)
+
+    def _check_timing(self, t: np.ndarray) -> None:
+        """Count gaps and irregular intervals (the fit assumes one nominal period between samples)."""
+        prev = math.nan if self._t_last is None else self._t_last
+        gaps, irregular = _timing_faults(t, prev, self._period, DT_TOL)
+        self._t_last = float(t[-1])
+        if gaps:
+            self.count("sample_gaps", gaps)
+        if irregular:
+            self.count("irregular_dt", irregular)
 
     def step(self, x: Chunk) -> dict[str, Chunk]:
         x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
@@ -298,6 +345,7 @@ class SavGol(Block):
             return {"y": Chunk.empty(shape=self._shape)}
         d = x.data
         n = len(x)
+        self._check_timing(x.t)
         if not self._started:
             self._started = True
             if self.config.padding == "hold":

@@ -80,6 +80,8 @@ class WeightedSum(Block):
     :class:`MisalignedError`. Latency: that of the slowest input; samples still unpaired at the
     end of the stream are dropped and counted (``unpaired_at_end``).
     ``on_bad_data: drop`` drops the whole instant (every input) so that the streams stay aligned.
+    Finite inputs whose sum overflows (≳ 1e308) give ±inf (or NaN for inf − inf), counted
+    ``overflow``: the consumer's own ``on_bad_data`` then applies (nlif stops by default).
     The sum is elementwise in a fixed order (bias, then x1..x4 channel by channel): chunking
     never changes a bit.
 
@@ -108,6 +110,8 @@ class WeightedSum(Block):
         "drop): upstream sent bad data",
         "nonfinite_hold": "input samples (per input) with NaN/inf, held at the last finite value "
         "(on_bad_data: hold): upstream sent bad data",
+        "overflow": "samples whose sum of finite inputs overflowed float64 (|y| > 1.8e308): emitted as "
+        "±inf or NaN, so the consumer's on_bad_data applies; inputs far outside any physical range",
         "unpaired_at_end": "input samples with no partners on the other inputs when the stream ended: not "
         "summed (the inputs delivered different numbers of samples)",
     }
@@ -166,11 +170,14 @@ class WeightedSum(Block):
             t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
             n = len(t)
         y = np.full(n, self.config.bias)
-        for p in self._ports:
-            x = data[p].reshape(n, self._nc[p])
-            for c, wc in enumerate(self._w[p]):
-                if wc != 0.0:
-                    y += wc * x[:, c]
+        with np.errstate(over="ignore", invalid="ignore"):  # counted below, never a warning or a crash
+            for p in self._ports:
+                x = data[p].reshape(n, self._nc[p])
+                for c, wc in enumerate(self._w[p]):
+                    if wc != 0.0:
+                        y += wc * x[:, c]
+        if n and not np.isfinite(y).all():
+            self.count("overflow", int((~np.isfinite(y)).sum()))
         return {"y": Chunk(t, y)}
 
     def flush(self) -> dict[str, Chunk]:

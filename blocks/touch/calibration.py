@@ -106,7 +106,8 @@ class GaugeForce(Block):
     sensor that starts unloaded but with a gauge offset. Those k samples are held back until the
     offset is known, then emitted tared (a one-off start-up latency of k samples; no sample is
     lost); a stream shorter than k is tared with the mean of what arrived, at flush. Beware: a
-    tare taken under load (the paper's 120 mN baseline) removes real force. Latency otherwise 0;
+    tare taken under load (the paper's 120 mN baseline) removes real force. Finite readings whose
+    force overflows float64 give ±inf/NaN, counted ``overflow`` (the consumer's ``on_bad_data`` applies). Latency otherwise 0;
     with ``ref`` connected, that of the later of ``r`` and ``ref``.
 
     Example
@@ -139,6 +140,8 @@ class GaugeForce(Block):
         "value (on_bad_data: hold): upstream sent bad data",
         "unpaired_at_end": "samples of 'r' or 'ref' with no partner on the other input when the stream "
         "ended: not used (the inputs delivered different numbers of samples)",
+        "overflow": "samples whose force from finite readings overflowed float64: emitted as ±inf/NaN, so "
+        "the consumer's on_bad_data applies; readings far outside any physical range",
         "tare_short": "the stream ended before tare_samples samples arrived: the tare offset is the mean "
         "of fewer samples",
     }
@@ -166,11 +169,14 @@ class GaugeForce(Block):
             r = r - data["ref"][:, None]
         a = self._a
         f = np.empty((len(r), 3))
-        for i in range(3):
-            acc = a[i, 0] * r[:, 0]
-            for j in range(1, 4):
-                acc = acc + a[i, j] * r[:, j]
-            f[:, i] = acc
+        with np.errstate(over="ignore", invalid="ignore"):  # counted below, never a warning or a crash
+            for i in range(3):
+                acc = a[i, 0] * r[:, 0]
+                for j in range(1, 4):
+                    acc = acc + a[i, j] * r[:, j]
+                f[:, i] = acc
+        if len(f) and not np.isfinite(f).all():
+            self.count("overflow", int((~np.isfinite(f)).any(axis=1).sum()))
         return f
 
     def step(self, **inputs: Chunk) -> dict[str, Chunk]:
