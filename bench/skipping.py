@@ -187,7 +187,9 @@ def pruning_note(rows: list[dict[str, Any]]) -> str:
         parts.append("it saved nothing measurable (the ratio's range includes 1) on " + ", ".join(
             f"{r['graph']} (pruned/full {r['ratio']:.2f})" for r in flat))  # fmt: skip
     return (
-        "; ".join(parts) + ". What is pruned in the shipped graphs is cheap: one 5-sample FIR at 1 kHz "
+        "; ".join(parts).capitalize()[:1]
+        + "; ".join(parts)[1:]
+        + ". What is pruned in the shipped graphs is cheap: one 5-sample FIR at 1 kHz "
         "(`ddforce`) and a few unused outputs. The '@ 5 ms tick' rows run the same graph with the live tick "
         "on the virtual clock, where the executor's per-node-step cost is paid 200 times per graph second "
         "instead of once."
