@@ -184,7 +184,7 @@ def pruning_note(rows: list[dict[str, Any]]) -> str:
         parts.append("Pruning saved CPU beyond the spread on " + ", ".join(
             f"{r['graph']} ({100 * (1 - r['ratio']):.0f} %)" for r in saved))  # fmt: skip
     if flat:
-        parts.append("it saved nothing measurable (the ratio's range includes 1) on " + ", ".join(
+        parts.append("pruning saved nothing measurable (the ratio's range includes 1) on " + ", ".join(
             f"{r['graph']} (pruned/full {r['ratio']:.2f})" for r in flat))  # fmt: skip
     return (
         "; ".join(parts).capitalize()[:1]
