@@ -122,8 +122,12 @@ def _find_cycle(stuck: list[str], deps: Mapping[str, set[str]]) -> list[str]:
         node = nxt
 
 
-def compile_graph(graph: Graph) -> Plan:
-    """Check the graph's streams and compute its plan; raise :class:`GraphErrors` on problems."""
+def compile_graph(graph: Graph, *, prune: bool = True) -> Plan:
+    """Check the graph's streams and compute its plan; raise :class:`GraphErrors` on problems.
+
+    ``prune=False`` keeps every node, output and connected input (nothing is skipped, ``pruned``
+    is empty): the forced-full plan ``flowtact bench skipping`` measures the pruned one against.
+    """
     errors: list[GraphError] = []
     order = _topo_order(graph, errors)
     if errors:
@@ -139,8 +143,10 @@ def compile_graph(graph: Graph) -> Plan:
         raise GraphErrors(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
 
     record, notes = _recordable(graph, specs)
-    active, demanded, needed, active_edges, pruning = _propagate_demand(
-        graph, order, blocks, incoming, record
+    active, demanded, needed, active_edges, pruning = (
+        _propagate_demand(graph, order, blocks, incoming, record)
+        if prune
+        else _everything(graph, order, incoming, specs)
     )
     ends = {
         n: end
@@ -303,6 +309,19 @@ def _node_seeds(graph: Graph) -> dict[str, int]:
         n: graph.nodes[n].seed if graph.nodes[n].seed is not None else node_seed(graph.seed, n)
         for n in graph.nodes
     }
+
+
+def _everything(
+    graph: Graph, order: list[str], incoming: Mapping[str, list[Edge]], specs: Mapping[Stream, StreamSpec]
+) -> tuple[list[str], dict[str, frozenset[str]], dict[str, frozenset[str]], list[Edge], list[str]]:
+    """The unpruned plan: every node active, every output that has a stream computed, every
+    connected input fed."""
+    demanded = {n: frozenset(p for p in graph.nodes[n].cls.outputs if (n, p) in specs) for n in order}
+    needed = {n: frozenset(e.dst_port for e in incoming.get(n, [])) for n in order}
+    edges = sorted(
+        (e for n in order for e in incoming.get(n, [])), key=lambda e: (order.index(e.dst), e.dst_port)
+    )
+    return list(order), demanded, needed, edges, []
 
 
 def _propagate_demand(

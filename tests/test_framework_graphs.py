@@ -65,6 +65,25 @@ def test_demand_propagation_prunes_dead_nodes_unused_outputs_and_zero_weight_inp
     assert "src" not in summary.counters  # Ramp counts the z chunks it computes: none
 
 
+def test_prune_false_keeps_every_node_output_and_input_and_records_the_same():
+    full = compile_graph(load(BASE), prune=False)
+    assert sorted(full.order) == ["add", "dbl", "dead", "src"] and full.pruned == [] and full.notes == []
+    assert full.needed["add"] == {"a", "b"} and full.demanded["src"] == {"y", "z"}
+    assert {(e.src, e.dst) for e in full.active_edges} == {("src", "dbl"), ("dbl", "add"), ("src", "add"),
+                                                            ("src", "dead")}  # fmt: skip
+    pruned = compile_graph(load(BASE))  # the default is unchanged
+    assert pruned.pruned == ["dead"] and pruned.needed["add"] == {"a"}
+    recs, sums = [], []
+    for plan in (pruned, full):
+        rec = Collect()
+        sums.append(InprocExecutor(plan, fast=True, tick_s=0.25, recorder=rec).run(2.0))
+        recs.append(rec)
+    for stream in ("add.y", "dbl.y"):
+        for a, b in zip(recs[0].joined(stream), recs[1].joined(stream), strict=True):
+            np.testing.assert_array_equal(a, b)  # wb = 0: the extra work changes nothing recorded
+    assert "src" not in sums[0].counters and sums[1].counters["src"]["z_chunks"] > 0  # z computed
+
+
 def test_nonzero_weight_demands_the_input_and_its_upstream_output():
     plan = compile_graph(load(BASE.replace("wb: 0.0", "wb: 0.5")))
     assert plan.needed["add"] == {"a", "b"}
