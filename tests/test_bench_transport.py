@@ -66,8 +66,9 @@ def test_cpu_sampler_reads_this_process_busy_time_over_the_window():
     slack = sampler.stall_s + 2 / measure.CLK_TCK
     outside = (end - start) / 1e9 - window
     assert used - outside - slack <= pct / 100 * window <= used + slack
-    # the steady window of a 0.3 s run holds no samples: no figure rather than a wrong one
-    late = measure.CpuSampler({"me": 1}, window=(1.0, 0.5))
+    # a steady window that the run never reached holds no samples: no figure rather than a wrong one
+    # (it starts after the run's end however long a loaded machine made the run)
+    late = measure.CpuSampler({"me": 1}, window=((end - start) / 1e9 + 1.0, 0.0))
     late.samples = sampler.samples
     assert late.cpu_pct(start, end) == {"me": None}
 

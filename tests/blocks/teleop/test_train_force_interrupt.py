@@ -41,7 +41,8 @@ def _recording(path, n=60, hw=(32, 64), seed=0):
 
 
 def _wait_for(stream, text, timeout=180.0):
-    """Lines read from ``stream`` (in a thread) until one contains ``text``; all lines so far."""
+    """``(lines, reader)``: lines read from ``stream`` by the ``reader`` thread, which goes on to the
+    end of the stream; returns once a line contains ``text``. Join the reader for every line."""
     lines: list[str] = []
     found = threading.Event()
 
@@ -52,9 +53,10 @@ def _wait_for(stream, text, timeout=180.0):
                 found.set()
         found.set()
 
-    threading.Thread(target=read, daemon=True).start()
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
     assert found.wait(timeout), f"no line with {text!r} within {timeout} s"
-    return lines
+    return lines, reader
 
 
 @pytest.mark.cli
@@ -70,14 +72,18 @@ def test_ctrl_c_saves_the_best_model_so_far_and_exits_0(tmp_path):
         text=True,
     )
     try:
-        lines = _wait_for(proc.stderr, "epoch 1:")  # the first epoch is done and reported
+        lines, reader = _wait_for(proc.stderr, "epoch 1:")  # the first epoch is done and reported
         assert proc.poll() is None, "".join(lines)
         proc.send_signal(signal.SIGINT)
-        stdout, _ = proc.communicate(timeout=180)
+        stdout = proc.stdout.read()  # to its end: the process has exited (its stdout is small)
+        proc.wait(timeout=180)
+        reader.join(timeout=60)  # stderr is the reader's alone (communicate would race it for lines)
     finally:
         if proc.poll() is None:
             proc.kill()
-            proc.communicate()
+            proc.wait()
+        proc.stdout.close()
+        proc.stderr.close()
     stderr = "".join(lines)
     assert proc.returncode == 0, stderr
     assert "Traceback" not in stderr and "stopping after this batch" in stderr
