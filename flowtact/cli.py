@@ -143,6 +143,11 @@ def _parser() -> argparse.ArgumentParser:
         "--json", action="store_true", help="print the run summary as JSON (progress on stderr)"
     )
     bench.add_argument("--out", default="bench-report", help="output folder (default: ./bench-report)")
+    bench.add_argument(
+        "--compare",
+        metavar="DIR",
+        help="an earlier run's output folder: say which ratios this run reproduces within its range",
+    )
     p.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     for sp in list(sub.choices.values()):  # also after the command: flowtact run --debug GRAPH
         sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
@@ -364,7 +369,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
     if args.list:
         return list_suites()
-    return run_suites(args.suites, args.quick, args.peers, Path(args.out), as_json=args.json)
+    compare = Path(args.compare) if args.compare else None
+    return run_suites(args.suites, args.quick, args.peers, Path(args.out), as_json=args.json, compare=compare)
 
 
 COMMANDS = {

@@ -172,3 +172,43 @@ def test_a_real_suite_runs_end_to_end_from_the_installed_package(tmp_path):
         and (tmp_path / "plots" / "savgol-error_vs_latency.png").exists()
     )
     assert "`flowtact bench savgol --quick`" in report
+
+
+def _fig(ratio, lo, hi):
+    return {"ratio": ratio, "ratio_range": [lo, hi]}
+
+
+def test_compare_holds_a_run_to_the_ratio_ranges_an_earlier_run_reported():
+    from flowtact.benchmark.compare import compare_records
+
+    before = {"s": {"figures": {"a": _fig(2.0, 1.8, 2.2), "b": _fig(0.5, 0.45, 0.55), "c": _fig(1, 1, 1)}}}
+    now = [
+        {"suite": "s", "figures": {"a": _fig(2.1, 2.0, 2.3), "b": _fig(0.6, 0.58, 0.7), "d": _fig(3, 3, 3)}}
+    ]
+    checks = {c.figure: c for c in compare_records(before, now)}
+    assert set(checks) == {"a", "b"}  # only figures with a ratio in both runs
+    assert checks["a"].within and checks["a"].overlaps
+    assert not checks["b"].within and not checks["b"].overlaps  # 0.58-0.7 misses 0.45-0.55
+
+
+@pytest.mark.usefixtures("suites")
+def test_a_second_run_compares_its_ratios_with_the_first(tmp_path, capsys):
+    first, second = tmp_path / "first", tmp_path / "second"
+    assert main(["bench", "toy_suite", "--quick", "--out", str(first)]) == 0
+    assert main(["bench", "toy_suite", "--quick", "--out", str(second), "--compare", str(first)]) == 0
+    out = capsys.readouterr().out
+    run = json.loads((second / "results" / "run.json").read_text())
+    repro = run["reproducibility"]
+    assert repro["ratios"] == 2 and repro["compared_with"] == str(first)  # builtin/loop and latency ours/base
+    assert repro["within_earlier_range"] <= repro["ranges_overlap"] <= 2
+    # the fixed figures (latency) reproduce exactly: at least that ratio is inside the earlier range
+    assert repro["within_earlier_range"] >= 1
+    report = (second / "REPORT.md").read_text()
+    assert "## Reproducibility" in report and f"Against the run in `{first}`" in report
+    assert f"ratios inside the range of {first}" in out
+
+
+@pytest.mark.usefixtures("suites")
+def test_compare_with_a_folder_that_is_not_a_run_is_a_usage_error(tmp_path, capsys):
+    assert main(["bench", "toy_suite", "--out", str(tmp_path / "o"), "--compare", str(tmp_path)]) == 2
+    assert "no results/ folder" in capsys.readouterr().err

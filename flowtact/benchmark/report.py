@@ -4,6 +4,7 @@ tables, plots and verdicts, the command that reproduces it, and where flowtact i
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -141,8 +142,10 @@ def _suite_section(r: dict[str, Any]) -> list[str]:
     return lines
 
 
-def write_report(out: Path, run: dict[str, Any], records: list[dict[str, Any]]) -> Path:
-    """Write OUT/REPORT.md and return its path."""
+def write_report(
+    out: Path, run: dict[str, Any], records: list[dict[str, Any]], extra: Sequence[str] = ()
+) -> Path:
+    """Write OUT/REPORT.md and return its path; ``extra`` lines (a comparison) follow the summary table."""
     m = run["machine"]
     v = ", ".join(f"{k} {x}" for k, x in m["versions"].items())
     lines = [
@@ -168,6 +171,7 @@ def write_report(out: Path, run: dict[str, Any], records: list[dict[str, Any]]) 
         lines.append(f"| [{r['suite']}](#{r['suite']}) | {r['status']} | {r['wall_s']:.1f} | "
                      f"{_load(r['load_before'])} → {_load(r['load_after'])} |")  # fmt: skip
     lines.append("")
+    lines += extra
     for r in records:
         lines += _suite_section(r)
     path = out / "REPORT.md"

@@ -117,9 +117,17 @@ def _write_plots(ctx: Context, out: Path) -> list[dict[str, Any]]:
 
 
 def run_suites(
-    names: Sequence[str], quick: bool, peers: bool, out: Path, as_json: bool = False, bar: bool | None = None
+    names: Sequence[str],
+    quick: bool,
+    peers: bool,
+    out: Path,
+    as_json: bool = False,
+    bar: bool | None = None,
+    compare: Path | None = None,
 ) -> int:
-    """Run the named suites (all when none) into ``out``; 0 all ran, 1 one failed, 2 an unknown name."""
+    """Run the named suites (all when none) into ``out``; 0 all ran, 1 one failed, 2 an unknown name
+    or an unreadable ``compare`` folder (an earlier run whose ratios this one is held to)."""
+    from flowtact.benchmark.compare import compare_records, load_results, report_lines
     from flowtact.benchmark.report import write_report
     from flowtact.params import did_you_mean
 
@@ -129,6 +137,11 @@ def run_suites(
         if n not in available:
             print(f"flowtact: unknown benchmark suite '{n}'{did_you_mean(n, available)}", file=sys.stderr)
             return 2
+    try:
+        before = load_results(compare) if compare is not None else None
+    except (OSError, ValueError) as e:
+        print(f"flowtact: --compare: {e}", file=sys.stderr)
+        return 2
     chosen = list(dict.fromkeys(names)) or list(available)
     out.mkdir(parents=True, exist_ok=True)
     run: dict[str, Any] = {
@@ -149,13 +162,29 @@ def run_suites(
     run["wall_s"] = round(time.perf_counter() - t0, 3)
     run["load_after"] = load_average()
     run["suites"] = {r["suite"]: r["status"] for r in records}
+    extra: list[str] = []
+    if before is not None and compare is not None:
+        checks = compare_records(before, records)
+        run["reproducibility"] = {
+            "compared_with": str(compare),
+            "ratios": len(checks),
+            "within_earlier_range": sum(c.within for c in checks),
+            "ranges_overlap": sum(c.overlaps for c in checks),
+        }
+        extra = report_lines(checks, compare)
     (out / "results").mkdir(parents=True, exist_ok=True)
     (out / "results" / "run.json").write_text(json.dumps(run, indent=1))
-    report = write_report(out, run, records)
+    report = write_report(out, run, records, extra)
     if as_json:
         print(json.dumps({**run, "report": str(report), "results": str(out / "results")}, indent=1))
     else:
         print(f"report: {report} ({run['wall_s']:.0f} s)")
+        if "reproducibility" in run:
+            r = run["reproducibility"]
+            print(
+                f"reproduced: {r['within_earlier_range']} of {r['ratios']} ratios inside the range of "
+                f"{compare} ({r['ranges_overlap']} ranges overlap)"
+            )
     return 1 if any(r["status"] == "failed" for r in records) else 0
 
 

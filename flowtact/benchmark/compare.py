@@ -1,0 +1,103 @@
+"""``flowtact bench --compare DIR``: does this run reproduce an earlier run's ratios within the spread
+that run reported? Ratios (against a baseline measured in the same run) are what a report claims,
+so they are what a second run is held to; absolute figures move with the machine's load."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["RatioCheck", "compare_records", "load_results", "report_lines"]
+
+
+@dataclass(frozen=True)
+class RatioCheck:
+    """One figure's ratio now against the same figure's ratio and reported range before."""
+
+    suite: str
+    figure: str
+    before: float
+    before_range: tuple[float, float]
+    now: float
+    now_range: tuple[float, float] | None
+
+    @property
+    def within(self) -> bool:
+        """This run's ratio lies inside the range the earlier report gave."""
+        lo, hi = self.before_range
+        return lo <= self.now <= hi
+
+    @property
+    def overlaps(self) -> bool:
+        """The two runs' ranges share a value (each run's spread allowed for)."""
+        lo, hi = self.before_range
+        a, b = self.now_range or (self.now, self.now)
+        return a <= hi and lo <= b
+
+
+def load_results(folder: Path) -> dict[str, dict[str, Any]]:
+    """The per-suite results of an earlier run: ``folder/results/<suite>.json`` (``run.json`` aside)."""
+    results = folder / "results"
+    if not results.is_dir():
+        raise FileNotFoundError(f"{folder}: no results/ folder (an output folder of flowtact bench)")
+    out = {}
+    for path in sorted(results.glob("*.json")):
+        if path.name != "run.json":
+            rec = json.loads(path.read_text())
+            out[rec.get("suite", path.stem)] = rec
+    return out
+
+
+def compare_records(before: dict[str, dict[str, Any]], now: list[dict[str, Any]]) -> list[RatioCheck]:
+    """Every figure with a ratio in both runs (same suite, same key)."""
+    checks = []
+    for rec in now:
+        old = before.get(rec["suite"], {}).get("figures", {})
+        for key, fig in rec.get("figures", {}).items():
+            prev = old.get(key)
+            if not prev or prev.get("ratio") is None or fig.get("ratio") is None:
+                continue
+            prev_range = prev.get("ratio_range") or (prev["ratio"], prev["ratio"])
+            now_range = fig.get("ratio_range")
+            checks.append(
+                RatioCheck(
+                    rec["suite"],
+                    key,
+                    float(prev["ratio"]),
+                    (float(prev_range[0]), float(prev_range[1])),
+                    float(fig["ratio"]),
+                    (float(now_range[0]), float(now_range[1])) if now_range else None,
+                )
+            )
+    return checks
+
+
+def report_lines(checks: list[RatioCheck], folder: Path) -> list[str]:
+    """The REPORT.md section: counts, then every ratio outside the earlier range."""
+    if not checks:
+        return ["## Reproducibility", "", f"No figure of this run has a ratio in `{folder}` to compare.", ""]
+    within = sum(c.within for c in checks)
+    overlap = sum(c.overlaps for c in checks)
+    lines = [
+        "## Reproducibility",
+        "",
+        f"Against the run in `{folder}`: {within} of {len(checks)} ratios lie inside the range that run "
+        f"reported; {overlap} of {len(checks)} ranges overlap.",
+        "",
+    ]
+    outside = [c for c in checks if not c.within]
+    if outside:
+        lines += [
+            "| suite | figure | before (range) | now (range) | ranges overlap |",
+            "|---|---|---|---|---|",
+        ]
+        for c in outside:
+            now_range = f"{c.now_range[0]:.3g}–{c.now_range[1]:.3g}" if c.now_range else "—"
+            lines.append(
+                f"| {c.suite} | {c.figure} | {c.before:.3g} ({c.before_range[0]:.3g}–{c.before_range[1]:.3g}) "
+                f"| {c.now:.3g} ({now_range}) | {'yes' if c.overlaps else 'no'} |"
+            )
+        lines.append("")
+    return lines
