@@ -82,6 +82,26 @@ class Scale(Block):
         return Example(inputs={"x": np.ones((10, 2))})
 
 
+class Closable(Scale):
+    """y = gain · x, refusing to step or flush once closed (a model or device released in close)."""
+
+    def reset(self):
+        self.closed = False
+
+    def step(self, x):
+        if self.closed:
+            raise RuntimeError("stepped after close()")
+        return super().step(x)
+
+    def flush(self):
+        if self.closed:
+            raise RuntimeError("flushed after close()")
+        return super().flush()
+
+    def close(self):
+        self.closed = True
+
+
 @dataclass(frozen=True)
 class AddConfig(Config):
     wb: float = param(1.0, doc="weight of b (0: b is not needed)")

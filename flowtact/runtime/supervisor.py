@@ -488,9 +488,8 @@ class ProcessExecutor:
         if beat["node"] is None or beat["node"] != old.get("node") or beat["steps"] != old.get("steps"):
             proc.busy_since = now  # waiting, or a new step: progress
             proc.silent_mark = None
-        if old and now > proc.beat_at:  # ticks per second, for where a stop can reach it
-            rate = max(beat["k"] - old["k"], 0) / (now - proc.beat_at)
-            proc.tick_rate = max(rate, 0.5 * proc.tick_rate)  # slow to forget a fast spell
+        if old:  # ticks per second, for where a stop can reach it
+            proc.tick_rate = max(_tick_rate(old, beat), 0.5 * proc.tick_rate)  # slow to forget a fast spell
         proc.beat, proc.beat_at = beat, now
         proc.last_k = max(proc.last_k, beat["k"])
 
@@ -862,6 +861,14 @@ class _Failure(Exception):
     def __init__(self, proc: _Proc, report: dict[str, Any]) -> None:
         self.proc, self.report = proc, report
         super().__init__(report.get("message", ""))
+
+
+def _tick_rate(old: dict[str, Any], beat: dict[str, Any]) -> float:
+    """Ticks per second between two heartbeats, timed by the worker that sent them: on a loaded
+    machine beats queue and arrive together, and their arrival times would make a rate of
+    millions of ticks per second (and a stop tick minutes ahead of every worker)."""
+    dt = (beat.get("sent_ns", 0) - old.get("sent_ns", 0)) / 1e9
+    return max(beat["k"] - old["k"], 0) / dt if dt > 0 else 0.0
 
 
 def describe_failure(proc: _Proc, report: dict[str, Any]) -> str:

@@ -69,6 +69,9 @@ LATEST_DRAIN_MS = 1
 what ZeroMQ still moves in from the kernel: what reaches the consumer is the newest, not the oldest."""
 MERGE_MAX_S = 0.1
 """A worker behind the wall clock merges at most this much graph time into one tick."""
+STOP_MERGE_MAX_S = 1.0
+"""... and this much once a stop is asked: a run far behind real time (an overloaded machine) then
+drains its backlog to the stop tick in a tenth of the ticks, within ``stop_grace_s``."""
 INF = math.inf
 FOREVER = 2**62
 
@@ -232,9 +235,9 @@ class Worker:
                 self.warm_ns = self.t0_ns + int(LATENCY_WARMUP_S * 1e9)
                 self.k = int(start.get("k0", 0))
                 self._run(resume=bool(start.get("resume")))
+                self._finish()  # steps and flushes the blocks once more: before they are closed
             finally:
                 self._close_blocks()
-            self._finish()
             self._expect("exit")
             return 0
         except Stop:
@@ -443,7 +446,8 @@ class Worker:
             return
         self.lag_s = behind * self.tick_s
         self.max_lag_s = max(self.max_lag_s, self.lag_s)
-        step = max(1, int(MERGE_MAX_S / self.tick_s))  # bounded chunks: a slow consumer stays bounded
+        merge_s = MERGE_MAX_S if self.stop_k == FOREVER else STOP_MERGE_MAX_S
+        step = max(1, int(merge_s / self.tick_s))  # bounded chunks: a slow consumer stays bounded
         k = min(self.k + min(behind, step), self.stop_k, self.n_ticks or FOREVER)
         self.merged_ticks += k - self.k
         self.k = k
@@ -745,6 +749,7 @@ class _Heartbeat:
                     "node": w.busy,
                     "first": w.busy_first,
                     "lag_s": w.lag_s,
+                    "sent_ns": time.monotonic_ns(),  # rates from the sender's clock, not arrivals
                 }
                 with contextlib.suppress(zmq.Again):
                     sock.send(msgpack.packb(beat), zmq.NOBLOCK)
