@@ -7,7 +7,9 @@ Measures, in one run, the same source -> stage -> sink pipeline (each in its own
      in real time: latency from the sensor's stamp to arrival 2 hops later, CPU per process;
   c. flowtact --fast (lossless backpressure) throughput of bench/graphs/fast.yaml, small and image;
   d. with --peers: the pipeline in Timeflux and ezmsg (bench/peers/), each pip-installed into a
-     throw-away venv under ~/.cache/flowtact-bench/ (made on first use, then reused).
+     throw-away venv under ~/.cache/flowtact-bench/ (made on first use, then reused);
+  e. tick x samples per message in real time, flowtact's fast.yaml and raw pyzmq side by side:
+     latency p50/p99 and CPU per process against tick (bench/transport_sweep.py).
 Records every figure with its ratio to raw pyzmq, and issue 3's targets as pass/fail.
 """
 
@@ -26,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from flowtact.bench import transport_sweep as sweep
 from flowtact.bench.peers import raw
 from flowtact.bench.peers.measure import CpuSampler, summarize
 from flowtact.benchmark import Context, Suite
@@ -55,7 +58,7 @@ class ContractError(RuntimeError):
 
 def durations(quick: bool) -> dict[str, float]:
     """Seconds of each kind of run: paced latency and flat-out throughput."""
-    return {"paced": 3.0 if quick else 10.0, "flat": 2.0 if quick else 5.0}
+    return {"paced": 2.0 if quick else 10.0, "flat": 2.0 if quick else 5.0}
 
 
 # -- a. raw pyzmq -----------------------------------------------------------------------------
@@ -217,6 +220,26 @@ def bench_fast(payload: str, quick: bool) -> dict[str, Any]:
         "sizing_runs": [{k: r[k] for k in ("messages", "samples", "wall_s")} for r in runs[:-1]],
         "summary": main["summary"],
     }
+
+
+# -- e. tick x samples per message ---------------------------------------------------------------
+
+
+def _checked_run(graph: Path, duration: float, tick: float, **kw: Any) -> dict[str, Any]:
+    s = flowtact_run(graph, duration, tick, **kw)
+    check_contract(s, (FAST_STREAM,), 3)
+    return s
+
+
+def bench_sweep(quick: bool, step: Any = print) -> dict[str, Any]:
+    """e. Each (tick, samples per message) for flowtact and raw pyzmq, one after the other."""
+    secs = sweep.seconds(quick)
+    pts: dict[str, list[dict[str, Any]]] = {"flowtact": [], "raw pyzmq": []}
+    for tick, chunk in sweep.settings(quick):
+        step(f"sweep: tick {tick * 1e3:g} ms, {chunk} samples/message")
+        pts["flowtact"].append(sweep.flowtact_point(_checked_run, FAST, FAST_STREAM, tick, chunk, secs))
+        pts["raw pyzmq"].append(sweep.raw_point(tick, chunk, secs))
+    return {"seconds": secs, "points": pts}
 
 
 # -- d. peers ---------------------------------------------------------------------------------
@@ -454,6 +477,47 @@ def record_peers(ctx: Context, peers: dict[str, Any]) -> None:
                 ctx.note(f"{name} {key}: {p[key]['error'].splitlines()[0]}")
 
 
+def record_sweep(ctx: Context, sw: dict[str, Any]) -> None:
+    """e. The sweep's table, its two plots, and p99 figures at the shipped default tick against raw's."""
+    pts = sw["points"]
+    ctx.table(
+        "Tick × samples per message, real time, 3 processes (source → stage → sink)",
+        [
+            "stack",
+            "tick (ms)",
+            "samples/msg",
+            "measured samples/msg",
+            "p50 (µs)",
+            "p99 (µs)",
+            "p99 / raw p99",
+            *(f"CPU {r} (% core)" for r in sweep.ROLES),
+        ],
+        sweep.sweep_rows(pts),
+        note=f"{sw['seconds']:g} s per run; flowtact: bench/graphs/fast.yaml in real time (--tick T, "
+        "--set source.rate_hz=samples/T); raw pyzmq: the same samples per message every T.",
+    )
+    ctx.plot("transport_latency_vs_tick", sweep.draw_latency(pts),
+             "Latency (source stamp → arrival in the sink process, 2 hops) against tick, one line per samples "
+             "per message; solid flowtact, dashed raw pyzmq in the same run; dotted: the shipped 5 ms tick.")  # fmt: skip
+    ctx.plot("transport_cpu_vs_tick", sweep.draw_cpu(pts),
+             "CPU of each process (% of one core) against tick, one line per samples per message; solid "
+             "flowtact, dashed raw pyzmq in the same run; dotted: the shipped 5 ms tick.")  # fmt: skip
+    base = {(p["tick_s"], p["chunk"]): p for p in pts["raw pyzmq"]}
+    for p in pts["flowtact"]:
+        b = base.get((p["tick_s"], p["chunk"]))
+        if (
+            p["tick_s"] != sweep.DEFAULT_TICK_S
+            or b is None
+            or None in (p["latency_us"]["p99"], b["latency_us"]["p99"])
+        ):
+            continue
+        label = f"tick 5 ms (default), {p['chunk']} samples/msg, p99 latency"
+        ctx.figure(f"raw pyzmq, {label}", b["latency_us"]["p99"], "µs", "lower", is_baseline=True)
+        ctx.figure(
+            f"flowtact, {label}", p["latency_us"]["p99"], "µs", "lower", baseline=f"raw pyzmq, {label}"
+        )
+
+
 def run(ctx: Context) -> None:
     res: dict[str, Any] = {"durations_s": durations(ctx.quick)}
     res["raw"] = bench_raw(ctx.quick, ctx.step)
@@ -465,6 +529,8 @@ def run(ctx: Context) -> None:
         ctx.step(f"flowtact --fast {p}")
         res["fast"][p] = bench_fast(p, ctx.quick)
     record_flowtact(ctx, res["chain"], res["fast"])
+    res["sweep"] = bench_sweep(ctx.quick, ctx.step)
+    record_sweep(ctx, res["sweep"])
     if ctx.peers:
         ctx.step("peers (ezmsg, Timeflux)")
         res["peers"] = bench_peers(ctx.quick)
