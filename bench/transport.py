@@ -18,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -31,13 +30,13 @@ import numpy as np
 from flowtact.bench import transport_sweep as sweep
 from flowtact.bench.peers import raw
 from flowtact.bench.peers.measure import CpuSampler, summarize
+from flowtact.bench.peers.venv import VENVS, venv_python
 from flowtact.benchmark import Context, Suite
 
 BENCH = Path(__file__).resolve().parent
 CHAIN = BENCH / "graphs" / "chain.yaml"
 FAST = BENCH / "graphs" / "fast.yaml"
 PEER_DIR = BENCH / "peers"
-VENVS = Path.home() / ".cache" / "flowtact-bench"
 PEERS: dict[str, dict[str, Any]] = {
     "ezmsg": {"packages": ["ezmsg", "numpy"], "module": "ezmsg.core", "script": "ezmsg_pipe.py"},
     "timeflux": {"packages": ["timeflux"], "module": "timeflux.core.manager", "script": "timeflux_pipe.py"},
@@ -58,7 +57,7 @@ class ContractError(RuntimeError):
 
 def durations(quick: bool) -> dict[str, float]:
     """Seconds of each kind of run: paced latency and flat-out throughput."""
-    return {"paced": 2.0 if quick else 10.0, "flat": 2.0 if quick else 5.0}
+    return {"paced": 2.0 if quick else 10.0, "flat": 1.5 if quick else 5.0}
 
 
 # -- a. raw pyzmq -----------------------------------------------------------------------------
@@ -248,31 +247,7 @@ def bench_sweep(quick: bool, step: Any = print) -> dict[str, Any]:
 def peer_python(name: str) -> Path | None:
     """The venv Python for a peer, creating the venv on first use; None (with a message) if pip fails."""
     spec = PEERS[name]
-    venv = VENVS / name
-    py = venv / "bin" / "python"
-    if (
-        py.exists()
-        and subprocess.run([py, "-c", f"import {spec['module']}"], capture_output=True).returncode == 0
-    ):
-        return py
-    print(f"   creating {venv} (pip install {' '.join(spec['packages'])}) ...", file=sys.stderr, flush=True)
-    shutil.rmtree(venv, ignore_errors=True)
-    venv.parent.mkdir(parents=True, exist_ok=True)
-    steps = [
-        [sys.executable, "-m", "venv", str(venv)],
-        [str(py), "-m", "pip", "install", "--disable-pip-version-check", "-q", *spec["packages"]],
-    ]
-    for cmd in steps:
-        r = subprocess.run(cmd, capture_output=True, text=True)
-        if r.returncode != 0:
-            tail = "\n".join((r.stderr or r.stdout).strip().splitlines()[-5:])
-            print(
-                f"   {name}: '{' '.join(cmd[:4])} ...' failed, skipping {name}:\n{tail}",
-                file=sys.stderr,
-                flush=True,
-            )
-            return None
-    return py
+    return venv_python(name, spec["packages"], spec["module"], VENVS)
 
 
 def run_peer(py: Path, name: str, payload: str, seconds: float, rate_hz: float | None) -> dict[str, Any]:
