@@ -491,6 +491,13 @@ def record_sweep(ctx: Context, sw: dict[str, Any]) -> None:
         ctx.figure(
             f"flowtact, {label}", p["latency_us"]["p99"], "µs", "lower", baseline=f"raw pyzmq, {label}"
         )
+    ctx.note(
+        "Tick sweep CPU: flowtact's figures are the runtime's own (each process's CPU time after its warm-up "
+        "over the wall time since); raw pyzmq's come from the suite's CpuSampler (/proc clock ticks over the run "
+        f"less its first {sweep.RAW_CPU_WINDOW[0]:g} s and last {sweep.RAW_CPU_WINDOW[1]:g} s: steps of "
+        f"{sweep.raw_cpu_step_pct(sw['seconds']):.2g} % of a core). Each setting is one run: on a loaded machine "
+        "a p99 of a few hundred messages is one scheduling hiccup away from the next."
+    )
 
 
 def run(ctx: Context) -> None:
@@ -532,9 +539,10 @@ SUITE = Suite(
     title="Transport: processes over ZeroMQ against raw pyzmq (and, with --peers, ezmsg and Timeflux)",
     measures="The same source → stage → sink pipeline, each stage in its own process: latency p50/p99 at 1 kHz "
     "(emission to arrival two hops later), CPU of the busiest process, and lossless flat-out throughput of "
-    "small samples and 240×320 frames; flowtact's bench/graphs/chain.yaml and fast.yaml.",
+    "small samples and 240×320 frames; flowtact's bench/graphs/chain.yaml and fast.yaml; and latency p50/p99 and "
+    "CPU per process against tick × samples per message in real time.",
     baseline="raw pyzmq with flowtact's wire format (ipc PUSH/PULL, HWM 1000, blocking), bench/peers/raw.py",
     run=run,
     minutes_quick=1.5,
-    minutes_full=3.0,
+    minutes_full=5.0,
 )
