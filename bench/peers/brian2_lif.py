@@ -5,7 +5,8 @@
 IN holds ``u`` (the drive, one value per step), ``gains`` (one per neuron), ``tau_s`` and ``dt_s``;
 the model is ``dv/dt = (-v + gain u(t)) / tau``, threshold ``v > 1``, reset ``v = 0``, exact
 integration. Every repeat builds and runs the network (two warm-ups first: the first compiles, and
-the first rerun still pays something more; the cache serves the rest). OUT gets each repeat's seconds, the last run's spikes as step numbers and neuron
+the first rerun still pays something more; the cache serves the rest). OUT gets each repeat's seconds
+in ``Network.run``, the last run's spikes as step numbers and neuron
 indices, the code-generation target used and Brian2's version. It needs no flowtact, so it runs
 in a throw-away venv too (bench/peers/venv.py).
 """
@@ -21,8 +22,11 @@ import brian2 as b2
 import numpy as np
 
 
-def run_once(u: np.ndarray, gains: np.ndarray, tau_s: float, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """One build-and-run of the population; its spikes as (step numbers, neuron indices)."""
+def run_once(
+    u: np.ndarray, gains: np.ndarray, tau_s: float, dt_s: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """One build-and-run of the population: its spikes as (step numbers, neuron indices), and the seconds
+    ``Network.run`` took (Brian2's per-run code preparation included, building the network not)."""
     b2.start_scope()
     b2.defaultclock.dt = dt_s * b2.second
     drive = b2.TimedArray(u, dt=dt_s * b2.second)
@@ -30,9 +34,12 @@ def run_once(u: np.ndarray, gains: np.ndarray, tau_s: float, dt_s: float) -> tup
                            reset="v = 0", method="exact", namespace={"drive": drive, "tau": tau_s * b2.second})  # fmt: skip
     group.gain = gains
     mon = b2.SpikeMonitor(group)
-    b2.Network(group, mon).run(len(u) * dt_s * b2.second, namespace={})
+    net = b2.Network(group, mon)
+    t0 = time.perf_counter()
+    net.run(len(u) * dt_s * b2.second, namespace={})
+    secs = time.perf_counter() - t0
     steps = np.round(np.asarray(mon.t / b2.second) / dt_s).astype(np.int64)
-    return steps, np.asarray(mon.i, np.int64)
+    return steps, np.asarray(mon.i, np.int64), secs
 
 
 def main() -> None:
@@ -49,12 +56,11 @@ def main() -> None:
         Path(tempfile.gettempdir()) / "flowtact-bench-brian2-cython"
     )
     for _ in range(2):  # warm-ups: compiling, then the first rerun's extra cost
-        steps, idx = run_once(u, gains, tau_s, dt_s)
+        steps, idx, _ = run_once(u, gains, tau_s, dt_s)
     secs = []
     for _ in range(a.repeats):
-        t0 = time.perf_counter()
-        steps, idx = run_once(u, gains, tau_s, dt_s)
-        secs.append(time.perf_counter() - t0)
+        steps, idx, s = run_once(u, gains, tau_s, dt_s)
+        secs.append(s)
     np.savez(a.out, secs=np.asarray(secs), steps=steps, idx=idx, target=a.target, version=b2.__version__)
 
 

@@ -231,7 +231,7 @@ def brian2_python() -> tuple[Path | None, str]:
 def brian2_run(
     py: Path, n: int, duration_s: float, repeats: int, rate: float = 1000.0, target: str = "cython"
 ) -> dict:
-    """Seconds per build-and-run of the population in Brian2 (bench/peers/brian2_lif.py run by ``py``),
+    """Seconds per ``Network.run`` of the population in Brian2 (bench/peers/brian2_lif.py run by ``py``),
     and its spikes as step numbers and neuron indices."""
     u = drive(round(duration_s * rate), rate)
     env = dict(os.environ)
@@ -292,8 +292,11 @@ def run_brian2(ctx: Context) -> None:
     ctx.check(f"same spikes as Brian2 (exp vs Brian2 'exact', N={n}, {dur:g} s at 1 kHz): every (step, neuron) pair",
               agree["identical"], f"{agree['common']} common, {agree['only_flowtact']} only flowtact's, "
               f"{agree['only_brian2']} only Brian2's")  # fmt: skip
-    ctx.note(f"Brian2 ran from {where}. Its figure times a whole build-and-run of the network per repeat (after a "
-             "compiling warm-up), flowtact's the block's calls on 1000-sample chunks.")  # fmt: skip
+    ctx.note(f"Brian2 {b['version']} ({b['target']}) ran from {where}, in its own process, on the same population, "
+             "drive and dt. Its figure times Network.run per repeat (after two warm-ups that compile; Brian2's "
+             "per-run code preparation included, building the network not), flowtact's the block's calls on "
+             "1000-sample chunks. Agreement is exact or a failed check: the same (step, neuron) spike pairs, no "
+             "tolerance.")  # fmt: skip
 
 
 def run_throughput(ctx: Context) -> None:
