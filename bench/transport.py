@@ -7,7 +7,9 @@ Measures, in one run, the same source -> stage -> sink pipeline (each in its own
      in real time: latency from the sensor's stamp to arrival 2 hops later, CPU per process;
   c. flowtact --fast (lossless backpressure) throughput of bench/graphs/fast.yaml, small and image;
   d. with --peers: the pipeline in Timeflux and ezmsg (bench/peers/), each pip-installed into a
-     throw-away venv under ~/.cache/flowtact-bench/ (made on first use, then reused).
+     throw-away venv under ~/.cache/flowtact-bench/ (made on first use, then reused);
+  e. tick x samples per message in real time, flowtact's fast.yaml and raw pyzmq side by side:
+     latency p50/p99 and CPU per process against tick (bench/transport_sweep.py).
 Records every figure with its ratio to raw pyzmq, and issue 3's targets as pass/fail.
 """
 
@@ -16,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -26,15 +27,16 @@ from typing import Any
 
 import numpy as np
 
+from flowtact.bench import transport_sweep as sweep
 from flowtact.bench.peers import raw
 from flowtact.bench.peers.measure import CpuSampler, summarize
+from flowtact.bench.peers.venv import VENVS, venv_python
 from flowtact.benchmark import Context, Suite
 
 BENCH = Path(__file__).resolve().parent
 CHAIN = BENCH / "graphs" / "chain.yaml"
 FAST = BENCH / "graphs" / "fast.yaml"
 PEER_DIR = BENCH / "peers"
-VENVS = Path.home() / ".cache" / "flowtact-bench"
 PEERS: dict[str, dict[str, Any]] = {
     "ezmsg": {"packages": ["ezmsg", "numpy"], "module": "ezmsg.core", "script": "ezmsg_pipe.py"},
     "timeflux": {"packages": ["timeflux"], "module": "timeflux.core.manager", "script": "timeflux_pipe.py"},
@@ -55,7 +57,7 @@ class ContractError(RuntimeError):
 
 def durations(quick: bool) -> dict[str, float]:
     """Seconds of each kind of run: paced latency and flat-out throughput."""
-    return {"paced": 3.0 if quick else 10.0, "flat": 2.0 if quick else 5.0}
+    return {"paced": 2.0 if quick else 10.0, "flat": 1.5 if quick else 5.0}
 
 
 # -- a. raw pyzmq -----------------------------------------------------------------------------
@@ -219,37 +221,33 @@ def bench_fast(payload: str, quick: bool) -> dict[str, Any]:
     }
 
 
+# -- e. tick x samples per message ---------------------------------------------------------------
+
+
+def _checked_run(graph: Path, duration: float, tick: float, **kw: Any) -> dict[str, Any]:
+    s = flowtact_run(graph, duration, tick, **kw)
+    check_contract(s, (FAST_STREAM,), 3)
+    return s
+
+
+def bench_sweep(quick: bool, step: Any = print) -> dict[str, Any]:
+    """e. Each (tick, samples per message) for flowtact and raw pyzmq, one after the other."""
+    secs = sweep.seconds(quick)
+    pts: dict[str, list[dict[str, Any]]] = {"flowtact": [], "raw pyzmq": []}
+    for tick, chunk in sweep.settings(quick):
+        step(f"sweep: tick {tick * 1e3:g} ms, {chunk} samples/message")
+        pts["flowtact"].append(sweep.flowtact_point(_checked_run, FAST, FAST_STREAM, tick, chunk, secs))
+        pts["raw pyzmq"].append(sweep.raw_point(tick, chunk, secs))
+    return {"seconds": secs, "points": pts}
+
+
 # -- d. peers ---------------------------------------------------------------------------------
 
 
 def peer_python(name: str) -> Path | None:
     """The venv Python for a peer, creating the venv on first use; None (with a message) if pip fails."""
     spec = PEERS[name]
-    venv = VENVS / name
-    py = venv / "bin" / "python"
-    if (
-        py.exists()
-        and subprocess.run([py, "-c", f"import {spec['module']}"], capture_output=True).returncode == 0
-    ):
-        return py
-    print(f"   creating {venv} (pip install {' '.join(spec['packages'])}) ...", file=sys.stderr, flush=True)
-    shutil.rmtree(venv, ignore_errors=True)
-    venv.parent.mkdir(parents=True, exist_ok=True)
-    steps = [
-        [sys.executable, "-m", "venv", str(venv)],
-        [str(py), "-m", "pip", "install", "--disable-pip-version-check", "-q", *spec["packages"]],
-    ]
-    for cmd in steps:
-        r = subprocess.run(cmd, capture_output=True, text=True)
-        if r.returncode != 0:
-            tail = "\n".join((r.stderr or r.stdout).strip().splitlines()[-5:])
-            print(
-                f"   {name}: '{' '.join(cmd[:4])} ...' failed, skipping {name}:\n{tail}",
-                file=sys.stderr,
-                flush=True,
-            )
-            return None
-    return py
+    return venv_python(name, spec["packages"], spec["module"], VENVS)
 
 
 def run_peer(py: Path, name: str, payload: str, seconds: float, rate_hz: float | None) -> dict[str, Any]:
@@ -454,6 +452,54 @@ def record_peers(ctx: Context, peers: dict[str, Any]) -> None:
                 ctx.note(f"{name} {key}: {p[key]['error'].splitlines()[0]}")
 
 
+def record_sweep(ctx: Context, sw: dict[str, Any]) -> None:
+    """e. The sweep's table, its two plots, and p99 figures at the shipped default tick against raw's."""
+    pts = sw["points"]
+    ctx.table(
+        "Tick × samples per message, real time, 3 processes (source → stage → sink)",
+        [
+            "stack",
+            "tick (ms)",
+            "samples/msg",
+            "measured samples/msg",
+            "p50 (µs)",
+            "p99 (µs)",
+            "p99 / raw p99",
+            *(f"CPU {r} (% core)" for r in sweep.ROLES),
+        ],
+        sweep.sweep_rows(pts),
+        note=f"{sw['seconds']:g} s per run; flowtact: bench/graphs/fast.yaml in real time (--tick T, "
+        "--set source.rate_hz=samples/T); raw pyzmq: the same samples per message every T.",
+    )
+    ctx.plot("transport_latency_vs_tick", sweep.draw_latency(pts),
+             "Latency (source stamp → arrival in the sink process, 2 hops) against tick, one line per samples "
+             "per message; solid flowtact, dashed raw pyzmq in the same run; dotted: the shipped 5 ms tick.")  # fmt: skip
+    ctx.plot("transport_cpu_vs_tick", sweep.draw_cpu(pts),
+             "CPU of each process (% of one core) against tick, one line per samples per message; solid "
+             "flowtact, dashed raw pyzmq in the same run; dotted: the shipped 5 ms tick.")  # fmt: skip
+    base = {(p["tick_s"], p["chunk"]): p for p in pts["raw pyzmq"]}
+    for p in pts["flowtact"]:
+        b = base.get((p["tick_s"], p["chunk"]))
+        if (
+            p["tick_s"] != sweep.DEFAULT_TICK_S
+            or b is None
+            or None in (p["latency_us"]["p99"], b["latency_us"]["p99"])
+        ):
+            continue
+        label = f"tick 5 ms (default), {p['chunk']} samples/msg, p99 latency"
+        ctx.figure(f"raw pyzmq, {label}", b["latency_us"]["p99"], "µs", "lower", is_baseline=True)
+        ctx.figure(
+            f"flowtact, {label}", p["latency_us"]["p99"], "µs", "lower", baseline=f"raw pyzmq, {label}"
+        )
+    ctx.note(
+        "Tick sweep CPU: flowtact's figures are the runtime's own (each process's CPU time after its warm-up "
+        "over the wall time since); raw pyzmq's come from the suite's CpuSampler (/proc clock ticks over the run "
+        f"less its first {sweep.RAW_CPU_WINDOW[0]:g} s and last {sweep.RAW_CPU_WINDOW[1]:g} s: steps of "
+        f"{sweep.raw_cpu_step_pct(sw['seconds']):.2g} % of a core). Each setting is one run: on a loaded machine "
+        "a p99 of a few hundred messages is one scheduling hiccup away from the next."
+    )
+
+
 def run(ctx: Context) -> None:
     res: dict[str, Any] = {"durations_s": durations(ctx.quick)}
     res["raw"] = bench_raw(ctx.quick, ctx.step)
@@ -465,6 +511,8 @@ def run(ctx: Context) -> None:
         ctx.step(f"flowtact --fast {p}")
         res["fast"][p] = bench_fast(p, ctx.quick)
     record_flowtact(ctx, res["chain"], res["fast"])
+    res["sweep"] = bench_sweep(ctx.quick, ctx.step)
+    record_sweep(ctx, res["sweep"])
     if ctx.peers:
         ctx.step("peers (ezmsg, Timeflux)")
         res["peers"] = bench_peers(ctx.quick)
@@ -491,9 +539,10 @@ SUITE = Suite(
     title="Transport: processes over ZeroMQ against raw pyzmq (and, with --peers, ezmsg and Timeflux)",
     measures="The same source → stage → sink pipeline, each stage in its own process: latency p50/p99 at 1 kHz "
     "(emission to arrival two hops later), CPU of the busiest process, and lossless flat-out throughput of "
-    "small samples and 240×320 frames; flowtact's bench/graphs/chain.yaml and fast.yaml.",
+    "small samples and 240×320 frames; flowtact's bench/graphs/chain.yaml and fast.yaml; and latency p50/p99 and "
+    "CPU per process against tick × samples per message in real time.",
     baseline="raw pyzmq with flowtact's wire format (ipc PUSH/PULL, HWM 1000, blocking), bench/peers/raw.py",
     run=run,
     minutes_quick=1.5,
-    minutes_full=3.0,
+    minutes_full=5.0,
 )

@@ -176,3 +176,71 @@ def test_bench_graphs_place_three_processes(name):
     plan = compile_graph(graph)
     assert not plan.pruned
     assert len({graph.nodes[n].process for n in graph.nodes}) == 3
+
+
+# -- part e: tick x samples per message --------------------------------------------------------------
+
+sweep = transport.sweep
+
+
+def test_raw_carries_several_samples_per_message_at_the_message_rate():
+    r = raw.run_pipeline(
+        "small", 0.2, 10_000.0, per_message=10, drop_s=0.0, cpu_window=(0.0, 0.0), cpu_period_s=0.05
+    )
+    assert r["sent"] == r["received"] == 200  # 2000 samples in 200 messages of 10, one every ms
+    assert r["payload_ok"] and r["per_message"] == 10  # message k held samples 10k.. as 2 x their index
+    with pytest.raises(ValueError, match="per_message"):
+        raw.run_pipeline("image", 0.1, 40.0, per_message=2)
+    with pytest.raises(ValueError, match="per_message"):
+        raw.run_pipeline("small", 0.1, None, per_message=2)
+
+
+def test_sweep_settings_put_the_chunk_in_each_ticks_message():
+    full = sweep.settings(quick=False)
+    assert len(full) == 12 and len(set(full)) == 12
+    assert {t for t, _ in full} == {0.001, 0.002, 0.005, 0.01} and {c for _, c in full} == {1, 10, 100}
+    assert set(sweep.settings(quick=True)) <= set(full)
+    assert any(t == sweep.DEFAULT_TICK_S for t, _ in sweep.settings(quick=True))
+    assert sweep.source_rate_hz(0.005, 10) == pytest.approx(2000.0)
+    assert sweep.source_rate_hz(0.001, 100) == pytest.approx(100_000.0)
+    # one clock tick (10 ms at 100 Hz) over a 1.25 s window is 0.8 % of a core
+    assert sweep.raw_cpu_step_pct(2.0) == pytest.approx(100 / measure.CLK_TCK / 1.25)
+
+
+def _point(tick, chunk, p99, cpu=1.0):
+    lat = {"p50": p99 / 2, "p99": p99, "max": p99, "n": 10}
+    return {"tick_s": tick, "chunk": chunk, "latency_us": lat, "samples_per_message": chunk,
+            "cpu_pct": {"source": cpu, "stage": None, "sink": cpu}}  # fmt: skip
+
+
+def test_sweep_rows_compare_each_setting_with_raws_same_setting():
+    pts = {
+        "flowtact": [_point(0.001, 1, 300.0), _point(0.005, 10, 900.0), _point(0.01, 1, 50.0)],
+        "raw pyzmq": [_point(0.005, 10, 300.0), _point(0.001, 1, 100.0)],
+    }
+    rows = sweep.sweep_rows(pts)
+    assert len(rows) == 5 and len(rows[0]) == 7 + len(sweep.ROLES)
+    by = {(r[0], r[1], r[2]): r for r in rows}
+    assert by[("flowtact", "1", 1)][6] == "3" and by[("flowtact", "5", 10)][6] == "3"
+    assert by[("flowtact", "10", 1)][6] == "–"  # no raw run at that setting: no ratio
+    assert by[("raw pyzmq", "5", 10)][6] == "–"
+    assert by[("flowtact", "1", 1)][7:] == ["1", "–", "1"]  # a missing CPU figure shows as missing
+
+
+def test_sweep_plots_draw_labelled_axes():
+    plt = pytest.importorskip("matplotlib.pyplot")
+    pts = {
+        "flowtact": [_point(0.001, 1, 300.0), _point(0.005, 1, 900.0)],
+        "raw pyzmq": [_point(0.001, 1, 100.0)],
+    }
+    # lines per panel: flowtact's, raw's and the default tick's; the stage's CPU is unknown, so only the tick's
+    for draw, ylabel, lines in (
+        (sweep.draw_latency, "latency (µs)", [3, 3]),
+        (sweep.draw_cpu, "CPU (% of one core)", [3, 1, 3]),
+    ):
+        fig = plt.figure()
+        draw(pts)(fig)
+        axes = fig.get_axes()
+        assert axes[0].get_ylabel() == ylabel and all(ax.get_xlabel() == "tick (ms)" for ax in axes)
+        assert [len(ax.get_lines()) for ax in axes] == lines
+        plt.close(fig)

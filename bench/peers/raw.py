@@ -26,11 +26,11 @@ from typing import Any
 import numpy as np
 import zmq
 
-from flowtact.bench.peers.measure import STEADY_WINDOW, CpuSampler, Pacer, summarize
+from flowtact.bench.peers.measure import CLK_TCK, STEADY_WINDOW, CpuSampler, Pacer, summarize
 from flowtact.chunk import Chunk
 from flowtact.runtime.wire import END, recv_message, send_message
 
-__all__ = ["PAYLOADS", "make_payload", "run_pipeline"]
+__all__ = ["CLK_TCK", "PAYLOADS", "make_payload", "run_pipeline"]
 
 HWM = 1000
 PAYLOADS: dict[str, tuple[tuple[int, ...], str]] = {
@@ -40,10 +40,11 @@ PAYLOADS: dict[str, tuple[tuple[int, ...], str]] = {
 """Sample shape and dtype of each payload: 4 float64 (32 B) or a 240x320 uint8 frame (76.8 kB)."""
 
 
-def make_payload(kind: str, k: int, frame: np.ndarray | None = None) -> np.ndarray:
-    """The k-th message's data, one sample: a new (1, 4) float64 array, or the shared frame."""
+def make_payload(kind: str, k: int, frame: np.ndarray | None = None, n: int = 1) -> np.ndarray:
+    """The k-th message's data: ``n`` new small samples, sample i of the stream holding i in all 4 values
+    (message k holds samples k n ... k n + n - 1), or the shared frame (one sample)."""
     if kind == "small":
-        return np.full((1, 4), float(k))
+        return np.repeat(np.arange(k * n, (k + 1) * n, dtype=np.float64)[:, None], 4, axis=1)
     assert frame is not None
     return frame
 
@@ -69,7 +70,7 @@ def _source(cfg: dict[str, Any], results: Any, stop: Any, go: Any) -> None:
     ctx = zmq.Context()
     out = _socket(ctx, zmq.PUSH)
     out.connect(cfg["out"])
-    kind, rate, seconds = cfg["payload"], cfg["rate_hz"], cfg["seconds"]
+    kind, rate, seconds, per = cfg["payload"], cfg["rate_hz"], cfg["seconds"], cfg["per_message"]
     shape, dtype = PAYLOADS[kind]
     frame = _frame(shape) if kind == "image" else None
     results.put(("ready", "source", os.getpid()))
@@ -77,12 +78,12 @@ def _source(cfg: dict[str, Any], results: Any, stop: Any, go: Any) -> None:
     start = time.monotonic_ns()
     first = last = start
     k = 0
-    if rate:  # paced: one message per period, sleeping to each deadline
-        pacer = Pacer(rate, start)
-        n = round(seconds * rate)
+    if rate:  # paced: one message of `per` samples per period (per / rate), sleeping to each deadline
+        pacer = Pacer(rate / per, start)
+        n = round(seconds * rate / per)
         for k in range(n):
             pacer.wait(k)
-            chunk = Chunk(np.full(1, k / rate), make_payload(kind, k, frame))
+            chunk = Chunk(np.arange(k * per, (k + 1) * per) / rate, make_payload(kind, k, frame, per))
             now = time.monotonic_ns()
             send_message(out, 0, k, k, chunk, {0: now})
             if k == 0:
@@ -135,7 +136,7 @@ def _sink(cfg: dict[str, Any], results: Any, stop: Any) -> None:
     inp = _socket(ctx, zmq.PULL)
     inp.bind(cfg["in"])
     results.put(("ready", "sink", os.getpid()))
-    kind, staged = cfg["payload"], cfg["staged"]
+    kind, staged, per = cfg["payload"], cfg["staged"], cfg["per_message"]
     shape, _ = PAYLOADS[kind]
     # what the first value of message k must be: k (small) or the frame's first pixel, after the stage
     pixel = int(_frame(shape)[0, 0, 0]) if kind == "image" else 0
@@ -151,10 +152,10 @@ def _sink(cfg: dict[str, Any], results: Any, stop: Any) -> None:
         recv.append(now)
         x = msg.chunk.data
         if kind == "small":
-            want = 2.0 * msg.seq if staged else float(msg.seq)
+            want = float(msg.seq * per) * (2.0 if staged else 1.0)
         else:
             want = 255 - pixel if staged else pixel
-        bad += int(x.shape != (1, *shape) or x.flat[0] != want)
+        bad += int(x.shape != (per, *shape) or x.flat[0] != want)
     results.put(
         ("sink", {"sent_ns": np.asarray(sent, np.int64), "recv_ns": np.asarray(recv, np.int64), "bad": bad})
     )
@@ -192,8 +193,13 @@ def run_pipeline(
     timeout_s: float = 60.0,
     cpu_window: tuple[float, float] = STEADY_WINDOW,
     cpu_period_s: float = 0.25,
+    per_message: int = 1,
 ) -> dict[str, Any]:
     """Run source -> [stage ->] sink once (``rate_hz=None``: flat out) and measure it.
+
+    ``rate_hz`` counts samples; paced small runs may carry ``per_message`` samples in each message
+    (one message every ``per_message / rate_hz`` s, like flowtact's source at tick ``per_message /
+    rate_hz``); flat-out and image runs send one sample per message.
 
     Returns latency (µs, messages sent after ``drop_s``), loss, throughput (flat out), the CPU %
     of one core of each process over the steady window (``cpu_window``: seconds after the start
@@ -204,11 +210,13 @@ def run_pipeline(
         raise ValueError(f"payload must be one of {sorted(PAYLOADS)}; got {payload!r}")
     if stages not in (0, 1):
         raise ValueError(f"stages must be 0 (source -> sink) or 1; got {stages}")
+    if per_message < 1 or (per_message > 1 and (payload != "small" or not rate_hz)):
+        raise ValueError(f"per_message must be 1, or >= 1 for paced small runs; got {per_message}")
     ctx = mp.get_context("spawn")
     results, go, stop = ctx.Queue(), ctx.Event(), ctx.Event()
     with tempfile.TemporaryDirectory(prefix="ftbench-") as tmp:
         eps = [f"ipc://{Path(tmp) / f'hop{i}'}" for i in range(stages + 1)]
-        base = {"payload": payload, "seconds": seconds, "rate_hz": rate_hz}
+        base = {"payload": payload, "seconds": seconds, "rate_hz": rate_hz, "per_message": per_message}
         # (role, process body, its config, its extra arguments): only the source waits for `go`
         roles = [("sink", _sink, {"in": eps[-1], "staged": stages == 1}, ())]
         roles += [("stage", _stage, {"in": eps[i], "out": eps[i + 1]}, ()) for i in range(stages)]
@@ -249,6 +257,7 @@ def run_pipeline(
         "payload": payload,
         "processes": len(procs),
         "seconds": seconds,
+        "per_message": per_message,
         **out,
         "payload_ok": int(snk["bad"]) == 0,
     }

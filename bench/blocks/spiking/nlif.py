@@ -11,16 +11,24 @@ Measures, in one run (one core, NUMBA_NUM_THREADS=1, median of repeats):
      179 spikes) and µs of CPU per neuron per simulated second, per integrator and dt; the
      threshold-free max |v error| vs dt (orders 1 and 2);
   4. noise: stationary membrane sd vs dt (must be flat for exp) and noisy firing rate vs dt;
-  5. with ``--peers``, Brian2's cython target at N = 1000 as the external comparison (when installed).
+  5. with ``--peers``, Brian2's cython target at N = 1000 as the external comparison: speed, and its spikes
+     against the block's (identical (step, neuron) pairs required); Brian2 comes from this environment,
+     or, when it has none, from a throw-away venv with brian2==2.9.0 (bench/peers/venv.py).
 """
 
 from __future__ import annotations
 
 import importlib.util
 import math
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
+from flowtact.bench.peers.venv import VENVS, venv_python
 from flowtact.benchmark import Context, Suite
 from flowtact.benchmark.timing import spread, time_call
 from flowtact.blocks.spiking.nlif import Nlif
@@ -206,26 +214,89 @@ def noise_stats(integrator: str, dt: float, n_sd: int, n_rate: int) -> dict:
 # -- 5: Brian2 ---------------------------------------------------------------------------------------
 
 
-def brian2_throughput(n: int, duration_s: float, repeats: int) -> list[float]:
-    """Seconds per run of the same population in Brian2 (cython target), every repeat's."""
-    import brian2 as b2  # optional external comparison
+BRIAN2_PIN = "brian2==2.9.0"
+"""The Brian2 the throw-away venv installs when this environment has none (constraints.txt's pin), beside
+this environment's numpy (brian2 2.9.0 breaks with numpy 2.4, which dropped ``ndarray.ptp``)."""
+BRIAN2_SCRIPT = Path(__file__).resolve().parents[2] / "peers" / "brian2_lif.py"
 
-    b2.prefs.codegen.target = "cython"
-    b2.prefs.codegen.runtime.cython.cache_dir = "/tmp/brian2_cython_cache"
-    rate = 1000.0
+
+def brian2_python() -> tuple[Path | None, str]:
+    """This Python if it imports brian2, else the throw-away venv's (pip-installed on first use)."""
+    if importlib.util.find_spec("brian2") is not None:
+        return Path(sys.executable), "this environment"
+    packages = [BRIAN2_PIN, f"numpy=={np.__version__}"]
+    return venv_python("brian2", packages, "brian2"), f"throw-away venv {VENVS / 'brian2'}"
+
+
+def brian2_run(
+    py: Path, n: int, duration_s: float, repeats: int, rate: float = 1000.0, target: str = "cython"
+) -> dict:
+    """Seconds per ``Network.run`` of the population in Brian2 (bench/peers/brian2_lif.py run by ``py``),
+    and its spikes as step numbers and neuron indices."""
     u = drive(round(duration_s * rate), rate)
+    env = dict(os.environ)
+    if py != Path(sys.executable):  # a throw-away venv: nothing of this environment's
+        env = {k: v for k, v in env.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    with tempfile.TemporaryDirectory(prefix="ftbench-brian2-") as tmp:
+        inp, out = Path(tmp, "in.npz"), Path(tmp, "out.npz")
+        np.savez(inp, u=u, gains=np.linspace(0.8, 1.2, n), tau_s=TAU, dt_s=1.0 / rate)
+        cmd = [str(py), str(BRIAN2_SCRIPT), str(inp), str(out), "--repeats", str(repeats), "--target", target]
+        r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=900)
+        if r.returncode != 0 or not out.exists():
+            tail = "\n".join((r.stderr or r.stdout).strip().splitlines()[-5:])
+            raise RuntimeError(f"Brian2 run exited with {r.returncode}:\n{tail}")
+        with np.load(out) as f:
+            return {"secs": f["secs"].tolist(), "steps": f["steps"], "idx": f["idx"], "target": str(f["target"]),
+                    "version": str(f["version"])}  # fmt: skip
 
-    def run() -> None:
-        b2.start_scope()
-        b2.defaultclock.dt = 1 * b2.ms
-        ta = b2.TimedArray(u, dt=1 * b2.ms)
-        g = b2.NeuronGroup(n, "dv/dt = (-v + gain*ta(t))/tau : 1\ngain : 1", threshold="v > 1", reset="v = 0",
-                           method="exact", namespace={"ta": ta, "tau": TAU * b2.second})  # fmt: skip
-        g.gain = np.linspace(0.8, 1.2, n)
-        net = b2.Network(g, b2.SpikeMonitor(g))
-        net.run(duration_s * b2.second, namespace={})
 
-    return time_call(run, repeats, warmup=1)  # the warm-up compiles (cached afterwards)
+def block_spikes(n: int, duration_s: float, rate: float = 1000.0) -> tuple[np.ndarray, np.ndarray]:
+    """The nlif block's spikes (exp, σ = 0) for Brian2's population and drive: step numbers, neuron indices."""
+    blk = Nlif(n=n, integrator="exp", tau_s=TAU, gain=list(np.linspace(0.8, 1.2, n)))
+    blk.bind({"x": StreamSpec(rate_hz=rate)}, demanded=frozenset({"spikes"}))
+    n_t = round(duration_s * rate)
+    t, u = np.arange(n_t) / rate, drive(n_t, rate)
+    parts = [blk(x=Chunk(t[i : i + 1000], u[i : i + 1000]))["spikes"] for i in range(0, n_t, 1000)]
+    steps = np.round(np.concatenate([p.t for p in parts]) * rate).astype(np.int64)
+    return steps, np.concatenate([p.data for p in parts]).astype(np.int64)
+
+
+def spike_agreement(ours: tuple[np.ndarray, np.ndarray], theirs: tuple[np.ndarray, np.ndarray]) -> dict:
+    """How two spike trains of one population agree, as sets of (step, neuron) pairs."""
+    a = set(zip(ours[0].tolist(), ours[1].tolist(), strict=True))
+    b = set(zip(theirs[0].tolist(), theirs[1].tolist(), strict=True))
+    return {"flowtact": len(a), "brian2": len(b), "common": len(a & b), "only_flowtact": len(a - b),
+            "only_brian2": len(b - a), "identical": a == b}  # fmt: skip
+
+
+def run_brian2(ctx: Context) -> None:
+    """5. Brian2 on the N = 1000 population of the throughput figures: speed ratio and spike agreement."""
+    py, where = brian2_python()
+    if py is None:
+        ctx.note(f"Brian2 was not timed: its throw-away venv could not be made (pip install {BRIAN2_PIN}).")
+        return
+    ctx.step("Brian2")
+    n, dur = 1000, 2.0 if ctx.quick else 10.0
+    try:
+        b = brian2_run(py, n, dur, 3)
+    except (RuntimeError, subprocess.TimeoutExpired) as e:
+        ctx.note(f"Brian2 was not timed: {str(e).splitlines()[0]}")
+        return
+    name = f"Brian2 {b['version']} {b['target']}, N={n}"
+    ctx.figure(name, [n * dur * 1000 / s for s in b["secs"]], "neuron-steps/s", "higher", is_baseline=True,
+               params={"python": where, "duration_s": dur})  # fmt: skip
+    ctx.figure("block exp, N=1000 vs Brian2", ctx.figures["block exp, sigma=0, N=1000"].samples, "neuron-steps/s",
+               "higher", baseline=name)  # fmt: skip
+    agree = spike_agreement(block_spikes(n, dur), (b["steps"], b["idx"]))
+    ctx.data["brian2"] = {"python": where, "version": b["version"], "target": b["target"], **agree}
+    ctx.check(f"same spikes as Brian2 (exp vs Brian2 'exact', N={n}, {dur:g} s at 1 kHz): every (step, neuron) pair",
+              agree["identical"], f"{agree['common']} common, {agree['only_flowtact']} only flowtact's, "
+              f"{agree['only_brian2']} only Brian2's")  # fmt: skip
+    ctx.note(f"Brian2 {b['version']} ({b['target']}) ran from {where}, in its own process, on the same population, "
+             "drive and dt. Its figure times Network.run per repeat (after two warm-ups that compile; Brian2's "
+             "per-run code preparation included, building the network not), flowtact's the block's calls on "
+             "1000-sample chunks. Agreement is exact or a failed check: the same (step, neuron) spike pairs, no "
+             "tolerance.")  # fmt: skip
 
 
 def run_throughput(ctx: Context) -> None:
@@ -297,19 +368,11 @@ def run_accuracy(ctx: Context) -> None:
 def run(ctx: Context) -> None:
     run_throughput(ctx)
     run_accuracy(ctx)
-    if not ctx.peers:
-        ctx.note("Brian2 (cython) was not timed: run with --peers.")
-    elif importlib.util.find_spec("brian2") is None:
-        ctx.note("Brian2 was not timed: it is not installed (pip install brian2).")
+    if ctx.peers:
+        run_brian2(ctx)
     else:
-        ctx.step("Brian2")
-        secs = brian2_throughput(1000, 2.0 if ctx.quick else 10.0, 3)
-        steps = 1000 * (2.0 if ctx.quick else 10.0) * 1000
-        ctx.figure(
-            "Brian2 cython, N=1000", [steps / s for s in secs], "neuron-steps/s", "higher", is_baseline=True
-        )
-        ctx.figure("block exp, N=1000 vs Brian2", ctx.figures["block exp, sigma=0, N=1000"].samples, "neuron-steps/s",
-                   "higher", baseline="Brian2 cython, N=1000")  # fmt: skip
+        ctx.note("Brian2 (cython) was not run: run with --peers (from this environment, or a throw-away venv "
+                 f"with {BRIAN2_PIN} under ~/.cache/flowtact-bench/ made on first use).")  # fmt: skip
 
 
 SUITE = Suite(
