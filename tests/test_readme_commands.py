@@ -94,6 +94,7 @@ def test_the_readme_shows_the_ci_commands():
     assert set(cmds) >= CI_OWN, "the README's set-up or test command changed: update .ci/run and CI_OWN"
 
 
+@pytest.mark.timeout(3 * TIMEOUT_S)  # every README command in turn: longer than the suite's per-test 600 s
 def test_every_readme_command_runs(tmp_path):
     work = fresh_checkout(tmp_path / "checkout")
     env = {**os.environ, "COLUMNS": "100"}
