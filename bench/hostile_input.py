@@ -15,12 +15,13 @@ from pathlib import Path
 
 from flowtact.bench.hostile_cases import CASES, TOUCH, run_measured
 from flowtact.benchmark import Context, Suite
+from flowtact.benchmark.suite import MIN_RATIO_SAMPLES
 
 PEAK_MIB = 500
 
 
 def run(ctx: Context) -> None:
-    repeats = 1 if ctx.quick else 3
+    repeats = MIN_RATIO_SAMPLES if ctx.quick else 5
     ctx.step("baseline: validate touch.yaml")
     base = [run_measured(["validate", TOUCH]) for _ in range(repeats)]
     if any(m.returncode != 0 for m in base):

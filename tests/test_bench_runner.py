@@ -64,7 +64,7 @@ def test_a_run_records_machine_load_samples_ratios_and_writes_the_report(tmp_pat
     assert ours["ratio"] == pytest.approx(ours["median"] / loop["median"])
     lat = res["figures"]["latency ours"]
     assert lat["ratio"] == pytest.approx(11.0 / 21.0)  # lower is better: > 1 would mean faster than the base
-    assert lat["ratio_range"] == pytest.approx([10.5 / 21.5, 11.5 / 20.5])
+    assert lat["ratio_range"] == pytest.approx([10.0 / 22.0, 12.0 / 20.0])  # worst to best pairing
     report = (tmp_path / "REPORT.md").read_text()
     assert "`flowtact bench toy_suite --quick`" in report
     assert "| a | 0.5 |" in report and "PASS toy bar" in report
@@ -139,6 +139,20 @@ def test_a_figure_naming_a_missing_baseline_fails_the_suite(tmp_path):
         "names baseline 'nothing'"
         in json.loads((tmp_path / "results" / "bad_baseline.json").read_text())["error"]
     )
+
+
+def test_a_ratio_from_a_single_run_is_refused_because_it_has_no_spread(tmp_path):
+    def single(ctx: Context) -> None:
+        ctx.figure("base", [1.0, 1.1, 0.9], "s", "lower", is_baseline=True)
+        ctx.figure("ours", 2.0, "s", "lower", baseline="base")
+
+    register(Suite("single_run", "single", "Nothing.", "none", single))
+    try:
+        assert main(["bench", "single_run", "--out", str(tmp_path)]) == 1
+    finally:
+        unregister("single_run")
+    error = json.loads((tmp_path / "results" / "single_run.json").read_text())["error"]
+    assert ">= 3 samples each" in error and "['ours']" in error
 
 
 @pytest.mark.slow

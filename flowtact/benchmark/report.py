@@ -162,7 +162,7 @@ def write_report(
         "",
         "Each speed figure is the median of its repeats (after warm-up), with its interquartile range and "
         "extremes; ratios compare it with a baseline measured in the same run, so they survive a "
-        "busy machine better than absolute figures. A ratio's range spans both figures' IQRs.",
+        "busy machine better than absolute figures. A ratio's range spans every pairing of the two figures' samples (worst to best); a rerun reproduces a ratio when its median lands inside that range.",
         "",
         "| suite | status | wall s | load before → after |",
         "|---|---|---|---|",

@@ -23,6 +23,7 @@ from typing import Any, Literal
 from flowtact.benchmark.timing import spread, time_call
 
 __all__ = [
+    "MIN_RATIO_SAMPLES",
     "Check",
     "Context",
     "Figure",
@@ -35,6 +36,9 @@ __all__ = [
 ]
 
 Better = Literal["higher", "lower"]
+MIN_RATIO_SAMPLES = 3
+"""Samples a figure and its baseline each need before a ratio between them is recorded: a single
+run's ratio has no spread, so a rerun could never be held to it."""
 
 
 class SuiteSkipped(Exception):
@@ -78,7 +82,8 @@ class Figure:
     ratio: float | None = None
     """Baseline-relative performance, > 1: better than the baseline (faster, lower latency)."""
     ratio_range: tuple[float, float] | None = None
-    """The ratio from the worse to the better ends of the two interquartile ranges."""
+    """The ratio from the worst to the best pairing of the two figures' samples (min–max against
+    max–min): the spread a rerun's ratio is held to (``flowtact bench --compare``)."""
     seconds: list[float] | None = None
     """Raw wall seconds per repeat, when the figure was timed here."""
 
@@ -275,6 +280,13 @@ class Context:
                     f"suite {self.suite.name!r}: figure {key!r} names baseline {baseline!r}, which is not "
                     f"(yet) recorded; have {sorted(self.figures)}"
                 )
+            short = [f.key for f in (base, fig) if len(f.samples) < MIN_RATIO_SAMPLES]
+            if short:
+                raise ValueError(
+                    f"suite {self.suite.name!r}: figure {key!r} has a baseline, so it and its baseline need "
+                    f">= {MIN_RATIO_SAMPLES} samples each for the ratio to have a spread; {short} "
+                    f"{'has' if len(short) == 1 else 'have'} fewer"
+                )
             if base.better != better:
                 raise ValueError(
                     f"suite {self.suite.name!r}: {key!r} and its baseline {baseline!r} disagree on 'better'"
@@ -295,15 +307,19 @@ class Context:
 
 
 def _ratio(fig: Figure, base: Figure) -> tuple[float | None, tuple[float, float] | None]:
-    """fig relative to base, > 1 when fig is better; the range spans both interquartile ranges."""
+    """fig relative to base, > 1 when fig is better; the range spans every pairing of their samples.
+
+    Interquartile ranges of a few repeats understate how far a rerun moves (measured: 73 of 172
+    quick-run ratios fell inside IQR-based ranges, against 111 of 172 with extremes), so the range is
+    the extremes'."""
 
     def div(a: float, b: float) -> float:
         return a / b if b and math.isfinite(a) and math.isfinite(b) else float("nan")
 
     if fig.better == "higher":
-        r, lo, hi = div(fig.median, base.median), div(fig.q1, base.q3), div(fig.q3, base.q1)
+        r, lo, hi = div(fig.median, base.median), div(fig.min, base.max), div(fig.max, base.min)
     else:
-        r, lo, hi = div(base.median, fig.median), div(base.q1, fig.q3), div(base.q3, fig.q1)
+        r, lo, hi = div(base.median, fig.median), div(base.min, fig.max), div(base.max, fig.min)
     if not math.isfinite(r):
         return None, None
     return r, (lo, hi)

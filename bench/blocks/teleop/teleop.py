@@ -45,36 +45,45 @@ def run_graph(graph: Path, duration_s: float) -> dict:
     }
 
 
+ROUNDS = 3
+"""Rounds of live runs, each running every graph once, so p50/p99 have a spread across runs."""
+
+
 def run(ctx: Context) -> None:
-    duration = 5.0 if ctx.quick else 30.0
+    duration = 3.0 if ctx.quick else 10.0
     graphs = [Path(str(files("flowtact.graphs") / "teleop.yaml"))]
     if importlib.util.find_spec("torch") is not None:
         graphs.append(Path(str(files("flowtact.graphs") / "teleop_cnn.yaml")))
     else:
         ctx.note("teleop_cnn.yaml not run: torch is not installed (pip install 'flowtact[cnn]').")
-    rows = []
+    runs: dict[str, list[dict]] = {g.name: [] for g in graphs}
+    for i in range(ROUNDS):
+        for g in graphs:
+            ctx.step(f"round {i + 1}/{ROUNDS}: {g.name}, {duration:g} s live")
+            runs[g.name].append(run_graph(g, duration))
     for g in graphs:
-        ctx.step(f"{g.name}, {duration:g} s live")
-        r = run_graph(g, duration)
-        rows.append(r)
+        rs = runs[g.name]
         base = "teleop.yaml (SSIM)" if g.name != "teleop.yaml" else None
         label = "teleop.yaml (SSIM)" if base is None else "teleop_cnn.yaml (CNN)"
         for q in ("p50", "p99"):
-            ctx.figure(f"{label}, {q} frame → servo command", r[f"{q}_us"] / 1e3, "ms", "lower", is_baseline=base is None,
-                       baseline=f"{base}, {q} frame → servo command" if base else None, params={"frames": r["frames"]})  # fmt: skip
+            ctx.figure(f"{label}, {q} frame → servo command", [r[f"{q}_us"] / 1e3 for r in rs], "ms", "lower",
+                       is_baseline=base is None, baseline=f"{base}, {q} frame → servo command" if base else None,
+                       params={"frames": [r["frames"] for r in rs]})  # fmt: skip
+        worst = max(rs, key=lambda r: r["p99_us"])
         ctx.check(
-            f"{g.name}: p99 ≤ 10 ms (issue 4)",
-            r["pass"],
-            f"p99 {r['p99_us'] / 1e3:.2f} ms over {r['frames']} frames",
+            f"{g.name}: p99 ≤ 10 ms in every run (issue 4)",
+            all(r["pass"] for r in rs),
+            f"worst p99 {worst['p99_us'] / 1e3:.2f} ms over {worst['frames']} frames",
         )
-    ctx.table("Frame → servo command, live (cams -> exo deadline path)",
+    rows = [r for rs in runs.values() for r in rs]
+    ctx.table("Frame → servo command, live (cams -> exo deadline path), every run",
               ["graph", "frames", "p50 (ms)", "p99 (ms)", "max (ms)", "> 10 ms", "serial packets"],
               [[r["graph"], r["frames"], r["p50_us"] / 1e3, r["p99_us"] / 1e3, r["max_us"] / 1e3, r["missed_10ms"],
                 r["packets"]] for r in rows])  # fmt: skip
     ctx.data["rows"] = rows
-    ctx.note("Latency is absolute (its bar is p99 ≤ 10 ms); each graph is a single live run, so p50/p99 are "
-             "percentiles over its frames, not medians of repeats. The loop's one-step delay alone costs up to "
-             "one tick (2 ms in these graphs).")  # fmt: skip
+    ctx.note(f"Latency is absolute (its bar is p99 ≤ 10 ms); each figure's samples are {ROUNDS} live runs of "
+             f"{duration:g} s (the graphs alternate), each a percentile over the run's frames. The loop's "
+             "one-step delay alone costs up to one tick (2 ms in these graphs).")  # fmt: skip
 
 
 SUITE = Suite(
@@ -85,6 +94,6 @@ SUITE = Suite(
     "serial line.",
     baseline="the SSIM graph for the CNN graph; absolute against issue 4's bar (p99 ≤ 10 ms)",
     run=run,
-    minutes_quick=0.5,
-    minutes_full=1.5,
+    minutes_quick=0.75,
+    minutes_full=2.0,
 )
