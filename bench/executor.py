@@ -97,7 +97,15 @@ def bench_overhead(ctx: Context, chunk: int, n_nodes: int, n_ticks: int) -> None
     steps = n_ticks * (n_nodes + 1)
     params = {"chunk_samples": chunk, "nodes": n_nodes + 1}
     base = f"direct calls, chunk {chunk}"
-    ctx.duration(base, direct, scale=1e6 / steps, unit="µs per node-step", is_baseline=True, params=params)
+    ctx.duration(
+        base,
+        direct,
+        scale=1e6 / steps,
+        unit="µs per node-step",
+        is_baseline=True,
+        reference=True,
+        params=params,
+    )
     ctx.duration(f"executor, chunk {chunk}", framework, scale=1e6 / steps, unit="µs per node-step",
                  baseline=base, params=params)  # fmt: skip
 
@@ -143,7 +151,9 @@ def bench_nlif(ctx: Context, n: int, sigma: float, seconds: float) -> None:
 
     params = {"n": n, "sigma": sigma}
     base = f"NLIF block called directly, N={n}, sigma={sigma:g}"
-    ctx.speed(base, direct, n * n_t, "neuron-steps/s", is_baseline=True, params=params, warmup=2)
+    ctx.speed(
+        base, direct, n * n_t, "neuron-steps/s", is_baseline=True, reference=True, params=params, warmup=2
+    )
     fig = ctx.speed(f"NLIF in the executor, N={n}, sigma={sigma:g}",
                     lambda: InprocExecutor(plan, fast=True, tick_s=1.0).run(seconds), n * n_t, "neuron-steps/s",
                     baseline=base, params=params, warmup=2)  # fmt: skip

@@ -92,7 +92,15 @@ def run(ctx: Context) -> None:
         params = {"samples_per_write": per, "streams": sorted(st)}
         w0, f0 = run_case(st, per, n_flush, plain=True)
         w1, f1 = run_case(st, per, n_flush, plain=False)
-        ctx.figure(f"plain h5py write, {label}", w0, "µs per write", "lower", is_baseline=True, params=params)
+        ctx.figure(
+            f"plain h5py write, {label}",
+            w0,
+            "µs per write",
+            "lower",
+            is_baseline=True,
+            reference=True,
+            params=params,
+        )
         ctx.figure(
             f"Recorder.write, {label}",
             w1,
@@ -107,6 +115,7 @@ def run(ctx: Context) -> None:
             "ms per flush (1 s of data)",
             "lower",
             is_baseline=True,
+            reference=True,
             params=params,
         )
         ctx.figure(

@@ -417,13 +417,19 @@ def _lat(ctx: Context, label: str, runs: list[dict[str, Any]], base: str | None)
         v = [r["latency_us"][q] for r in runs if r["latency_us"][q] is not None]
         if not v:
             continue
-        ctx.figure(f"{label}, {q} latency", v, "µs", "lower", is_baseline=base is None,
-                   baseline=f"{base}, {q} latency" if base else None,
+        ctx.figure(f"{label}, {q} latency", v, "µs", "lower", is_baseline=base is None, reference=True,
+                   baseline=f"{base}, {q} latency" if base else None, paired=_pairs(ctx, base and f"{base}, {q} latency", v),
                    params={"n": [r["latency_us"].get("n") for r in runs]})  # fmt: skip
 
 
 def _thr(ctx: Context, label: str, rates: list[float], base: str | None, unit: str = "msg/s") -> None:
-    ctx.figure(label, rates, unit, "higher", is_baseline=base is None, baseline=base)
+    ctx.figure(label, rates, unit, "higher", is_baseline=base is None, reference=True, baseline=base,
+               paired=_pairs(ctx, base, rates))  # fmt: skip
+
+
+def _pairs(ctx: Context, base: str | None, values: list[float]) -> bool:
+    """Whether ``values`` pair round by round with the baseline's samples (no round missing)."""
+    return bool(base) and base in ctx.figures and len(ctx.figures[base].samples) == len(values)
 
 
 def record_raw(ctx: Context, rounds: list[dict[str, Any]]) -> None:
@@ -448,7 +454,14 @@ def record_raw(ctx: Context, rounds: list[dict[str, Any]]) -> None:
         max(c) for c in ([v for v in r["small_1khz"]["cpu_pct"].values() if v is not None] for r in rw) if c
     ]
     if cpu:
-        ctx.figure("raw pyzmq, busiest process at 1 kHz", cpu, "% of a core", "lower", is_baseline=True)
+        ctx.figure(
+            "raw pyzmq, busiest process at 1 kHz",
+            cpu,
+            "% of a core",
+            "lower",
+            is_baseline=True,
+            reference=True,
+        )
 
 
 def record_flowtact(ctx: Context, rounds: list[dict[str, Any]]) -> None:
@@ -462,7 +475,7 @@ def record_flowtact(ctx: Context, rounds: list[dict[str, Any]]) -> None:
     cpu = [c["cpu_max_pct"] for c in chains if c["cpu_max_pct"] is not None]
     if cpu and "raw pyzmq, busiest process at 1 kHz" in ctx.figures:
         ctx.figure("flowtact chain.yaml, busiest process at 1 kHz", cpu, "% of a core", "lower",
-                   baseline="raw pyzmq, busiest process at 1 kHz")  # fmt: skip
+                   baseline="raw pyzmq, busiest process at 1 kHz", paired=_pairs(ctx, "raw pyzmq, busiest process at 1 kHz", cpu))  # fmt: skip
     _thr(
         ctx,
         "flowtact --fast, small",

@@ -18,8 +18,9 @@ from flowtact.cli import main
 def _toy(ctx: Context) -> None:
     ctx.speed("loop", lambda: sum(range(2000)), 2000, "items/s", is_baseline=True)
     ctx.speed("builtin", lambda: sum(range(200)), 200, "items/s", baseline="loop")
-    ctx.figure("latency base", [10.0, 12.0, 11.0], "µs", "lower", is_baseline=True)
+    ctx.figure("latency base", [10.0, 12.0, 11.0], "µs", "lower", is_baseline=True, reference=True)
     ctx.figure("latency ours", [20.0, 22.0, 21.0], "µs", "lower", baseline="latency base")
+    ctx.figure("latency fine", [30.0, 31.0, 32.0], "µs", "lower", baseline="latency ours")
     ctx.table("a toy table", ["setting", "error"], [["a", 0.5], ["b", 0.25]])
     ctx.check("toy bar", True, "met")
     ctx.plot("line", lambda fig: fig.add_subplot(1, 1, 1).plot([0, 1], [1, 2]), "a toy line")
@@ -61,14 +62,19 @@ def test_a_run_records_machine_load_samples_ratios_and_writes_the_report(tmp_pat
     loop, ours = res["figures"]["loop"], res["figures"]["builtin"]
     assert len(loop["samples"]) == len(loop["seconds"]) == 5  # quick: 5 repeats after the warm-up
     assert loop["median"] == pytest.approx(sorted(loop["samples"])[2])
-    assert ours["ratio"] == pytest.approx(ours["median"] / loop["median"])
+    assert len(ours["ratio_samples"]) == 5  # timed in pairs with its baseline, one ratio per pair
+    assert ours["ratio"] == pytest.approx(sorted(ours["ratio_samples"])[2])
+    assert ours["ratio_range"] == pytest.approx([min(ours["ratio_samples"]), max(ours["ratio_samples"])])
     lat = res["figures"]["latency ours"]
     assert lat["ratio"] == pytest.approx(11.0 / 21.0)  # lower is better: > 1 would mean faster than the base
     assert lat["ratio_range"] == pytest.approx([10.0 / 22.0, 12.0 / 20.0])  # worst to best pairing
     report = (tmp_path / "REPORT.md").read_text()
     assert "`flowtact bench toy_suite --quick`" in report
     assert "| a | 0.5 |" in report and "PASS toy bar" in report
-    assert "**latency ours** is slower than its baseline (latency base): 0.524×" in report
+    refs = report.index("slower or worse than an outside reference")
+    own = report.index("Settings slower or worse than the flowtact setting")
+    assert refs < report.index("**latency ours** is slower than latency base: 0.524×") < own
+    assert own < report.index("**latency fine** is slower than latency ours")
     for png in ("toy_suite-line.png", "toy_suite-cost.png"):
         assert (tmp_path / "plots" / png).stat().st_size > 1000
         assert f"(plots/{png})" in report
@@ -139,6 +145,28 @@ def test_a_figure_naming_a_missing_baseline_fails_the_suite(tmp_path):
         "names baseline 'nothing'"
         in json.loads((tmp_path / "results" / "bad_baseline.json").read_text())["error"]
     )
+
+
+def test_a_figure_naming_a_timed_baseline_is_timed_alternately_with_it():
+    calls = []
+    ctx = Context(TOY, quick=True)
+    ctx.duration("base", lambda: calls.append("b"), is_baseline=True, repeats=3)
+    assert calls == ["b"] * 4  # one warm-up, three repeats
+    calls.clear()
+    fig = ctx.duration("ours", lambda: calls.append("f"), baseline="base", repeats=3)
+    assert calls == ["b", "f"] * 4  # warm-up pair, then three pairs
+    assert len(fig.ratio_samples) == 3 and fig.ratio_range == (min(fig.ratio_samples), max(fig.ratio_samples))
+
+
+def test_paired_rounds_give_per_round_ratios():
+    ctx = Context(TOY, quick=True)
+    ctx.figure("raw", [100.0, 200.0, 100.0], "µs", "lower", is_baseline=True)
+    ours = ctx.figure("ours", [200.0, 400.0, 200.0], "µs", "lower", baseline="raw", paired=True)
+    assert ours.ratio_samples == [0.5, 0.5, 0.5] and ours.ratio_range == (0.5, 0.5)
+    crossed = ctx.figure("unpaired", [200.0, 400.0, 200.0], "µs", "lower", baseline="raw")
+    assert crossed.ratio_range == (0.25, 1.0)  # every pairing of the samples: worst to best
+    with pytest.raises(ValueError, match="as many samples"):
+        ctx.figure("short", [1.0, 2.0], "µs", "lower", baseline="raw", paired=True)
 
 
 def test_a_ratio_from_a_single_run_is_refused_because_it_has_no_spread(tmp_path):
@@ -213,10 +241,10 @@ def test_a_second_run_compares_its_ratios_with_the_first(tmp_path, capsys):
     out = capsys.readouterr().out
     run = json.loads((second / "results" / "run.json").read_text())
     repro = run["reproducibility"]
-    assert repro["ratios"] == 2 and repro["compared_with"] == str(first)  # builtin/loop and latency ours/base
-    assert repro["within_earlier_range"] <= repro["ranges_overlap"] <= 2
-    # the fixed figures (latency) reproduce exactly: at least that ratio is inside the earlier range
-    assert repro["within_earlier_range"] >= 1
+    assert repro["ratios"] == 3 and repro["compared_with"] == str(first)  # builtin/loop and the two latencies
+    assert repro["within_earlier_range"] <= repro["ranges_overlap"] <= 3
+    # the fixed figures (latency) reproduce exactly: at least those ratios are inside the earlier range
+    assert repro["within_earlier_range"] >= 2
     report = (second / "REPORT.md").read_text()
     assert "## Reproducibility" in report and f"Against the run in `{first}`" in report
     assert f"ratios inside the range of {first}" in out

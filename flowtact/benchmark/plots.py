@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from flowtact.benchmark.labels import PointLabel, label_points
 from flowtact.benchmark.suite import Plot, Tradeoff
 
 __all__ = ["draw_tradeoff", "save_plot"]
@@ -48,14 +49,8 @@ def draw_tradeoff(t: Tradeoff) -> Plot:
         for i, name in enumerate(series):
             pts = [p for p in t.points if p.series == name]
             ax.plot([p.time for p in pts], [p.error for p in pts], "o", color=f"C{i}", label=name, ms=5)
-            for p in pts:
-                ax.annotate(
-                    p.setting, (p.time, p.error), fontsize=7, textcoords="offset points", xytext=(4, 3)
-                )
         for p in (p for p in t.points if p.default):
             ax.plot([p.time], [p.error], "*", ms=16, mfc="none", mec="k", mew=1.5)
-            ax.annotate("shipped default", (p.time, p.error), fontsize=8, weight="bold",
-                        textcoords="offset points", xytext=(6, -12))  # fmt: skip
         from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
         xs, ys = [p.time for p in t.points], [p.error for p in t.points]
@@ -73,6 +68,9 @@ def draw_tradeoff(t: Tradeoff) -> Plot:
         ax.set_title(t.title, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
+        fig.tight_layout()  # labels are placed against the final layout
+        label_points(ax, [PointLabel(p.time, p.error, f"{p.setting} (shipped default)" if p.default else p.setting,
+                                     bold=p.default) for p in t.points])  # fmt: skip
 
     marked = [p.setting for p in t.points if p.default]
     caption = f"{t.title}: run time against error, one point per setting" + (

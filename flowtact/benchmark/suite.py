@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
-from flowtact.benchmark.timing import spread, time_call
+from flowtact.benchmark.timing import spread, time_call, time_paired
 
 __all__ = [
     "MIN_RATIO_SAMPLES",
@@ -79,11 +79,17 @@ class Figure:
     params: dict[str, Any] = field(default_factory=dict)
     baseline: str | None = None
     is_baseline: bool = False
+    reference: bool = False
+    """A baseline from outside flowtact's own settings (another library, a framework-free call): the
+    report lists where flowtact is slower than one of these apart from its settings' trade-offs."""
     ratio: float | None = None
     """Baseline-relative performance, > 1: better than the baseline (faster, lower latency)."""
     ratio_range: tuple[float, float] | None = None
-    """The ratio from the worst to the best pairing of the two figures' samples (min–max against
-    max–min): the spread a rerun's ratio is held to (``flowtact bench --compare``)."""
+    """The spread a rerun's ratio is held to (``flowtact bench --compare``): the extremes of the paired
+    ratios when the figure was measured in pairs with its baseline, else the worst to the best
+    pairing of the two figures' samples."""
+    ratio_samples: list[float] | None = None
+    """Per-pair ratios, when each sample was measured alongside one of the baseline's."""
     seconds: list[float] | None = None
     """Raw wall seconds per repeat, when the figure was timed here."""
 
@@ -163,6 +169,7 @@ class Context:
         self.data: dict[str, Any] = {}
         """Anything else worth keeping in results/<suite>.json (raw rows, configurations)."""
         self._on_step = on_step
+        self._timers: dict[str, _Timer] = {}
 
     # -- progress and verdicts ------------------------------------------------------------------
 
@@ -213,15 +220,20 @@ class Context:
         *,
         baseline: str | None = None,
         is_baseline: bool = False,
+        reference: bool = False,
         setup: Callable[[], Any] | None = None,
         repeats: int | None = None,
         warmup: int = 1,
         params: dict[str, Any] | None = None,
     ) -> Figure:
-        """Time ``fn`` and record ``work / seconds`` in ``unit`` (higher is better)."""
-        self.step(key)
-        secs = time_call(fn, repeats or self.repeats, warmup, setup)
-        return self._add(key, unit, "higher", [work / s for s in secs], baseline, is_baseline, params, secs)
+        """Time ``fn`` and record ``work / seconds`` in ``unit`` (higher is better).
+
+        ``is_baseline`` makes it a baseline other figures name; ``reference`` marks a baseline from
+        outside flowtact (another library, a framework-free call) rather than one of its settings.
+        A figure naming a baseline timed here is timed in pairs with it (baseline, then figure), so
+        its ratio compares the two under the same load."""
+        return self._timed(key, fn, lambda s: work / s, unit, "higher", baseline, is_baseline, reference, setup,
+                           repeats, warmup, params)  # fmt: skip
 
     def duration(
         self,
@@ -232,15 +244,46 @@ class Context:
         unit: str = "µs per call",
         baseline: str | None = None,
         is_baseline: bool = False,
+        reference: bool = False,
         setup: Callable[[], Any] | None = None,
         repeats: int | None = None,
         warmup: int = 1,
         params: dict[str, Any] | None = None,
     ) -> Figure:
-        """Time ``fn`` and record ``seconds * scale`` in ``unit`` (lower is better)."""
+        """Time ``fn`` and record ``seconds * scale`` in ``unit`` (lower is better); baselines and
+        pairing as in :meth:`speed`."""
+        return self._timed(key, fn, lambda s: s * scale, unit, "lower", baseline, is_baseline, reference, setup,
+                           repeats, warmup, params)  # fmt: skip
+
+    def _timed(
+        self,
+        key: str,
+        fn: Callable[..., Any],
+        value: Callable[[float], float],
+        unit: str,
+        better: Better,
+        baseline: str | None,
+        is_baseline: bool,
+        reference: bool,
+        setup: Callable[[], Any] | None,
+        repeats: int | None,
+        warmup: int,
+        params: dict[str, Any] | None,
+    ) -> Figure:
         self.step(key)
-        secs = time_call(fn, repeats or self.repeats, warmup, setup)
-        return self._add(key, unit, "lower", [s * scale for s in secs], baseline, is_baseline, params, secs)
+        n = repeats or self.repeats
+        timer = self._timers.get(baseline) if baseline else None
+        if timer is None:
+            secs = time_call(fn, n, warmup, setup)
+            pairs = None
+        else:
+            secs, base_secs = time_paired(fn, timer.fn, n, warmup, setup, timer.setup)
+            pairs = [(value(s), timer.value(b)) for s, b in zip(secs, base_secs, strict=True)]
+        fig = self._add(key, unit, better, [value(s) for s in secs], baseline, is_baseline, params, secs, reference,
+                        pairs)  # fmt: skip
+        if is_baseline:
+            self._timers[key] = _Timer(fn, setup, value)
+        return fig
 
     def figure(
         self,
@@ -251,11 +294,23 @@ class Context:
         *,
         baseline: str | None = None,
         is_baseline: bool = False,
+        reference: bool = False,
+        paired: bool = False,
         params: dict[str, Any] | None = None,
     ) -> Figure:
-        """Record values measured some other way (one value, or every repeat's)."""
+        """Record values measured some other way (one value, or every repeat's). ``paired``: sample
+        ``i`` was measured alongside the baseline's sample ``i`` (rounds), so ratios pair them."""
         values = [float(samples)] if isinstance(samples, (int, float)) else [float(s) for s in samples]
-        return self._add(key, unit, better, values, baseline, is_baseline, params, None)
+        pairs = None
+        if paired:
+            base = self.figures.get(baseline or "")
+            if base is None or len(base.samples) != len(values):
+                raise ValueError(
+                    f"suite {self.suite.name!r}: paired figure {key!r} needs a recorded baseline with as many "
+                    f"samples ({len(values)}); got {baseline!r} with {len(base.samples) if base else 'none'}"
+                )
+            pairs = list(zip(values, base.samples, strict=True))
+        return self._add(key, unit, better, values, baseline, is_baseline, params, None, reference, pairs)
 
     def _add(
         self,
@@ -267,12 +322,14 @@ class Context:
         is_baseline: bool,
         params: dict[str, Any] | None,
         seconds: list[float] | None,
+        reference: bool = False,
+        pairs: list[tuple[float, float]] | None = None,
     ) -> Figure:
         if key in self.figures:
             raise ValueError(f"suite {self.suite.name!r}: figure {key!r} recorded twice")
         s = spread(samples)
         fig = Figure(key, unit, better, samples, s.median, s.q1, s.q3, s.min, s.max, dict(params or {}),
-                     baseline, is_baseline, seconds=seconds)  # fmt: skip
+                     baseline, is_baseline, reference and is_baseline, seconds=seconds)  # fmt: skip
         if baseline is not None:
             base = self.figures.get(baseline)
             if base is None:
@@ -291,7 +348,7 @@ class Context:
                 raise ValueError(
                     f"suite {self.suite.name!r}: {key!r} and its baseline {baseline!r} disagree on 'better'"
                 )
-            fig.ratio, fig.ratio_range = _ratio(fig, base)
+            fig.ratio, fig.ratio_range, fig.ratio_samples = _ratio(fig, base, pairs)
         self.figures[key] = fig
         return fig
 
@@ -306,20 +363,42 @@ class Context:
         }
 
 
-def _ratio(fig: Figure, base: Figure) -> tuple[float | None, tuple[float, float] | None]:
-    """fig relative to base, > 1 when fig is better; the range spans every pairing of their samples.
+def _ratio(
+    fig: Figure, base: Figure, pairs: list[tuple[float, float]] | None = None
+) -> tuple[float | None, tuple[float, float] | None, list[float] | None]:
+    """fig relative to base, > 1 when fig is better, with its range and per-pair ratios.
 
-    Interquartile ranges of a few repeats understate how far a rerun moves (measured: 73 of 172
-    quick-run ratios fell inside IQR-based ranges, against 111 of 172 with extremes), so the range is
-    the extremes'."""
+    Measured in pairs (``pairs`` of (figure, baseline) values taken together): the median and
+    extremes of the per-pair ratios. Otherwise the ratio of medians, and a range spanning every
+    pairing of the samples: interquartile ranges of a few repeats understate how far a rerun
+    moves (measured: 73 of 172 quick-run ratios fell inside IQR-based ranges, 111 with extremes).
+    """
 
     def div(a: float, b: float) -> float:
         return a / b if b and math.isfinite(a) and math.isfinite(b) else float("nan")
 
+    def oriented(f: float, b: float) -> float:
+        return div(f, b) if fig.better == "higher" else div(b, f)
+
+    if pairs:
+        rs = [oriented(f, b) for f, b in pairs]
+        s = spread(rs)
+        if not math.isfinite(s.median):
+            return None, None, None
+        return s.median, (s.min, s.max), rs
     if fig.better == "higher":
         r, lo, hi = div(fig.median, base.median), div(fig.min, base.max), div(fig.max, base.min)
     else:
         r, lo, hi = div(base.median, fig.median), div(base.min, fig.max), div(base.max, fig.min)
     if not math.isfinite(r):
-        return None, None
-    return r, (lo, hi)
+        return None, None, None
+    return r, (lo, hi), None
+
+
+@dataclass(frozen=True)
+class _Timer:
+    """How a baseline was timed, so figures naming it can be timed in pairs with it."""
+
+    fn: Callable[..., Any]
+    setup: Callable[[], Any] | None
+    value: Callable[[float], float]

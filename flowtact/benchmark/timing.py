@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Spread", "spread", "time_call"]
+__all__ = ["Spread", "spread", "time_call", "time_paired"]
 
 
 @dataclass(frozen=True)
@@ -55,4 +55,26 @@ def time_call(
         dt = time.perf_counter() - t0
         if i >= warmup:
             out.append(dt)
+    return out
+
+
+def time_paired(
+    fn: Callable[..., Any],
+    base: Callable[..., Any],
+    repeats: int,
+    warmup: int = 1,
+    setup: Callable[[], Any] | None = None,
+    base_setup: Callable[[], Any] | None = None,
+) -> tuple[list[float], list[float]]:
+    """Wall seconds of ``fn`` and of its baseline ``base``, called alternately (base, then fn) so
+    each pair shares the machine's load of that moment: their ratio is what a busy machine keeps."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    out: tuple[list[float], list[float]] = ([], [])
+    for i in range(warmup + repeats):
+        b = time_call(base, 1, 0, base_setup)[0]
+        f = time_call(fn, 1, 0, setup)[0]
+        if i >= warmup:
+            out[0].append(f)
+            out[1].append(b)
     return out

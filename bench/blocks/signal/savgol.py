@@ -23,6 +23,7 @@ import numpy as np
 
 from flowtact import Chunk, StreamSpec
 from flowtact.benchmark import Context, Suite
+from flowtact.benchmark.labels import PointLabel, label_points
 from flowtact.blocks.signal.savgol import SavGol, savgol_coeffs
 
 RATE = 1000.0
@@ -57,7 +58,7 @@ def throughput(ctx: Context) -> None:
 
             base = f"lfilter+zi, {case}"
             params = {"channels": channels, "chunk": chunk}
-            ctx.speed(base, run_lfilter, n, "samples/s", is_baseline=True, params=params)
+            ctx.speed(base, run_lfilter, n, "samples/s", is_baseline=True, reference=True, params=params)
             for mode in ("causal", "centred"):
                 block = SavGol(window=5, order=4, deriv=1, mode=mode)
                 block.bind({"x": StreamSpec(shape=shape, units="N", rate_hz=RATE)})
@@ -241,7 +242,7 @@ def sweep(ctx: Context, rows: list[dict], sigma: float = 0.01, duration_s: float
                 return signal.lfilter(b, [1.0], noisy)
 
             base = f"savgol_coeffs(pos=N-1) + lfilter, {setting}"
-        sp = ctx.duration(base, with_scipy, scale=1e6 / n, unit="µs per sample", is_baseline=True,
+        sp = ctx.duration(base, with_scipy, scale=1e6 / n, unit="µs per sample", is_baseline=True, reference=True,
                           params=params, repeats=repeats)  # fmt: skip
         coef = savgol_coeffs(window, order, 1, pos=pos, rate_hz=RATE)
         agree = fir_agreement(through_block(), with_scipy(), coef, noisy, pos)
@@ -268,7 +269,7 @@ def draw_sweep(rows: list[dict]):
         norm = mpl.colors.Normalize(vmin=min(delays), vmax=max(delays))
         for mode, marker in (("centred", "o"), ("causal", "s")):
             sel = [r for r in rows if r["mode"] == mode]
-            sc = ax.scatter([r["block_us"] for r in sel], [r["d1_rms"] for r in sel], c=[r["group_delay_ms"] for r in sel],
+            sc = ax.scatter([r["block_us"] * 1e3 for r in sel], [r["d1_rms"] for r in sel], c=[r["group_delay_ms"] for r in sel],
                             cmap="viridis", norm=norm, marker=marker, s=46, edgecolors="k", linewidths=0.4,
                             label=f"flowtact savgol, {mode}", zorder=3)  # fmt: skip
         for mode, marker, what in (
@@ -276,26 +277,27 @@ def draw_sweep(rows: list[dict]):
             ("causal", "+", "lfilter (causal)"),
         ):
             sp = [r for r in rows if r["mode"] == mode]
-            ax.scatter([r["scipy_us"] for r in sp], [r["d1_rms"] for r in sp], marker=marker, color="0.45", s=34,
+            ax.scatter([r["scipy_us"] * 1e3 for r in sp], [r["d1_rms"] for r in sp], marker=marker, color="0.45", s=34,
                        label=f"scipy {what}", zorder=2)  # fmt: skip
+        labels = []
         for r in rows:
-            ax.annotate(f"{r['window']}/{r['order']}" + ("" if r["mode"] == "centred" else " c"),
-                        (r["block_us"], r["d1_rms"]), fontsize=7, textcoords="offset points", xytext=(4, 3))  # fmt: skip
-        for r in rows:
-            if (r["window"], r["order"]) == PAPER_SETTING:
-                shipped = r["mode"] == SHIPPED_MODE
-                ax.plot([r["block_us"]], [r["d1_rms"]], "*", ms=18 if shipped else 14, mfc="none",
+            paper = (r["window"], r["order"]) == PAPER_SETTING
+            shipped = paper and r["mode"] == SHIPPED_MODE
+            text = f"{r['window']}/{r['order']}" + ("" if r["mode"] == "centred" else " c")
+            if paper:
+                ax.plot([r["block_us"] * 1e3], [r["d1_rms"]], "*", ms=18 if shipped else 14, mfc="none",
                         mec="r" if shipped else "k", mew=1.5, zorder=4)  # fmt: skip
-                text = "5/4 causal: shipped (touch/slip.yaml)" if shipped else "5/4 centred: block default"
-                ax.annotate(text, (r["block_us"], r["d1_rms"]), fontsize=8, weight="bold",
-                            textcoords="offset points", xytext=(8, -4 if shipped else 6))  # fmt: skip
+                text += ": shipped (touch/slip.yaml)" if shipped else ": block default"
+            labels.append(PointLabel(r["block_us"] * 1e3, r["d1_rms"], text, bold=paper))
         fig.colorbar(sc, ax=ax, label="group delay of F' (ms at 1 kHz; causal F': 0)")
         ax.set_yscale("log")
-        ax.set_xlabel("cost (µs per sample, 10 s at 1 kHz in one chunk, one core)")
+        ax.set_xlabel("cost (ns per sample, 10 s at 1 kHz in one chunk, one core)")
         ax.set_ylabel("F' RMS error vs analytic (N/s)")
         ax.set_title("Savitzky–Golay F': cost vs error vs group delay (σ = 0.01 N)", fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="upper right")
+        fig.tight_layout()  # labels are placed against the final layout
+        label_points(ax, labels)
 
     return draw
 

@@ -283,7 +283,7 @@ def run_brian2(ctx: Context) -> None:
         ctx.note(f"Brian2 was not timed: {str(e).splitlines()[0]}")
         return
     name = f"Brian2 {b['version']} {b['target']}, N={n}"
-    ctx.figure(name, [n * dur * 1000 / s for s in b["secs"]], "neuron-steps/s", "higher", is_baseline=True,
+    ctx.figure(name, [n * dur * 1000 / s for s in b["secs"]], "neuron-steps/s", "higher", is_baseline=True, reference=True,
                params={"python": where, "duration_s": dur})  # fmt: skip
     ctx.figure("block exp, N=1000 vs Brian2", ctx.figures["block exp, sigma=0, N=1000"].samples, "neuron-steps/s",
                "higher", baseline=name)  # fmt: skip

@@ -62,7 +62,15 @@ def kernel(ctx: Context) -> None:
                 skimage_ssim(ref, frames[i % len(frames)])
 
         base = f"scikit-image, {size}"
-        ctx.speed(base, run_skimage, n_sk, "frames/s", is_baseline=True, repeats=max(3, ctx.repeats // 3))
+        ctx.speed(
+            base,
+            run_skimage,
+            n_sk,
+            "frames/s",
+            is_baseline=True,
+            reference=True,
+            repeats=max(3, ctx.repeats // 3),
+        )
         for precision in ("float64", "float32"):
             r = SsimReference(ref[None], precision)
             got = r.compare(frames[:, None])[:, 0]
@@ -164,7 +172,7 @@ def matrix(ctx: Context) -> list[dict]:
                 params = {"region": region, "window": window, "impl": impl}
                 reps = max(3, ctx.repeats // 2) if "full 240" in region else ctx.repeats
                 fig = ctx.duration(key, per_frame, scale=1e3 / len(frames), unit="ms per frame", params=params,
-                                   is_baseline=impl == "scikit-image", repeats=reps,
+                                   is_baseline=impl == "scikit-image", reference=True, repeats=reps,
                                    baseline=None if impl == "scikit-image" else base)  # fmt: skip
                 got = np.array([cmp(f) for f in frames])
                 rows.append(

@@ -68,6 +68,7 @@ def run(ctx: Context) -> None:
         for q in ("p50", "p99"):
             ctx.figure(f"{label}, {q} frame → servo command", [r[f"{q}_us"] / 1e3 for r in rs], "ms", "lower",
                        is_baseline=base is None, baseline=f"{base}, {q} frame → servo command" if base else None,
+                       paired=base is not None,
                        params={"frames": [r["frames"] for r in rs]})  # fmt: skip
         worst = max(rs, key=lambda r: r["p99_us"])
         ctx.check(
