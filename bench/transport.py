@@ -60,7 +60,7 @@ class ContractError(RuntimeError):
 
 def durations(quick: bool) -> dict[str, float]:
     """Seconds of each kind of run: paced latency and flat-out throughput."""
-    return {"paced": 2.0 if quick else 10.0, "flat": 1.5 if quick else 5.0}
+    return {"paced": 1.5 if quick else 10.0, "flat": 1.0 if quick else 5.0}
 
 
 # -- a. raw pyzmq -----------------------------------------------------------------------------

@@ -116,7 +116,7 @@ def measure(ctx: Context, n: int, sigma: float, history: bool = True) -> dict:
                     repeats=repeats, params=params)  # fmt: skip
     ctx.step(f"paced {label}")
     blk.reset()
-    paced_s = (0.5 if n >= 100_000 else 1.0) if ctx.quick else 3.0
+    paced_s = 0.5 if ctx.quick else 3.0
     late, busy = paced(blk, ticks(round(paced_s * RATE)))
     p50, p99, pmax = (float(x) * 1e3 for x in np.percentile(late, [50, 99, 100]))
     row = {

@@ -50,7 +50,7 @@ ROUNDS = 3
 
 
 def run(ctx: Context) -> None:
-    duration = 3.0 if ctx.quick else 10.0
+    duration = 2.5 if ctx.quick else 10.0
     graphs = [Path(str(files("flowtact.graphs") / "teleop.yaml"))]
     if importlib.util.find_spec("torch") is not None:
         graphs.append(Path(str(files("flowtact.graphs") / "teleop_cnn.yaml")))
