@@ -110,7 +110,8 @@ def _check_name(name: str, where: str) -> str:
 
 def read_table(path: str | Path) -> list[dict[str, Any]]:
     """Rows of ``node.param`` values from a YAML list of mappings or a CSV file with a header
-    (each CSV cell read by the ``--set`` loader, so ``0.01`` is a number and ``touch`` text)."""
+    (each CSV cell read by the ``--set`` loader, so ``0.01`` is a number and ``touch`` text; an
+    empty cell leaves that parameter as the graph has it)."""
     p = Path(path)
     try:
         text = read_graph_text(p)  # the graph file's limits: size, depth, aliases
@@ -127,7 +128,9 @@ def read_table(path: str | Path) -> list[dict[str, Any]]:
             if None in rec or any(v is None for v in rec.values()):
                 raise SweepSpecError(f"--table {p}:{i}: the row does not have one cell per column")
             try:
-                out.append({_check_name(k, f"--table {p}"): load_value(v) for k, v in rec.items()})
+                out.append(
+                    {_check_name(k, f"--table {p}"): load_value(v) for k, v in rec.items() if v.strip()}
+                )
             except SafeYamlError as e:
                 raise SweepSpecError(f"--table {p}:{i}: {e.message}") from None
         rows_ = out

@@ -27,7 +27,9 @@ def to_frame(rows: Sequence[dict[str, Any]], first: Sequence[str] = ()) -> Any:
     df = pd.DataFrame(list(rows))
     order = [c for c in (*first, *FIRST_COLUMNS) if c in df.columns]
     df = df[order + [c for c in df.columns if c not in order]]
-    for col in df.select_dtypes(include=["object"]).columns:
+    for col in df.columns:
+        if pd.api.types.is_numeric_dtype(df[col]) or pd.api.types.is_bool_dtype(df[col]):
+            continue
         kinds = {type(v) for v in df[col] if v is not None and v == v}
         if len(kinds) > 1 or kinds & {list, dict, tuple}:
             from flowtact.sweeps.grid import override_text
