@@ -109,9 +109,15 @@ def _report(df: Any, args: argparse.Namespace) -> int:
         shown = df.drop(columns=[c for c in ("key", "provenance", "notes", "graph") if c in df.columns])
         print(shown.to_string(index=False))
     if args.plot:
+        from flowtact.graph import GraphErrors
+        from flowtact.launch import load_plan
         from flowtact.sweeps.plot import plot_rates
 
-        plot_rates(df, args.plot)
+        try:
+            graph = load_plan(args.graph, overrides=args.overrides).graph  # parameter docs: axis units
+        except GraphErrors:
+            graph = None
+        plot_rates(df, args.plot, graph)
     kept = df.attrs.get("kept", 0)
     where = f" -> {args.out}" if args.out else ""
     plot = f", rates plotted to {args.plot}" if args.plot else ""
