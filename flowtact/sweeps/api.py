@@ -123,7 +123,7 @@ def _abs(recordings: Mapping[str, str]) -> dict[str, str]:
 
 @contextmanager
 def _executor(
-    executor: Executor | str, workers: int | None, scheduler: str | None
+    executor: Executor | str, workers: int | None, scheduler: str | None, preload: Sequence[str] = ()
 ) -> Iterator[dict[str, Any]]:
     """Keyword arguments for :func:`drive`, and the worker count, for an executor choice."""
     if isinstance(executor, Executor):
@@ -131,7 +131,7 @@ def _executor(
     elif executor == "local":
         from flowtact.sweeps.executors import local_pool_factory
 
-        yield {"make_executor": local_pool_factory(workers), "n": workers or os.cpu_count() or 1}
+        yield {"make_executor": local_pool_factory(workers, preload), "n": workers or os.cpu_count() or 1}
     elif executor == "dask":
         from flowtact.sweeps.executors import dask_executor
 
@@ -223,7 +223,8 @@ def sweep(
             last_write[0] = time.monotonic()
 
     try:
-        with _executor(executor, workers, scheduler) as ex, bar:
+        blocks = sorted({nd.cls.__module__ for nd in base.nodes.values()})
+        with _executor(executor, workers, scheduler, blocks) as ex, bar:
             n = ex.pop("n")
             drive(tasks, on_row, in_flight=2 * n, **ex)
     finally:

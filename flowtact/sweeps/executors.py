@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from typing import Any
 
@@ -20,11 +20,14 @@ from flowtact.sweeps.grid import SweepSpecError
 __all__ = ["dask_executor", "local_pool_factory"]
 
 
-def local_pool_factory(workers: int | None) -> Callable[[], Executor]:
-    """A function returning a fresh process pool of ``workers`` (default: the CPU count)."""
+def local_pool_factory(workers: int | None, preload: Sequence[str] = ()) -> Callable[[], Executor]:
+    """A function returning a fresh process pool of ``workers`` (default: the CPU count) whose
+    workers fork from a server that has imported flowtact and the ``preload`` modules (the graph's
+    blocks), so no worker imports them again. The server is started once per process: the first
+    pool's preload list holds for later ones."""
     n = workers or os.cpu_count() or 1
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["flowtact.sweeps.runs", "flowtact.launch", "flowtact.blocks"])
+    ctx.set_forkserver_preload(["flowtact.sweeps.runs", "flowtact.launch", "flowtact.compile", *preload])
 
     def make() -> Executor:
         return ProcessPoolExecutor(max_workers=n, mp_context=ctx)

@@ -20,6 +20,7 @@ from flowtact.sweeps.grid import SweepSpecError
 __all__ = ["check_plot_extra", "param_label", "plot_rates"]
 
 MAX_PANELS = 24
+RATE_LABEL = "mean rate per unit (events/s)"
 
 
 def check_plot_extra() -> None:
@@ -44,7 +45,7 @@ def param_label(name: str, graph: Any = None) -> str:
         doc = fields[param].metadata.get("doc", "") if param in fields else ""
         m = re.search(r"\bin (1/sqrt\(s\)|[A-Za-zµ/]+(?:\([^)]*\))?)(?=[\s:,;)]|$)", doc)
         unit = m.group(1) if m else None
-    return f"{base} ({pretty_units(unit)})" if unit else name
+    return f"{base} ({pretty_units(unit).replace('sqrt(s)', '√s')})" if unit else name
 
 
 def _varying(df: Any) -> list[str]:
@@ -127,7 +128,7 @@ def _heatmaps(plt: Any, df: Any, rates: list[str], xy: list[str], facets: list[s
             ax.set_ylabel(param_label(y, graph))
             stream = rate.partition(":")[2]
             ax.set_title(f"{stream}{': ' + _facet_text(facets, combos[j]) if facets else ''}", fontsize=10)
-        fig.colorbar(im, ax=list(axes[i]), label="mean rate (spikes/s per unit)", shrink=0.9)
+        fig.colorbar(im, ax=list(axes[i]), label=RATE_LABEL, shrink=0.9)
     return fig
 
 
@@ -149,7 +150,7 @@ def _lines(plt: Any, df: Any, rates: list[str], x: str | None, facets: list[str]
                 sel = sel.sort_values(x)
                 ax.plot(sel[x], sel[rate], marker=marker, label=label)
         ax.set_title(rate.partition(":")[2], fontsize=10)
-        ax.set_ylabel("mean rate (spikes/s per unit)")
+        ax.set_ylabel(RATE_LABEL)
         if x is not None:
             ax.set_xlabel(param_label(x, graph))
             if facets:

@@ -16,7 +16,7 @@ class SweepProgress:
         self.stream = stream or sys.stderr
         self.total, self.done, self.failed = total, 0, 0
         self.enabled = enabled
-        self.every = every or max(1, total // 20)
+        self.every = every or max(1, total // 10)
         self._bar: Any = None
         if enabled and (bar if bar is not None else self.stream.isatty()):
             from rich.console import Console
