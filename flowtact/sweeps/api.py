@@ -84,11 +84,12 @@ def _table(table: Any) -> list[dict[str, Any]]:
 
 
 def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: set[str],
-           metrics: MetricSpec) -> Any:  # fmt: skip
+           metrics: MetricSpec, duration_s: float | None) -> Any:  # fmt: skip
     """Load the graph as the first row would run it (without the swept values): graph problems
     raise GraphErrors (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too."""
     from flowtact.compile import compile_graph
     from flowtact.graph import load_graph
+    from flowtact.source_ends import default_duration
 
     graph = load_graph(source, text=text, overrides=overrides, replays=_abs(first.recordings))
     for name in sorted(names):
@@ -101,6 +102,8 @@ def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: 
             raise SweepSpecError(f"{name}: block {nd.block} has no parameter '{param}' "
                                  f"(parameters: {', '.join(sorted(fields))})")  # fmt: skip
     plan = compile_graph(graph)
+    if default_duration(plan, duration_s) is None:
+        raise SweepSpecError(f"{source}: the graph has no duration_s and replays no file: give --duration")
     recorded = {f"{n}.{p}" for n, p in plan.record}
     for est, ref in metrics.rmse_pairs:
         for s in (est, ref):
@@ -175,7 +178,7 @@ def sweep(
     spec = parse_metrics(metrics, rmse)
     all_rows = rows(axes, trows, recordings)
     names = {a.name for a in axes} | {k for r in trows for k in r}
-    base = _check(source, text, overrides, all_rows[0], names, spec)
+    base = _check(source, text, overrides, all_rows[0], names, spec, duration_s)
     first_cols = [
         *dict.fromkeys(k for r in all_rows for k in r.params),
         *(f"recording:{n}" for n in recordings),

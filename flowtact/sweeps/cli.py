@@ -121,7 +121,7 @@ def _report(df: Any, args: argparse.Namespace) -> int:
     kept = df.attrs.get("kept", 0)
     where = f" -> {args.out}" if args.out else ""
     plot = f", rates plotted to {args.plot}" if args.plot else ""
-    print(f"flowtact sweep: {len(df)} runs ({df.attrs.get('executed', 0)} run now, {kept} kept from before): "
+    print(f"flowtact sweep: {len(df)} run{'s' if len(df) != 1 else ''} ({df.attrs.get('executed', 0)} run now, {kept} kept from before): "
           f"{len(df) - len(failed)} ok, {len(failed)} failed{where}{plot}", file=sys.stderr)  # fmt: skip
     for _, r in failed.head(10).iterrows():
         print(f"  failed: {_row_label(r)}: {r['error']}", file=sys.stderr)

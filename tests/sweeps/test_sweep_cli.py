@@ -53,9 +53,12 @@ def toy(tmp_path: Path) -> Path:
         (["--metrics", "nosuchmodule:f"], "--metrics nosuchmodule:f: cannot import module 'nosuchmodule'"),
         (["--rmse", "probe.y=nosuch.y"], "'nosuch.y' is not a recorded stream of the graph"),
         (["--table", "missing.csv"], "--table missing.csv: "),
+        (["--set", "src.noise=0"], "the graph has no duration_s and replays no file: give --duration"),
     ],
 )
 def test_usage_errors_are_one_line_and_exit_2(toy: Path, args: list[str], says: str, capsys) -> None:
+    if "--duration" in says:
+        toy.write_text(toy.read_text().replace("duration_s: 0.3\n", ""))
     assert main(["sweep", str(toy), *args]) == 2
     err = capsys.readouterr().err.strip()
     assert says in err and len(err.splitlines()) == 1, err
