@@ -13,6 +13,7 @@ meaningful only when the two cores are otherwise idle.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from importlib.resources import files
 from pathlib import Path
@@ -62,52 +63,52 @@ def run(ctx: Context) -> None:
     n = 24 if ctx.quick else 96
     repeats = 3 if ctx.quick else 5
     params = {"runs": n, "workers": WORKERS}
-    ctx.step("loop")
-    _loop(4)  # warm-up: imports, kernels
-    loop = [1e3 * _loop(n) / n for _ in range(repeats)]
-    ctx.figure("plain loop, ms per run", loop, "ms per run", "lower", is_baseline=True, params=params)
-    ctx.step("local processes")
-    _sweep(4, "local")  # warm-up: the fork server
-    local = [1e3 * _sweep(n, "local") / n for _ in range(repeats)]
-    fig_local = ctx.figure("sweep, local processes, ms per run", local, "ms per run", "lower",
-                           baseline="plain loop, ms per run", params=params)  # fmt: skip
-    rows = [
-        ["local processes", f"{fig_local.median:.2f}", f"{fig_local.median * WORKERS - _median(loop):.2f}"]
-    ]
+    with contextlib.ExitStack() as stack:
+        dask_ex = _dask(ctx, stack, params)
+        ctx.step("warm-up")
+        _loop(4)  # imports, kernels
+        _sweep(4, "local")  # the fork server
+        if dask_ex is not None:
+            _sweep(4, dask_ex)  # imports and kernels in each dask worker
+        loop, local, dask = [], [], []
+        for i in range(repeats):  # in rounds: round i of each under the same load
+            ctx.step(f"round {i + 1}/{repeats}")
+            loop.append(1e3 * _loop(n) / n)
+            local.append(1e3 * _sweep(n, "local") / n)
+            if dask_ex is not None:
+                dask.append(1e3 * _sweep(n, dask_ex) / n)
+    base = "plain loop, ms per run"
+    ctx.figure(base, loop, "ms per run", "lower", is_baseline=True, params=params)
+    figs = {"local processes": ctx.figure("sweep, local processes, ms per run", local, "ms per run", "lower",
+                                          baseline=base, params=params)}  # fmt: skip
+    if dask:
+        figs["dask LocalCluster"] = ctx.figure("sweep, dask LocalCluster, ms per run", dask, "ms per run",
+                                               "lower", baseline=base, params=params)  # fmt: skip
+    rows = [[k, f"{f.median:.2f}", f"{f.median * WORKERS - _median(loop):.2f}"] for k, f in figs.items()]
+    ctx.table(f"Per run, {n} runs of a trivial graph on {WORKERS} workers (median of {repeats} rounds)",
+              ["executor", "ms per run (wall)", "overhead per run and worker, ms"], rows,
+              note=f"the plain loop takes {_median(loop):.2f} ms per run; each local sweep starts its "
+              "own pool (2 forked workers), whose start-up is spread over its runs")  # fmt: skip
+
+
+def _dask(ctx: Context, stack: contextlib.ExitStack, params: dict) -> object | None:
+    """A started LocalCluster's executor (its start-up recorded), or None without Dask."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
         ctx.note('Dask is not installed (pip install "flowtact[dask]"): the Dask part was not measured.')
-    else:
-        import logging
+        return None
+    import logging
 
-        logging.getLogger("distributed").setLevel(logging.ERROR)
-        ctx.step("dask LocalCluster start")
-        t0 = time.perf_counter()
-        with (
-            LocalCluster(
-                n_workers=WORKERS, threads_per_worker=1, processes=True, dashboard_address=None
-            ) as c,
-            Client(c) as client,
-        ):
-            ctx.figure("dask LocalCluster(2) start, s", time.perf_counter() - t0, "s", "lower", params=params)
-            ex = client.get_executor(pure=False)
-            ctx.step("dask")
-            _sweep(4, ex)  # warm-up: imports and kernels in each worker
-            dask = [1e3 * _sweep(n, ex) / n for _ in range(repeats)]
-        fig_dask = ctx.figure("sweep, dask LocalCluster, ms per run", dask, "ms per run", "lower",
-                              baseline="plain loop, ms per run", params=params)  # fmt: skip
-        rows.append(
-            [
-                "dask LocalCluster",
-                f"{fig_dask.median:.2f}",
-                f"{fig_dask.median * WORKERS - _median(loop):.2f}",
-            ]
-        )
-    ctx.table(f"Per run, {n} runs of a trivial graph on {WORKERS} workers (median of {repeats})",
-              ["executor", "ms per run (wall)", "overhead per run and worker, ms"], rows,
-              note=f"the plain loop takes {_median(loop):.2f} ms per run; each local sweep starts its "
-              "own pool (2 forked workers), whose start-up is spread over its runs")  # fmt: skip
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    ctx.step("dask LocalCluster start")
+    t0 = time.perf_counter()
+    cluster = stack.enter_context(
+        LocalCluster(n_workers=WORKERS, threads_per_worker=1, processes=True, dashboard_address=None)
+    )
+    client = stack.enter_context(Client(cluster))
+    ctx.figure("dask LocalCluster(2) start, s", time.perf_counter() - t0, "s", "lower", params=params)
+    return client.get_executor(pure=False)
 
 
 def _median(xs: list[float]) -> float:
