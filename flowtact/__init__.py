@@ -18,6 +18,15 @@ from flowtact.params import Config, ConfigError, param
 
 __version__ = "0.1.0"
 
+
+def sweep(graph, **kwargs):  # type: ignore[no-untyped-def]
+    """Run a graph over a parameter grid and recordings; a pandas DataFrame, one row per run
+    (:func:`flowtact.sweeps.api.sweep`; needs ``pip install "flowtact[sweep]"``)."""
+    from flowtact.sweeps.api import sweep as run_sweep
+
+    return run_sweep(graph, **kwargs)
+
+
 __all__ = [
     "BadDataConfig",
     "BadDataError",
@@ -37,4 +46,5 @@ __all__ = [
     "nonfinite_counter_docs",
     "param",
     "screen_nonfinite",
+    "sweep",
 ]

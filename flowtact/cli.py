@@ -148,6 +148,9 @@ def _parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="an earlier run's output folder: say which ratios this run reproduces within its range",
     )
+    from flowtact.sweeps.cli import add_sweep_parser
+
+    add_sweep_parser(sub)
     p.add_argument("--debug", action="store_true", help=DEBUG_HELP)
     for sp in list(sub.choices.values()):  # also after the command: flowtact run --debug GRAPH
         sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
@@ -373,6 +376,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return run_suites(args.suites, args.quick, args.peers, Path(args.out), as_json=args.json, compare=compare)
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from flowtact.sweeps.cli import run_sweep_command
+
+    return run_sweep_command(args)
+
+
 COMMANDS = {
     "run": _cmd_run,
     "validate": _cmd_validate,
@@ -383,6 +392,7 @@ COMMANDS = {
     "bench": _cmd_bench,
     "worker": _cmd_worker,
     "keys": _cmd_keys,
+    "sweep": _cmd_sweep,
 }
 
 

@@ -143,10 +143,12 @@ def run_plan(
     live: Any = None,
     warn: Callable[[str], None] | None = None,
     argv: list[str] | None = None,
+    sink: Any = None,
 ) -> RunSummary:
     """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
     ``record:`` streams to ``record``. A failing worker raises
-    :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed."""
+    :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed. Without
+    ``record``, an ``inproc`` run may hand its recorded streams to ``sink`` in memory (sweeps)."""
     duration = default_duration(
         plan, duration_s
     )  # --duration, else the replayed files' end, else the graph's
@@ -164,7 +166,7 @@ def run_plan(
         )
 
     if record is None:
-        summary = executor(None).run(duration)
+        summary = executor(sink).run(duration)
         ends.finish(summary)
         return summary
     from flowtact.record import Recorder
