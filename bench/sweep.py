@@ -78,12 +78,12 @@ def run(ctx: Context) -> None:
             if dask_ex is not None:
                 dask.append(1e3 * _sweep(n, dask_ex) / n)
     base = "plain loop, ms per run"
-    ctx.figure(base, loop, "ms per run", "lower", is_baseline=True, params=params)
+    ctx.figure(base, loop, "ms per run", "lower", is_baseline=True, reference=True, params=params)
     figs = {"local processes": ctx.figure("sweep, local processes, ms per run", local, "ms per run", "lower",
-                                          baseline=base, params=params)}  # fmt: skip
+                                          baseline=base, paired=True, params=params)}  # fmt: skip
     if dask:
         figs["dask LocalCluster"] = ctx.figure("sweep, dask LocalCluster, ms per run", dask, "ms per run",
-                                               "lower", baseline=base, params=params)  # fmt: skip
+                                               "lower", baseline=base, paired=True, params=params)  # fmt: skip
     rows = [[k, f"{f.median:.2f}", f"{f.median * WORKERS - _median(loop):.2f}"] for k, f in figs.items()]
     ctx.table(f"Per run, {n} runs of a trivial graph on {WORKERS} workers (median of {repeats} rounds)",
               ["executor", "ms per run (wall)", "overhead per run and worker, ms"], rows,
