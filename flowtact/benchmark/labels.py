@@ -24,6 +24,11 @@ _SPOTS = (
     (-10, 12, "right", "bottom"),
     (-10, -12, "right", "top"),
 )
+_DOT_PX = 3.0
+_STAR_PX = 9.0
+"""Half-widths (display pixels) kept clear around a plain marker and a bold one (the default's star)."""
+_MARGIN_PX = 5.0
+"""Clearance (display pixels) between a label and another point's marker."""
 _SAME_PX = 4.0
 """Markers closer than this (display pixels) share one label, joined with " = "."""
 
@@ -40,16 +45,11 @@ class PointLabel:
 
 def label_points(ax: Any, labels: Sequence[PointLabel], fontsize: float = 7) -> None:
     """Annotate ``labels`` on ``ax`` (call it once scales and limits are final)."""
-    if not labels:
-        return
     renderer = ax.figure.canvas.get_renderer()
-    xy = ax.transData.transform(np.array([(p.x, p.y) for p in labels], dtype=float))
-    taken = [_box(px - 3, py - 3, px + 3, py + 3) for px, py in xy if np.isfinite(px) and np.isfinite(py)]
     frame = ax.get_window_extent(renderer)
     groups: list[tuple[np.ndarray, list[PointLabel]]] = []
-    for p, pxy in sorted(
-        zip(labels, xy, strict=True), key=lambda t: not t[0].bold
-    ):  # bold labels choose first
+    for p in sorted(labels, key=lambda p: not p.bold):  # bold labels choose first
+        pxy = ax.transData.transform((p.x, p.y))
         if not np.all(np.isfinite(pxy)):
             continue
         for anchor, members in groups:
@@ -59,22 +59,29 @@ def label_points(ax: Any, labels: Sequence[PointLabel], fontsize: float = 7) -> 
                 break
         else:
             groups.append((pxy, [p]))
-    for _, members in groups:
-        _place(ax, renderer, members, taken, frame, fontsize)
+    markers = [(xy, _STAR_PX if any(m.bold for m in ms) else _DOT_PX) for xy, ms in groups]
+    placed: list[Any] = []
+    for i, (_, members) in enumerate(groups):
+        others = [m for j, m in enumerate(markers) if j != i]
+        placed.append(_place(ax, renderer, members, placed, others, frame, fontsize))
 
 
-def _place(
-    ax: Any, renderer: Any, members: list[PointLabel], taken: list, frame: Any, fontsize: float
-) -> None:
+def _place(ax: Any, renderer: Any, members: list[PointLabel], placed: list, others: list, frame: Any,
+           fontsize: float) -> Any:  # fmt: skip
+    """Put one label at the first spot that covers no placed label, no other marker (with a margin,
+    so a label is never nearer another point than its own) and stays inside the axes."""
     first = members[0]
     text = " = ".join(m.text for m in members)
     bold = any(m.bold for m in members)
+    reach = _STAR_PX / _DOT_PX if bold else 1.0  # a bold label starts beyond its star
     best = None
     for dx, dy, ha, va in _SPOTS:
-        t = ax.annotate(text, (first.x, first.y), xytext=(dx, dy), textcoords="offset points", ha=ha, va=va,
-                        fontsize=fontsize + (1 if bold else 0), weight="bold" if bold else "normal")  # fmt: skip
+        t = ax.annotate(text, (first.x, first.y), xytext=(dx * reach, dy * reach), textcoords="offset points", ha=ha,
+                        va=va, fontsize=fontsize + (1 if bold else 0), weight="bold" if bold else "normal")  # fmt: skip
         bb = t.get_window_extent(renderer)
-        cost = sum(_overlap(bb, o) for o in taken) + _outside(bb, frame)
+        cost = sum(_overlap(bb, o) for o in placed) + _outside(bb, frame)
+        cost += sum(_overlap(bb, _box(x - r - _MARGIN_PX, y - r - _MARGIN_PX, x + r + _MARGIN_PX, y + r + _MARGIN_PX))
+                    for (x, y), r in others)  # fmt: skip
         if best is None or cost < best[0]:
             if best is not None:
                 best[1].remove()
@@ -83,7 +90,7 @@ def _place(
             t.remove()
         if cost == 0:
             break
-    taken.append(best[2])
+    return best[2]
 
 
 def _box(x0: float, y0: float, x1: float, y1: float) -> Any:

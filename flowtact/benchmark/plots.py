@@ -69,7 +69,7 @@ def draw_tradeoff(t: Tradeoff) -> Plot:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         fig.tight_layout()  # labels are placed against the final layout
-        label_points(ax, [PointLabel(p.time, p.error, f"{p.setting} (shipped default)" if p.default else p.setting,
+        label_points(ax, [PointLabel(p.time, p.error, _default_label(p.setting) if p.default else p.setting,
                                      bold=p.default) for p in t.points])  # fmt: skip
 
     marked = [p.setting for p in t.points if p.default]
@@ -77,3 +77,8 @@ def draw_tradeoff(t: Tradeoff) -> Plot:
         f"; the star marks the shipped default ({', '.join(marked)})" if marked else ""
     )
     return Plot(t.name, caption, draw)
+
+
+def _default_label(setting: str) -> str:
+    """The shipped default's label, saying so once."""
+    return setting if "shipped" in setting else f"{setting} (shipped default)"
