@@ -4,7 +4,12 @@
 block        module           what
 ============ ================ ==========================================================
 braille_scan scan             fingertip of 24 capacitive taxels scanning a line of Braille
+speed_contr… speed_controller scanning speed from the decoder's confidence; lateral corrector
 ============ ================ ==========================================================
+
+``reading`` runs a Braille graph in process and cuts its spikes into character windows;
+``train_braille`` is ``flowtact train-braille`` (the decoder's model, ``models/braille_first.npz``,
+for graphs/braille.yaml, the closed loop).
 
 ``cells`` builds the cells from the Unicode Braille block and holds the (scaled) geometry;
 ``fingertip`` the sensor's physics; ``presets`` the neuron parameters (``preset: braille.afferent``,

@@ -46,9 +46,10 @@ class NaiveBayes(Block):
     -----
     spikes : events, int64 unit index, n_units = the model's
         The population's spikes (e.g. ``nlif.spikes``), watermarked (``Chunk.end``).
-    window : int sample stream, shape (), with a rate
+    window : int or float sample stream, shape (), with a rate
         What is under the sensor: a categorical stream (e.g. the character); a window is a maximal
-        run of one value that is not named in ``gap``. Without categories, values < 0 are gaps.
+        run of one value that is not named in ``gap``. Without categories, values < 0 are gaps;
+        float values that are no whole number (NaN) are gaps too (``unknown_window_values``).
     posterior : float64 (n_classes,), one sample per finished window, stamped at its end, no rate
         p(class | features of the window); the channels are named after the classes.
     decision : int64 categorical (the classes), one sample per finished window, stamped at its end
@@ -97,7 +98,7 @@ class NaiveBayes(Block):
         "windows": "windows decoded (posterior and decision emitted): the normal work",
         "empty_windows": "windows with no spike at all: decoded as the prior (the population was silent)",
         "unfinished_windows": "a window still open at end of stream: dropped, not decoded",
-        "unknown_window_values": "window samples whose value is no category: treated as gap (upstream fault?)",
+        "unknown_window_values": "window samples whose value is no category (or NaN): treated as gap; a fault upstream",
     }
 
     # -- specs -------------------------------------------------------------------------------
@@ -116,9 +117,9 @@ class NaiveBayes(Block):
                 f"{self.node}: the model {self.config.model} was trained on {m.n_units} units; input "
                 f"'spikes' has {s.n_units}",
             )
-        if np.dtype(w.dtype).kind not in "iu":
+        if np.dtype(w.dtype).kind not in "iuf":
             raise SpecError(
-                "window", f"{self.node}: input 'window' must be integer (categorical); got {w.dtype}"
+                "window", f"{self.node}: input 'window' must be categorical numbers; got {w.dtype}"
             )
         if w.categories is not None:
             missing = [c for c in m.classes if c not in w.categories]
@@ -161,7 +162,19 @@ class NaiveBayes(Block):
         self._keep_from = -math.inf
         self._t_last = -math.inf  # time of the last window sample
 
+    def _values(self, data: np.ndarray) -> np.ndarray:
+        """Window values as ints; a float that is no whole number (NaN, 2.5) becomes ``_BAD``."""
+        d = np.asarray(data)
+        if d.dtype.kind != "f":
+            return d.astype(np.int64)
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(d) & (d == np.round(d)) & (np.abs(d) < 2**53)
+        return np.where(ok, np.where(ok, d, 0).astype(np.int64), _BAD)
+
     def _is_gap(self, v: int) -> bool:
+        if v == _BAD:
+            self.count("unknown_window_values")
+            return True
         if self._n_values is None:
             return v < 0
         if not 0 <= v < self._n_values:
@@ -172,8 +185,8 @@ class NaiveBayes(Block):
     # -- step --------------------------------------------------------------------------------
     def step(self, spikes: Chunk, window: Chunk) -> dict[str, Chunk]:
         self._take_spikes(spikes)
-        for t, v in zip(window.t.tolist(), np.asarray(window.data).tolist(), strict=True):
-            self._take_window_sample(float(t), int(v))
+        for t, v in zip(window.t.tolist(), self._values(window.data).tolist(), strict=True):
+            self._take_window_sample(float(t), v)
         return self._drain(final=False)
 
     def _take_spikes(self, spikes: Chunk) -> None:
@@ -272,6 +285,9 @@ class NaiveBayes(Block):
             rate_hz=EXAMPLE_RATE_HZ,
         )
 
+
+#: Stand-in for a window value that is no whole number (NaN, inf, 2.5): counted, treated as gap.
+_BAD = np.iinfo(np.int64).min
 
 #: Sample rate of the example's window stream (the Braille loop's 4 ms tick).
 EXAMPLE_RATE_HZ = 250.0
