@@ -21,8 +21,8 @@ from .cells import CATEGORIES
 
 __all__ = ["GAPS", "LAYERS", "OPEN_GRAPH", "Reading", "char_windows", "read_line"]
 
-#: The shipped open-loop graph.
-OPEN_GRAPH = "graphs/braille_open.yaml"
+#: The shipped open-loop graph (graphs/braille_open.yaml, found from any folder).
+OPEN_GRAPH = "braille_open"
 #: Feature layer → the node whose ``spikes`` it reads in the Braille graphs.
 LAYERS: Mapping[str, str] = {"first": "afferents", "second": "cuneate"}
 #: ``char`` categories that are not character windows: between cells, and the dot-less space cell.
@@ -90,6 +90,8 @@ def graph_text(
     from flowtact.graph import resolve_graph_path
 
     path = resolve_graph_path(graph)
+    if not path.is_file():
+        raise ValueError(f"{graph}: no such graph file")
     doc = yaml.safe_load(path.read_text())
     doc["seed"] = int(seed)
     if tick_s is not None:
