@@ -81,12 +81,12 @@ def graph_text(
     speed_mm_s: float | None = None,
     text: str | None = None,
     letters: int | None = None,
-    scan: Mapping[str, Any] | None = None,
+    params: Mapping[str, Mapping[str, Any]] | None = None,
     tick_s: float | None = None,
     record: Sequence[str] | None = None,
 ) -> tuple[Path, str]:
-    """The graph file's path and its YAML with the seed, the scan's text and speed, the tick and
-    the recorded streams replaced (the rest as written)."""
+    """The graph file's path and its YAML with the seed, the scan's text and speed, node
+    parameters (node → {param: value}), the tick and the recorded streams replaced."""
     from flowtact.graph import resolve_graph_path
 
     path = resolve_graph_path(graph)
@@ -96,14 +96,17 @@ def graph_text(
     doc["seed"] = int(seed)
     if tick_s is not None:
         doc["tick_s"] = tick_s
-    params = doc["nodes"]["scan"].setdefault("params", {})
+    scan = doc["nodes"]["scan"].setdefault("params", {})
     if text is not None:
-        params.update(text=text, random_letters=0)
+        scan.update(text=text, random_letters=0)
     if letters is not None:
-        params.update(text="", random_letters=int(letters))
+        scan.update(text="", random_letters=int(letters))
     if speed_mm_s is not None:
-        params["speed_mm_s"] = float(speed_mm_s)
-    params.update(scan or {})
+        scan["speed_mm_s"] = float(speed_mm_s)
+    for node, values in (params or {}).items():
+        if node not in doc["nodes"]:
+            raise ValueError(f"{graph}: no node {node!r} (nodes: {', '.join(doc['nodes'])})")
+        doc["nodes"][node].setdefault("params", {}).update(values)
     if record is not None:
         doc["record"] = list(record)
     return path, yaml.safe_dump(doc, sort_keys=False)
@@ -116,7 +119,7 @@ def read_line(
     speed_mm_s: float | None = None,
     text: str | None = None,
     letters: int | None = None,
-    scan: Mapping[str, Any] | None = None,
+    params: Mapping[str, Mapping[str, Any]] | None = None,
     layers: Sequence[str] = ("first", "second"),
     extra: Sequence[str] = (),
     tick_s: float = 0.2,
@@ -134,7 +137,7 @@ def read_line(
 
     streams = ["scan.char", *(f"{LAYERS[k]}.spikes" for k in layers), *extra]
     path, yml = graph_text(
-        graph, seed=seed, speed_mm_s=speed_mm_s, text=text, letters=letters, scan=scan,
+        graph, seed=seed, speed_mm_s=speed_mm_s, text=text, letters=letters, params=params,
         tick_s=tick_s or None, record=streams,
     )  # fmt: skip
     plan = compile_graph(load_graph(path, text=yml))

@@ -47,3 +47,17 @@ def test_fast_closed_loop_runs_are_bit_identical_in_process_and_across_processes
     _, letters = char_windows(char.t, char.data)
     assert len(letters) == 6 and len(a.streams["decoder.decision"].t) == 6
     assert speed.min() == 10.0 and speed.max() == 80.0
+
+
+def test_recording_only_the_text_keeps_the_loop_closed():
+    """Demand flows back through the delayed speed input: the controller runs though nothing records
+    it (a single backward pass of the compiler once left the loop open, silently)."""
+    from flowtact.blocks.braille.reading import graph_text
+    from flowtact.compile import compile_graph
+    from flowtact.graph import load_graph
+
+    path, text = graph_text(GRAPH, seed=1, text="ab", record=["scan.char"])
+    plan = compile_graph(load_graph(path, text=text))
+    assert plan.order == ["scan", "afferents", "decoder", "control"]
+    assert plan.demanded["control"] == {"speed"} and plan.demanded["decoder"] == {"running"}
+    assert "speed" in plan.needed["scan"]
