@@ -19,7 +19,7 @@ import yaml
 
 from .cells import CATEGORIES
 
-__all__ = ["GAPS", "LAYERS", "OPEN_GRAPH", "Reading", "char_windows", "read_line"]
+__all__ = ["GAPS", "LAYERS", "OPEN_GRAPH", "Reading", "char_windows", "prefix_windows", "read_line"]
 
 #: The shipped open-loop graph (graphs/braille_open.yaml, found from any folder).
 OPEN_GRAPH = "braille_open"
@@ -39,6 +39,7 @@ class Reading:
     letters: tuple[str, ...]
     duration_s: float
     streams: Mapping[str, Any]
+    rate_hz: float = 250.0
 
 
 class _Keep:
@@ -154,5 +155,20 @@ def read_line(
         for k in layers
     }
     n_units = {k: int(plan.specs[(LAYERS[k], "spikes")].n_units or 0) for k in layers}
-    end = float(char.t[-1]) + 1.0 / float(plan.specs[("scan", "char")].rate_hz or 1.0) if len(char) else 0.0
-    return Reading(spikes, n_units, windows, labels, end, got)
+    rate = float(plan.specs[("scan", "char")].rate_hz or 1.0)
+    end = float(char.t[-1]) + 1.0 / rate if len(char) else 0.0
+    return Reading(spikes, n_units, windows, labels, end, got, rate)
+
+
+def prefix_windows(windows: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """The partial windows the decoder's ``running`` output scores: for each window [t0, t1) and
+    each of its samples t_k = t0 + k/rate, [t0, t_k + 1/rate); returns them and their window index."""
+    out, owner = [], []
+    for w, (t0, t1) in enumerate(np.asarray(windows, np.float64).reshape(-1, 2)):
+        n = max(round((t1 - t0) * rate_hz), 1)
+        ends = t0 + (np.arange(n) + 1) / rate_hz
+        out.append(np.column_stack([np.full(n, t0), ends]))
+        owner.append(np.full(n, w))
+    if not out:
+        return np.zeros((0, 2)), np.zeros(0, np.int64)
+    return np.vstack(out), np.concatenate(owner)

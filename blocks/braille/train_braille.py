@@ -4,7 +4,8 @@ Runs the open-loop graph (in process, fast) over seeded random letters at one or
 speeds, cuts the first- or second-order spikes into character windows (the ``char`` stream, as
 the ``naive_bayes`` block does online), computes each window's features (spike counts in
 time-normalised sub-bins, or first-spike latencies), fits a naive Bayes model over the 26 letters
-and saves it with its provenance. Run ``k`` (speed ``k`` of ``--speeds``, repetition ``r``) uses
+and saves it with its provenance. A counts model also gets the temperature of its running
+posterior, fitted on every prefix of the training windows (``nb_model.fit_temperature``). Run ``k`` (speed ``k`` of ``--speeds``, repetition ``r``) uses
 graph seed ``--seed + k + r·len(speeds)``: its letters and its noise come from that seed. The
 benchmark's held-out text uses seeds from :data:`HELDOUT_SEED` up, which this command refuses.
 """
@@ -12,6 +13,7 @@ benchmark's held-out text uses seeds from :data:`HELDOUT_SEED` up, which this co
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import sys
@@ -27,14 +29,15 @@ from flowtact.blocks.spiking.nb_model import (
     NaiveBayesModel,
     fit_gaussian,
     fit_multinomial,
+    fit_temperature,
     save_model,
 )
 from flowtact.blocks.spiking.window_features import window_features
 
 from .cells import LETTERS
-from .reading import LAYERS, OPEN_GRAPH, read_line
+from .reading import LAYERS, OPEN_GRAPH, prefix_windows, read_line
 
-__all__ = ["HELDOUT_SEED", "build_parser", "main", "train_braille"]
+__all__ = ["HELDOUT_SEED", "build_parser", "main", "train_braille", "train_layers"]
 
 #: Graph seeds from here up are the benchmark's held-out text; training never uses them.
 HELDOUT_SEED = 100_000
@@ -80,54 +83,76 @@ def train_braille(
     progress: Callable[[str, float, float], None] | None = None,
 ) -> tuple[NaiveBayesModel, dict[str, Any]]:
     """Simulate, extract features and fit; returns the model and its provenance."""
-    if layer not in LAYERS:
-        raise ValueError(f"layer must be one of {', '.join(LAYERS)}; got {layer!r}")
+    return train_layers(
+        graph=graph, speeds=speeds, letters=letters, repeats=repeats, layers=(layer,), features=features,
+        n_bins=n_bins, alpha=alpha, var_smoothing=var_smoothing, seed=seed, progress=progress,
+    )[layer]  # fmt: skip
+
+
+def train_layers(
+    *,
+    graph: str | Path = OPEN_GRAPH,
+    speeds: Sequence[float] = (15.0, 30.0, 60.0),
+    letters: int = 260,
+    repeats: int = 1,
+    layers: Sequence[str] = ("first",),
+    features: str = "counts",
+    n_bins: int = 2,
+    alpha: float = 1.0,
+    var_smoothing: float = 1e-3,
+    seed: int = 1,
+    progress: Callable[[str, float, float], None] | None = None,
+) -> dict[str, tuple[NaiveBayesModel, dict[str, Any]]]:
+    """:func:`train_braille` for several layers from the same simulated runs: layer → (model, provenance)."""
+    bad = [k for k in layers if k not in LAYERS]
+    if bad or not layers:
+        raise ValueError(f"layer must be one of {', '.join(LAYERS)}; got {', '.join(bad) or 'none'}")
+    if features not in ("counts", "latency"):
+        raise ValueError(f"features must be counts or latency; got {features!r}")
     runs = [(s, r) for r in range(repeats) for s in speeds]
     if seed < 0 or seed + len(runs) > HELDOUT_SEED:
         raise ValueError(
             f"seed must be in [0, {HELDOUT_SEED - len(runs)}]: seeds from {HELDOUT_SEED} are held out"
         )
-    xs, ys, n_units, per_run = [], [], 0, []
+    bins = n_bins if features == "counts" else 1
+    data: dict[str, dict[str, list[Any]]] = {k: {"x": [], "prefix": []} for k in layers}
+    ys: list[str] = []
+    prefix_labels: list[str] = []
+    per_run, n_units = [], {}
     for k, (speed, _) in enumerate(runs):
-        run_seed = seed + k
 
         def tick(now: float, dur: float | None, k: int = k, speed: float = speed) -> None:
             if progress is not None:
-                progress(
-                    f"run {k + 1}/{len(runs)} at {speed:g} mm/s", k + (now / dur if dur else 0.0), len(runs)
-                )
+                done = k + (now / dur if dur else 0.0)
+                progress(f"run {k + 1}/{len(runs)} at {speed:g} mm/s", done, len(runs))
 
-        r = read_line(graph, seed=run_seed, speed_mm_s=speed, letters=letters, layers=(layer,), progress=tick)
-        n_units = r.n_units[layer]
-        t, u = r.spikes[layer]
-        kind = "counts" if features == "counts" else "latency"
-        xs.append(
-            window_features(
-                t, u, r.windows, n_units=n_units, n_bins=n_bins if kind == "counts" else 1, kind=kind
-            )
+        r = read_line(
+            graph, seed=seed + k, speed_mm_s=speed, letters=letters, layers=tuple(layers), progress=tick
         )
+        pw, owner = prefix_windows(r.windows, r.rate_hz)
+        for layer in layers:
+            n_units[layer] = r.n_units[layer]
+            t, u = r.spikes[layer]
+            d = data[layer]
+            d["x"].append(
+                window_features(t, u, r.windows, n_units=n_units[layer], n_bins=bins, kind=features)
+            )  # type: ignore[arg-type]
+            if features == "counts":  # the partial windows the running posterior scores: its calibration
+                d["prefix"].append(window_features(t, u, pw, n_units=n_units[layer]))
         ys.extend(r.letters)
-        per_run.append({"seed": run_seed, "speed_mm_s": speed, "windows": len(r.letters), "spikes": len(t)})
-    x = np.vstack(xs)
+        prefix_labels.extend(r.letters[i] for i in owner)
+        per_run.append({"seed": seed + k, "speed_mm_s": speed, "windows": len(r.letters)})
     missing = sorted(set(LETTERS) - set(ys))
     if missing:
         raise ValueError(f"letters {''.join(missing)} never came up in the training text: raise --letters")
-    if features == "counts":
-        model = fit_multinomial(x, ys, tuple(LETTERS), n_units=n_units, n_bins=n_bins, alpha=alpha)
-    else:
-        model = fit_gaussian(x, ys, tuple(LETTERS), n_units=n_units, var_smoothing=var_smoothing)
-    pred = np.array(list(LETTERS))[np.argmax(model.joint_log_likelihood(x), axis=1)]
     from flowtact.graph import resolve_graph_path
     from flowtact.launch import versions
 
-    gpath = resolve_graph_path(graph)
-    prov = {
+    common = {
         "graph": str(graph),
-        "graph_sha256": hashlib.sha256(gpath.read_bytes()).hexdigest(),
-        "layer": layer,
-        "spikes_stream": f"{LAYERS[layer]}.spikes",
+        "graph_sha256": hashlib.sha256(resolve_graph_path(graph).read_bytes()).hexdigest(),
         "features": features,
-        "n_bins": n_bins if features == "counts" else 1,
+        "n_bins": bins,
         "alpha": alpha if features == "counts" else None,
         "var_smoothing": var_smoothing if features == "latency" else None,
         "seed": seed,
@@ -136,10 +161,29 @@ def train_braille(
         "letters_per_run": letters,
         "runs": per_run,
         "windows": len(ys),
-        "training_accuracy": float(np.mean(pred == np.array(ys))),
         "flowtact_version": versions().get("flowtact", "?"),
     }
-    return model, prov
+    out = {}
+    for layer in layers:
+        x = np.vstack(data[layer]["x"])
+        if features == "counts":
+            model = fit_multinomial(x, ys, tuple(LETTERS), n_units=n_units[layer], n_bins=bins, alpha=alpha)
+            tau = fit_temperature(model, np.vstack(data[layer]["prefix"]), prefix_labels)
+            model = dataclasses.replace(model, running_temperature=tau)
+        else:
+            model = fit_gaussian(x, ys, tuple(LETTERS), n_units=n_units[layer], var_smoothing=var_smoothing)
+        pred = np.array(list(LETTERS))[np.argmax(model.joint_log_likelihood(x), axis=1)]
+        out[layer] = (
+            model,
+            {
+                **common,
+                "layer": layer,
+                "spikes_stream": f"{LAYERS[layer]}.spikes",
+                "training_accuracy": float(np.mean(pred == np.array(ys))),
+                "running_temperature": model.running_temperature,
+            },
+        )
+    return out
 
 
 class _Bar:

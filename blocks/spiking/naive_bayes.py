@@ -12,7 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from flowtact.block import Block, Example, Port, SpecError
-from flowtact.blocks.spiking.nb_model import ModelError, NaiveBayesModel, load_model, log_posterior
+from flowtact.blocks.spiking.nb_model import (
+    ModelError,
+    NaiveBayesModel,
+    load_model,
+    log_posterior,
+    tempered_log_posterior,
+)
 from flowtact.blocks.spiking.window_features import window_features
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
@@ -57,7 +63,8 @@ class NaiveBayes(Block):
     running : float64 (n_classes,), at the window stream's rate
         At each window sample t: the posterior from the spikes since the window began up to
         t + 1/rate, scored with the unit-marginal model (the per-unit counts over all sub-bins,
-        since where the window ends is not known yet); in a gap, the last window's posterior
+        since where the window ends is not known yet) with its evidence scaled by the model's
+        ``running_temperature`` (a calibration: see ``nb_model``); in a gap, the last window's posterior
         (the prior before the first). What a speed controller reads; a latency model refuses to
         run when this output is consumed (a latency needs the window's end).
 
@@ -256,7 +263,7 @@ class NaiveBayes(Block):
         if math.isnan(start) or self._marg is None:
             return self._last.copy()
         x = window_features(self._spk_t, self._spk_i, np.array([[start, need]]), n_units=self._n_units)
-        return np.exp(log_posterior(self._marg, x)[0])
+        return np.exp(tempered_log_posterior(self._marg, x, self._m.running_temperature)[0])
 
     def _prune(self) -> None:
         """Forget spikes no open or queued window can need."""

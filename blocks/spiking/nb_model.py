@@ -10,8 +10,15 @@ scores are log-domain throughout, the posterior a log-sum-exp normalisation.
 File format (``.npz``, no pickled objects): the arrays ``class_log_prior`` (C,), then
 ``feature_log_prob`` (C, F) for a multinomial model or ``theta`` and ``var`` (C, F) for a
 Gaussian one, and ``meta``: a JSON text holding the format version, the likelihood and feature
-kind, the classes, ``n_units``, ``n_bins``, the provenance (how it was trained) and a SHA-256 of
-the arrays, which :func:`load_model` checks, so a damaged or hand-edited file is refused.
+kind, the classes, ``n_units``, ``n_bins``, ``running_temperature``, the provenance (how it was
+trained) and a SHA-256 of the arrays and of those fields, which :func:`load_model` checks, so a
+damaged or hand-edited file is refused.
+
+``running_temperature`` (τ, default 1) scales the evidence of a *partial* window scored with the
+unit-marginal model: ``log p(c | x) ∝ log p(c) + τ · log p(x | c)``. Counts from the first part of a
+window are not distributed like a whole window's, so the plain marginal is over-confident; τ is
+fitted on the training windows' prefixes (:func:`fit_temperature`, minimum log-loss), as in
+temperature scaling of classifiers.
 """
 
 from __future__ import annotations
@@ -34,9 +41,11 @@ __all__ = [
     "NaiveBayesModel",
     "fit_gaussian",
     "fit_multinomial",
+    "fit_temperature",
     "load_model",
     "log_posterior",
     "save_model",
+    "tempered_log_posterior",
 ]
 
 #: Format tag written in every model file's meta (bumped when the layout changes).
@@ -62,6 +71,7 @@ class NaiveBayesModel:
     n_bins: int
     arrays: Mapping[str, np.ndarray]
     provenance: Mapping[str, Any] = field(default_factory=dict)
+    running_temperature: float = 1.0
 
     @property
     def likelihood(self) -> str:
@@ -93,6 +103,39 @@ class NaiveBayesModel:
         marg = np.logaddexp.reduce(flp, axis=1)
         arrays = {"class_log_prior": self.arrays["class_log_prior"], "feature_log_prob": marg}
         return NaiveBayesModel("counts", self.classes, self.n_units, 1, arrays, self.provenance)
+
+    def running_log_posterior(self, x: np.ndarray) -> np.ndarray:
+        """log p(class | per-unit counts ``x`` of a partial window): the unit-marginal model with
+        its evidence scaled by ``running_temperature``."""
+        return tempered_log_posterior(
+            self.unit_marginal(), np.asarray(x, np.float64), self.running_temperature
+        )
+
+
+def tempered_log_posterior(marg: NaiveBayesModel, x: np.ndarray, tau: float) -> np.ndarray:
+    """log p(class | x) of a unit-marginal counts model with the evidence scaled by ``tau``."""
+    prior = marg.arrays["class_log_prior"]
+    jll = prior + tau * (x.reshape(-1, marg.n_units) @ marg.arrays["feature_log_prob"].T)
+    top = jll.max(axis=1, keepdims=True)
+    return jll - (top + np.log(np.exp(jll - top).sum(axis=1, keepdims=True)))
+
+
+def fit_temperature(model: NaiveBayesModel, x: np.ndarray, y: Sequence[str]) -> float:
+    """τ in [1e-3, 1] minimising the log-loss of the tempered unit-marginal posterior on per-unit
+    prefix counts ``x`` (n, n_units) of windows of classes ``y`` (a grid in log τ, then refined)."""
+    marg = model.unit_marginal()
+    idx = _class_index(y, model.classes)
+    x = np.asarray(x, np.float64)
+
+    def loss(log_tau: float) -> float:
+        return float(
+            -tempered_log_posterior(marg, x, float(np.exp(log_tau)))[np.arange(len(idx)), idx].mean()
+        )
+
+    grid = np.linspace(np.log(1e-3), 0.0, 40)
+    best = grid[int(np.argmin([loss(g) for g in grid]))]
+    fine = np.linspace(best - 0.2, min(best + 0.2, 0.0), 21)
+    return float(np.exp(fine[int(np.argmin([loss(g) for g in fine]))]))
 
 
 def log_posterior(model: NaiveBayesModel, x: np.ndarray) -> np.ndarray:
@@ -151,12 +194,19 @@ def fit_gaussian(
     return NaiveBayesModel("latency", tuple(classes), n_units, 1, arrays)
 
 
-def _digest(arrays: Mapping[str, np.ndarray]) -> str:
+def _digest(arrays: Mapping[str, np.ndarray], fields: Mapping[str, Any]) -> str:
     h = hashlib.sha256()
     for k in sorted(arrays):
         a = np.ascontiguousarray(arrays[k], np.float64)
         h.update(k.encode() + str(a.shape).encode() + a.tobytes())
+    h.update(json.dumps(dict(fields), sort_keys=True).encode())
     return h.hexdigest()
+
+
+def _fields(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """The meta fields the checksum covers (what scoring depends on)."""
+    keys = ("likelihood", "features", "classes", "n_units", "n_bins", "running_temperature")
+    return {k: meta.get(k) for k in keys}
 
 
 def save_model(path: str | Path, model: NaiveBayesModel, provenance: Mapping[str, Any] | None = None) -> Path:
@@ -170,9 +220,10 @@ def save_model(path: str | Path, model: NaiveBayesModel, provenance: Mapping[str
         "classes": list(model.classes),
         "n_units": int(model.n_units),
         "n_bins": int(model.n_bins),
+        "running_temperature": float(model.running_temperature),
         "provenance": dict(provenance if provenance is not None else model.provenance),
-        "sha256": _digest(arrays),
     }
+    meta["sha256"] = _digest(arrays, _fields(meta))
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("wb") as f:
         np.savez(f, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
@@ -204,11 +255,14 @@ def _checked(path: Path, meta: dict[str, Any], stored: dict[str, np.ndarray]) ->
     names = _ARRAYS[likelihood]
     if set(stored) != set(names):
         raise ModelError(f"{path}: arrays {sorted(stored)}, expected {sorted(names)}")
-    if _digest(stored) != meta.get("sha256"):
-        raise ModelError(f"{path}: checksum mismatch: the model arrays were changed or damaged")
+    if _digest(stored, _fields(meta)) != meta.get("sha256"):
+        raise ModelError(f"{path}: checksum mismatch: the model was changed or damaged")
     classes = tuple(str(c) for c in meta.get("classes", ()))
     n_units, n_bins = int(meta.get("n_units", 0)), int(meta.get("n_bins", 0))
-    model = NaiveBayesModel(features, classes, n_units, n_bins, stored, meta.get("provenance", {}))
+    tau = float(meta.get("running_temperature", 1.0))
+    model = NaiveBayesModel(features, classes, n_units, n_bins, stored, meta.get("provenance", {}), tau)
+    if not 0 < tau <= 1:
+        raise ModelError(f"{path}: running_temperature must be in (0, 1]; got {tau}")
     want = {"class_log_prior": (len(classes),)} | {k: (len(classes), model.n_features) for k in names[1:]}
     for k, shape in want.items():
         if stored[k].shape != shape:
