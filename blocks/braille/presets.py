@@ -20,10 +20,10 @@ __all__ = ["AFFERENT", "CUNEATE", "CUNEATE_SYNAPSE", "PRESETS"]
 AFFERENT: dict[str, Any] = {
     "n": 24,
     "tau_s": 0.01,
-    "v_leak": -0.6,
-    "gain": 10.0,
+    "v_leak": -2.0,
+    "gain": 30.0,
     "sigma": 1.0,
-    "refractory_s": 0.004,
+    "refractory_s": 0.008,
     "integrator": "exp",
     "h_weights": (0.0, -0.3, -0.3, -0.2),
     "h_peaks_s": (0.004, 0.1),
@@ -36,7 +36,7 @@ CUNEATE: dict[str, Any] = {
     "v_leak": 0.0,
     "gain": 1.0,
     "sigma": 1.0,
-    "refractory_s": 0.004,
+    "refractory_s": 0.008,
     "integrator": "exp",
 }
 
@@ -46,7 +46,7 @@ CUNEATE_SYNAPSE: dict[str, Any] = {
     "grid": (6, 4),
     "n_targets": 49,
     "fan_in": (1, 3),
-    "weight": 0.5,
+    "weight": 1.0,
     "connect_seed": 13,
 }
 
