@@ -6,6 +6,7 @@ block        module           what
 nlif         nlif             noisy leaky integrate-and-fire population, post-spike current
 rate         rate             spikes → firing rate in bins
 pulses       pulses           spikes → clamped stimulation pulses (amplitude, charge, rate)
+synapse      synapse          spikes → currents: sparse weights (dense or seeded grid), exponential decay
 ============ ================ ==========================================================
 
 Private kernels: ``_lif_kernels`` (numba LIF integrators and their numpy twins, in-kernel normal
