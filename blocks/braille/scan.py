@@ -149,7 +149,8 @@ class BrailleScan(Source):
     answer takes effect at the first sample after it arrives). The scan ends after the last
     sample with ``x ≤`` (cells · pitch + lead_mm): nothing is emitted after it. ``ends_at`` is
     that time exactly at constant speed; with ``speed`` connected, the time at
-    ``min_speed_mm_s`` (a bound: give a closed-loop graph a ``duration_s``).
+    ``min_speed_mm_s`` (a bound; flowtact runs until the latest source end before a graph's
+    ``duration_s``, so shorten a closed loop with ``--duration``).
     *Safety*: speeds outside the range (0, negative, huge) are clamped and counted
     (``speed_clamped``); NaN/inf speed or lateral samples follow ``on_bad_data`` (drop and hold
     both keep the previous command).
