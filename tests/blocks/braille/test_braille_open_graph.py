@@ -43,12 +43,12 @@ seed: 3
 tick_s: 0.004
 nodes:
   scan: {block: braille_scan, process: finger, params: {text: "abc", min_speed_mm_s: 10}}
-  ctl:  {block: weighted_sum, process: control, params: {w1: [%s], bias: -140, units: "mm/s"}}
+  ctl:  {block: weighted_sum, process: control, params: {w1: [W24], bias: -140, units: "mm/s"}}
 edges:
   - scan.taxels -> ctl.x1
   - ctl.y -> scan.speed
 record: [scan.position, ctl.y]
-""" % ", ".join(["100"] * 24)
+""".replace("W24", ", ".join(["100"] * 24))
 
 
 @pytest.mark.slow
