@@ -149,7 +149,8 @@ class BrailleScan(Source):
     answer takes effect at the first sample after it arrives). The scan ends after the last
     sample with ``x ≤`` (cells · pitch + lead_mm): nothing is emitted after it. ``ends_at`` is
     that time exactly at constant speed; with ``speed`` connected, the time at
-    ``min_speed_mm_s`` (a bound: give a closed-loop graph a ``duration_s``).
+    ``min_speed_mm_s`` (a bound; flowtact runs until the latest source end before a graph's
+    ``duration_s``, so shorten a closed loop with ``--duration``).
     *Safety*: speeds outside the range (0, negative, huge) are clamped and counted
     (``speed_clamped``); NaN/inf speed or lateral samples follow ``on_bad_data`` (drop and hold
     both keep the previous command).
@@ -228,26 +229,42 @@ class BrailleScan(Source):
         self._lat = 0.0
         self._done = False
         self._pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {"speed": [], "lateral": []}
-        self._last: dict[str, np.ndarray | None] = {"speed": np.array(self._v), "lateral": np.array(0.0)}
+        self._last = {"speed": self._v, "lateral": 0.0}
+        self._range = {
+            "speed": (c.min_speed_mm_s, c.max_speed_mm_s),
+            "lateral": (-c.max_lateral_mm, c.max_lateral_mm),
+        }
 
     # -- inputs ----------------------------------------------------------------------------------
     def _take(self, port: str, chunk: Chunk | None) -> None:
-        """Screen, clamp and queue the commands that arrived on ``port``."""
+        """Screen, clamp and queue the commands that arrived on ``port``.
+
+        Non-finite samples: ``raise`` stops the run; ``drop`` removes them; ``hold`` repeats the
+        previous (clamped) command. Finite ones outside the safe range are clamped and counted.
+        """
         if chunk is None or len(chunk) == 0:
             return
-        chunk, self._last[port] = screen_nonfinite(
-            self, chunk, self.config.on_bad_data, port, self._last[port]
-        )
-        if len(chunk) == 0:
-            return
+        policy = self.config.on_bad_data
+        t = np.asarray(chunk.t, np.float64)
         v = np.asarray(chunk.data, np.float64)
-        if port == "speed":
-            lo, hi = self.config.min_speed_mm_s, self.config.max_speed_mm_s
-        else:
-            lo, hi = -self.config.max_lateral_mm, self.config.max_lateral_mm
-        out = (v < lo) | (v > hi)
-        self.count(f"{port}_clamped", int(out.sum()))
-        self._pending[port].append((np.asarray(chunk.t, np.float64), np.clip(v, lo, hi)))
+        bad = ~np.isfinite(v)
+        if bad.any():
+            if policy == "raise":
+                screen_nonfinite(self, chunk, policy, port, None)  # raises, naming node and port
+            self.count("nonfinite_drop" if policy == "drop" else "nonfinite_hold", int(bad.sum()))
+        lo, hi = self._range[port]
+        clamped = int((~bad & ((v < lo) | (v > hi))).sum())
+        self.count("speed_clamped" if port == "speed" else "lateral_clamped", clamped)
+        v = np.clip(v, lo, hi)
+        if policy == "drop":
+            t, v = t[~bad], v[~bad]
+        elif bad.any():  # hold: forward-fill from the last good (clamped) command
+            good = np.where(~bad, np.arange(len(v)), -1)
+            src = np.maximum.accumulate(good)
+            v = np.where(src >= 0, v[np.maximum(src, 0)], self._last[port])
+        if len(v):
+            self._last[port] = float(v[-1])
+            self._pending[port].append((t, v))
 
     def _apply_until(self, port: str, t: float) -> float | None:
         """The latest queued command stamped at or before ``t`` (dropping it and older ones), or None."""

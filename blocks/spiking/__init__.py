@@ -6,6 +6,7 @@ block        module           what
 nlif         nlif             noisy leaky integrate-and-fire population, post-spike current
 rate         rate             spikes → firing rate in bins
 pulses       pulses           spikes → clamped stimulation pulses (amplitude, charge, rate)
+synapse      synapse          spikes → currents: sparse weights (dense or seeded grid), exponential decay
 naive_bayes  naive_bayes      spikes per window → posterior over classes and a decision
 ============ ================ ==========================================================
 
