@@ -6,7 +6,8 @@
 * Held-out text: permutations of the alphabet drawn from seed ``HELDOUT_SEED`` (each letter equally
   often), read with graph seeds from ``HELDOUT_SEED`` up, which training refuses: nothing here is
   tuned on it (the controller's setting was chosen on a validation text, seed 500).
-* Recognition rate against constant speed, per letter and the confusion matrix at 30 mm/s;
+* Recognition rate against constant speed (10–80 mm/s, and 100 mm/s: the scan's top speed),
+  per letter and the confusion matrix at 30 mm/s;
   robustness to a lateral (±Y) offset at 30 mm/s (models trained on centred lines).
 * Information (the paper's Fig. 4A): spike counts per neuron in windows growing from the moment
   the leading taxels reach a cell; the information a cross-validated decoder's confusion matrix
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from flowtact.bench.braille_metrics import confusion, entropy_bits, mi_corrected
 from flowtact.benchmark import Context, Suite
@@ -33,27 +35,26 @@ from flowtact.blocks.spiking.nb_model import log_posterior, save_model
 from flowtact.blocks.spiking.window_features import window_features
 
 LAYER_NAMES = {"first": "first order (24 afferents)", "second": "second order (49 cuneate)"}
-SHIPPED_CONTROL = {"min_speed_mm_s": 25.0, "max_speed_mm_s": 80.0, "unsure": 0.5, "sure": 0.99}
 QUICK = {
-    "speeds": (10.0, 20.0, 30.0, 50.0, 80.0),
+    "speeds": (10.0, 30.0, 50.0, 80.0, 100.0),
     "reps": 2,
     "offsets": (-2.0, -1.0, 0.0, 1.0, 2.0),
     "offset_reps": 1,
     "loop_reps": 2,
-    "loop_settings": ({}, {"min_speed_mm_s": 40.0}),
+    "loop_settings": ({}, {"min_speed_mm_s": 60.0}),
 }
 FULL = {
-    "speeds": (10.0, 15.0, 20.0, 30.0, 40.0, 50.0, 60.0, 80.0),
+    "speeds": (10.0, 15.0, 20.0, 30.0, 40.0, 50.0, 60.0, 80.0, 100.0),
     "reps": 10,
     "offsets": (-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0),
     "offset_reps": 2,
     "loop_reps": 4,
     "loop_settings": (
         {},
-        {"min_speed_mm_s": 15.0},
-        {"min_speed_mm_s": 40.0},
+        {"min_speed_mm_s": 25.0, "max_speed_mm_s": 80.0},
+        {"min_speed_mm_s": 60.0},
         {"sure": 0.9},
-        {"min_speed_mm_s": 40.0, "sure": 0.9},
+        {"min_speed_mm_s": 60.0, "sure": 0.9},
     ),
 }
 #: Leading taxel column edge ahead of the finger centre, plus a dot radius (mm): where a cell's first
@@ -275,13 +276,26 @@ def _fastest_constant(curve: list[tuple[float, float]], accuracy: float) -> floa
     return float(ok.max()) if len(ok) else math.nan
 
 
+def shipped_control() -> dict[str, Any]:
+    """The controller parameters graphs/braille.yaml ships (what the check holds to the bar)."""
+    from flowtact.graph import resolve_graph_path
+
+    doc = yaml.safe_load(resolve_graph_path("braille").read_text())
+    return dict(doc["nodes"]["control"]["params"])
+
+
+def _up_to(v: float, curve: list[tuple[float, float]]) -> str:
+    top = max(p[0] for p in curve)
+    return f"{v:.1f} mm/s" + (" (the fastest tested: at least)" if v >= top else "")
+
+
 def _closed_loop(
     ctx: Context, cfg: dict[str, Any], model: Path, curve: dict[str, list[tuple[float, float]]]
 ) -> None:
     text = heldout_text(cfg["loop_reps"])
     pts = []
     for i, change in enumerate(cfg["loop_settings"]):
-        setting = {**SHIPPED_CONTROL, **change}
+        setting = {**shipped_control(), **change}
         ctx.step(f"closed loop {i + 1}/{len(cfg['loop_settings'])}")
         r = read_line(
             "braille",
@@ -311,7 +325,11 @@ def _closed_loop(
         "closed loop reads faster than the fastest constant speed of equal accuracy",
         bool(shipped[1] > best) if math.isfinite(best) else True,
         f"closed loop {shipped[1]:.1f} mm/s at {shipped[2]:.1%} ({shipped[3]} letters); constant speed "
-        + (f"reaches that accuracy up to {best:.1f} mm/s" if math.isfinite(best) else "never reaches it"),
+        + (
+            f"reaches that accuracy up to {_up_to(best, curve['first'])}"
+            if math.isfinite(best)
+            else "never reaches it"
+        ),
     )
     ctx.table(
         "Closed loop (graphs/braille.yaml) on held-out text: controller settings",
@@ -330,7 +348,7 @@ def _closed_loop(
                 f"{v:.1f}",
                 f"{a:.1%}",
                 n,
-                f"≤ {_fastest_constant(curve['first'], a):.1f} mm/s",
+                f"up to {_up_to(_fastest_constant(curve['first'], a), curve['first'])}",
             ]
             for s, v, a, n in pts
         ],
