@@ -15,6 +15,7 @@ from flowtact.block import BadDataError
 from flowtact.stress import Outcome, StressCase
 from flowtact.testing import run_source
 
+from .controller_stress import CASES as CONTROLLER_STRESS
 from .scan import BrailleScan
 
 __all__ = ["CASES"]
@@ -111,4 +112,5 @@ CASES: tuple[StressCase, ...] = (
     StressCase("speed_nan_raise", "braille_scan", speed_nan_raises),
     StressCase("speed_nan_drop", "braille_scan", speed_nan_dropped),
     StressCase("lateral_huge", "braille_scan", lateral_huge),
+    *CONTROLLER_STRESS,  # the room's other blocks (controller_stress.py)
 )  # fmt: skip

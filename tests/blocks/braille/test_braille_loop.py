@@ -46,7 +46,9 @@ def test_fast_closed_loop_runs_are_bit_identical_in_process_and_across_processes
     char, speed = a.streams["scan.char"], a.streams["control.speed"].data
     _, letters = char_windows(char.t, char.data)
     assert len(letters) == 6 and len(a.streams["decoder.decision"].t) == 6
-    assert speed.min() >= 100.0 and speed.max() == 300.0 and len(np.unique(speed)) > 10  # steered, within bounds
+    assert (
+        speed.min() >= 100.0 and speed.max() == 300.0 and len(np.unique(speed)) > 10
+    )  # steered, within bounds
 
 
 def test_recording_only_the_text_keeps_the_loop_closed():

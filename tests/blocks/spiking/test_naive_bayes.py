@@ -151,9 +151,7 @@ def test_running_posterior_is_the_marginal_model_on_the_spikes_so_far():
     # sample 40 lies in the first window [20, 70): counts since 20/250 up to 41/250, unit-marginal model
     x = window_features(t, u, np.array([[20 / 250.0, 41 / 250.0]]), n_units=4)
     marg = m.unit_marginal()
-    np.testing.assert_allclose(
-        run.data[40], np.exp(log_posterior(marg, x)[0]), atol=1e-14
-    )
+    np.testing.assert_allclose(run.data[40], np.exp(log_posterior(marg, x)[0]), atol=1e-14)
     flp = marg.arrays["feature_log_prob"]  # a proper distribution over units per class
     np.testing.assert_allclose(np.exp(flp).sum(axis=1), 1.0)
     # before the first window: the prior; in the gap after window 1: window 1's posterior
