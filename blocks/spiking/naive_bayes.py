@@ -105,6 +105,8 @@ class NaiveBayes(Block):
         "windows": "windows decoded (posterior and decision emitted): the normal work",
         "empty_windows": "windows with no spike at all: decoded as the prior (the population was silent)",
         "unfinished_windows": "a window still open at end of stream: dropped, not decoded",
+        "late_spikes": "spikes older than results already emitted (the producer broke its watermark): "
+        "ignored; a fault upstream",
         "unknown_window_values": "window samples whose value is no category (or NaN): treated as gap; a fault upstream",
     }
 
@@ -168,6 +170,7 @@ class NaiveBayes(Block):
         self._last = np.exp(self._m.arrays["class_log_prior"])
         self._keep_from = -math.inf
         self._t_last = -math.inf  # time of the last window sample
+        self._decided = -math.inf  # spikes before this time were needed by results already emitted
 
     def _values(self, data: np.ndarray) -> np.ndarray:
         """Window values as ints; a float that is no whole number (NaN, 2.5) becomes ``_BAD``."""
@@ -204,9 +207,18 @@ class NaiveBayes(Block):
                     f"{self.node} ({self.name}): unit index out of range 0..{self._n_units - 1} "
                     f"(got {idx.min()}..{idx.max()})"
                 )
-            self._spk_t = np.concatenate([self._spk_t, spikes.t])
+            t = np.asarray(spikes.t, np.float64)
+            late = t < self._decided  # before a window already decoded: the producer broke its watermark
+            if late.any():
+                self.count("late_spikes", int(late.sum()))
+                t, idx = t[~late], idx[~late]
+            self._spk_t = np.concatenate([self._spk_t, t])
             self._spk_i = np.concatenate([self._spk_i, idx])
-            self._wm = max(self._wm, float(spikes.t[-1]))
+            if len(t) and (np.diff(self._spk_t) < 0).any():  # searchsorted needs time order
+                order = np.argsort(self._spk_t, kind="stable")
+                self._spk_t, self._spk_i = self._spk_t[order], self._spk_i[order]
+            if len(t):
+                self._wm = max(self._wm, float(t.max()))
         if spikes.end is not None:
             self._wm = max(self._wm, float(spikes.end))
 
@@ -226,6 +238,7 @@ class NaiveBayes(Block):
         post_t, post, dec, run_t, run = [], [], [], [], []
         while self._queue and (final or self._queue[0][2] <= self._wm):
             kind, start, need = self._queue.popleft()
+            self._decided = max(self._decided, need)
             if kind == "win":
                 p = self._decode(start, need)
                 self._last = p

@@ -293,3 +293,24 @@ def test_model_round_trip_keeps_arrays_and_provenance(tmp_path):
 @pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
 def test_naive_bayes_conforms(check):
     check(NaiveBayes)
+
+
+def test_spikes_out_of_order_are_sorted_and_late_ones_counted():
+    specs = {
+        "spikes": StreamSpec(dtype="int64", events=True, n_units=4),
+        "window": StreamSpec(dtype="int64", rate_hz=250.0),
+    }
+    blk = NaiveBayes(model=str(example_model_path()))
+    blk.bind(specs, demanded=frozenset({"posterior"}))
+    w = np.r_[np.full(10, 0), np.full(5, -1)]
+    t = np.arange(15) / 250.0
+    # spikes of unit 2 arrive reversed: the window's counts are the same as in time order
+    out = blk(spikes=Chunk(np.array([0.03, 0.02, 0.01]), np.array([2, 2, 2]), 0.06), window=Chunk(t, w))
+    ref = NaiveBayes(model=str(example_model_path()))
+    ref.bind(specs, demanded=frozenset({"posterior"}))
+    want = ref(spikes=Chunk(np.array([0.01, 0.02, 0.03]), np.array([2, 2, 2]), 0.06), window=Chunk(t, w))
+    np.testing.assert_array_equal(out["posterior"].data, want["posterior"].data)
+    blk(
+        spikes=Chunk(np.array([0.005]), np.array([1]), 0.07), window=Chunk(np.zeros(0), np.zeros(0, np.int64))
+    )
+    assert blk.counters["late_spikes"] == 1  # its window was decoded already
