@@ -233,9 +233,13 @@ def _information(ctx: Context, cfg: dict[str, Any]) -> None:
             ax.set_xlabel("time since the cell reaches the taxels (ms)")
             ax.set_ylabel("bits")
             ax.axhline(h_s, color="0.6", lw=0.8)
-            ax.set_ylim(0, h_s * 1.45)  # headroom above H(S) for the legend
+            ax.annotate(f"H(S) = {h_s:.2f} bits", (ts[0] * 1e3, h_s), xytext=(0, 3), textcoords="offset points",
+                        fontsize=7, color="0.4")  # fmt: skip
+            ax.set_yticks(range(int(h_s) + 1))
+            ax.set_ylim(0, h_s * 1.6)  # headroom above H(S) for the legend
             ax.set_title(LAYER_NAMES[layer], fontsize=9)
-            ax.legend(loc="upper center", fontsize=7, ncol=2)
+            if j == 0:  # one legend serves both panels
+                ax.legend(loc="upper right", fontsize=7)
 
     ctx.plot(
         "information_30",
