@@ -81,3 +81,18 @@ def test_a_missing_graph_is_a_usage_error(tmp_path, capsys):
         main(["--graph", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "m.npz"), "--no-progress"]) == 2
     )
     assert "none.yaml" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_shipped_model_is_what_its_documented_command_makes_today(tmp_path):
+    """Retraining with the recorded command gives the shipped arrays bit for bit: the model is
+    reproducible and not stale (a change to the sensor, the presets or the graph breaks this)."""
+    shipped = load_model(ROOT / "blocks/braille/models/braille_first.npz")
+    argv = shipped.provenance["command"].removeprefix("flowtact train-braille ").split()
+    out = argv.index("--out") + 1
+    argv[out] = str(tmp_path / "again.npz")
+    assert main([*argv, "--no-progress"]) == 0
+    again = load_model(tmp_path / "again.npz")
+    assert again.running_temperature == shipped.running_temperature
+    for k in shipped.arrays:
+        np.testing.assert_array_equal(again.arrays[k], shipped.arrays[k])
