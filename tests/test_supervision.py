@@ -299,6 +299,7 @@ SHIPPED = {
     "teleop_cnn": "exo.angles",
     "tactip_dataset": "sim.force",
     "braille_open": "scan.position",
+    "braille": "scan.position",
 }
 
 
