@@ -18,6 +18,7 @@ MODULES = (
     "flowtact.blocks.signal.stress_cases",
     "flowtact.blocks.touch.stress_cases",
     "flowtact.blocks.teleop.stress_cases",
+    "flowtact.blocks.braille.stress_cases",
 )
 
 

@@ -339,6 +339,23 @@ def _propagate_demand(
     demanded: dict[str, set[str]] = defaultdict(set)
     for n, p, _ in record:
         demanded[n].add(p)
+    # One backward pass misses demand that flows back through a delayed (loop) input: the loop's
+    # source is visited before the node it feeds; so pass again until nothing new is demanded.
+    while True:
+        before = {n: frozenset(d) for n, d in demanded.items()}
+        result = _demand_pass(graph, order, blocks, incoming, demanded)
+        if {n: frozenset(d) for n, d in demanded.items()} == before:
+            return result
+
+
+def _demand_pass(
+    graph: Graph,
+    order: list[str],
+    blocks: Mapping[str, Block],
+    incoming: Mapping[str, list[Edge]],
+    demanded: dict[str, set[str]],
+) -> tuple[list[str], dict[str, frozenset[str]], dict[str, frozenset[str]], list[Edge], list[str]]:
+    """One backward pass of :func:`_propagate_demand`, adding to ``demanded``."""
     active: set[str] = {n for n in order if graph.nodes[n].cls.sink}
     needed: dict[str, frozenset[str]] = {}
     active_edges: list[Edge] = []

@@ -13,7 +13,7 @@ from flowtact.presets import presets_for
 
 
 def test_the_touch_domain_publishes_its_presets_for_generic_blocks():
-    assert set(presets_for("nlif")) == {"touch.SA1", "touch.FA1"}
+    assert {p for p in presets_for("nlif") if p.startswith("touch.")} == {"touch.SA1", "touch.FA1"}
     assert set(presets_for("weighted_sum")) == {"touch.SA1", "touch.FA1"}
     assert set(presets_for("savgol")) == {"touch.rager"}
     assert presets_for("lowpass") == {}

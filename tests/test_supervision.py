@@ -298,6 +298,8 @@ SHIPPED = {
     "teleop": "exo.angles",
     "teleop_cnn": "exo.angles",
     "tactip_dataset": "sim.force",
+    "braille_open": "scan.position",
+    "braille": "scan.position",
 }
 
 

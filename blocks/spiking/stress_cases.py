@@ -17,6 +17,7 @@ from flowtact.chunk import Chunk, StreamSpec
 from flowtact.stress import EPS, Outcome, StressCase
 from flowtact.testing import run_offline
 
+from .naive_bayes_stress import CASES as NAIVE_BAYES_STRESS
 from .nlif import Nlif
 
 __all__ = ["CASES", "long_run"]
@@ -272,4 +273,5 @@ CASES: tuple[StressCase, ...] = (
         )
         for i in INTEGRATORS
     ),
+    *NAIVE_BAYES_STRESS,  # the room's other blocks (naive_bayes_stress.py)
 )

@@ -1,0 +1,343 @@
+"""``braille_scan``: a fingertip of 24 capacitive taxels sliding along a line of Braille (Bologna et al. 2013)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from flowtact import (
+    BadDataConfig,
+    Chunk,
+    Example,
+    Port,
+    Source,
+    StreamSpec,
+    nonfinite_counter_docs,
+    param,
+    screen_nonfinite,
+)
+
+from .cells import CATEGORIES, LETTERS, Geometry, dot_positions, text_cells
+from .fingertip import COLS, ROWS, Fingertip
+
+__all__ = ["TAXEL_LABELS", "BrailleScan", "BrailleScanConfig"]
+
+#: Taxel ``j = row·4 + col`` is labelled ``r{row}c{col}`` (row 0 top, +Y; column 0 trailing, −X).
+TAXEL_LABELS = tuple(f"r{r}c{c}" for r in range(ROWS) for c in range(COLS))
+
+
+@dataclass(frozen=True)
+class BrailleScanConfig(BadDataConfig):
+    """Parameters of :class:`BrailleScan` (lengths in mm, speeds in mm/s)."""
+
+    text: str = param("", doc="the line to read: letters a-z and spaces ('' with random_letters > 0)")
+    random_letters: int = param(
+        0, doc="if > 0, read this many random letters a-z drawn from the node's seed instead of text", ge=0
+    )
+    rate_hz: float = param(250.0, doc="sampling rate of the taxels (Bologna et al.: 4 ms clock)", gt=0)
+    speed_mm_s: float = param(30.0, doc="scanning speed when the speed input is not connected", gt=0)
+    min_speed_mm_s: float = param(5.0, doc="slowest speed the finger is driven at (safe range)", gt=0)
+    max_speed_mm_s: float = param(100.0, doc="fastest speed the finger is driven at (safe range)", gt=0)
+    y_offset_mm: float = param(0.0, doc="lateral (±Y) error of the finger centre from the middle dot row")
+    max_lateral_mm: float = param(5.0, doc="lateral corrections are clamped to ±this", ge=0)
+    lead_mm: float = param(8.0, doc="blank paper before the first cell and after the last", ge=0)
+    noise: float = param(0.01, doc="sd of the white sensor noise on each reading (ΔC/C0)", ge=0)
+    scale: float = param(1.7, doc="scaling of the Braille dimensions (Bologna et al.: 1:1.7)", gt=0)
+    taxel_mm: float = param(1.6, doc="side of a square taxel electrode", gt=0)
+    pitch_mm: float = param(2.0, doc="taxel centre-to-centre distance, both directions", gt=0)
+    cover_mm: float = param(1.0, doc="thickness of the neoprene cover", gt=0)
+    spread: float = param(0.6, doc="sd of the cover's spatial spread per mm of cover thickness", gt=0)
+    press_mm: float = param(0.1, doc="uniform compression of the cover pressed on the paper", ge=0)
+    transmission: float = param(
+        0.3, doc="fraction of the cover compression closing the taxel gap", gt=0, le=1
+    )
+    gap_mm: float = param(0.5, doc="dielectric gap of a taxel at rest", gt=0)
+
+    def check(self) -> None:
+        if self.text and self.random_letters:
+            raise self.error("text", "must be '' when random_letters > 0 (give one or the other)")
+        if not self.text and not self.random_letters:
+            raise self.error("text", "must name the letters to read (or set random_letters > 0)")
+        bad = sorted({ch for ch in self.text if ch != " " and ch not in LETTERS})
+        if bad:
+            raise self.error("text", f"must hold only letters a-z and spaces; got {''.join(bad)!r}")
+        if self.max_speed_mm_s < self.min_speed_mm_s:
+            raise self.error("max_speed_mm_s", f"must be >= min_speed_mm_s ({self.min_speed_mm_s:g})")
+        top = self.transmission * (self.press_mm + 0.5 * self.scale)
+        if top >= self.gap_mm:
+            raise self.error(
+                "gap_mm", f"must exceed transmission·(press + dot height) = {top:g} mm (the gap would close)"
+            )
+
+    def fingertip(self) -> Fingertip:
+        """The sensor model these parameters describe."""
+        return Fingertip(
+            Geometry(scale=self.scale),
+            taxel_mm=self.taxel_mm,
+            pitch_mm=self.pitch_mm,
+            cover_mm=self.cover_mm,
+            spread=self.spread,
+            press_mm=self.press_mm,
+            transmission=self.transmission,
+            gap_mm=self.gap_mm,
+        )
+
+    def n_cells(self) -> int:
+        return self.random_letters or len(self.text)
+
+    def track(self) -> tuple[float, float]:
+        """Finger centre (mm) at the first sample, and the last position it reads at."""
+        pitch = self.scale * 6.0
+        return -self.lead_mm, self.n_cells() * pitch + self.lead_mm
+
+
+@njit(cache=True)
+def _samples_at(x0: float, x_end: float, step: float) -> int:
+    """How many samples ``x_i = x_{i−1} + step`` (from x0) stay at or before x_end, summed as the block does."""
+    n, x = 0, x0
+    while x <= x_end:
+        n += 1
+        x = x + step
+    return n
+
+
+class BrailleScan(Source):
+    """A fingertip of 24 capacitive taxels (6 × 4) under a neoprene cover scanning a line of Braille.
+
+    Ports
+    -----
+    speed : float64 (), "mm/s", optional, delayed (the closed loop feeds it one tick late)
+        Commanded scanning speed; clamped to [min_speed_mm_s, max_speed_mm_s]. Unconnected: the
+        constant ``speed_mm_s``.
+    lateral : float64 (), "mm", optional, delayed
+        Lateral correction added to ``y_offset_mm`` (clamped to ±max_lateral_mm); 0 before any.
+    taxels : float64 (24,), "1" (ΔC/C0), labels r{row}c{col}
+        Relative capacitance change of each taxel, ``j = row·4 + col``; row 0 is the top row
+        (+Y, dots 1 and 4), column 0 the trailing one (the finger moves towards +X).
+    char : float64 (), categorical: gap, a … z, space
+        The letter whose cell lies under the finger's centre (its two dot columns ± a dot
+        radius), else ``gap``. Ground truth for decoders: a run of equal values is one
+        character window.
+    position : float64 (), "mm"
+        The finger centre along the line; cell k spans [k, k + 1)·cell pitch (10.2 mm scaled).
+    y : float64 (), "mm"
+        The finger centre across the line (0 = on the middle dot row): offset + correction.
+
+    Config
+    ------
+    See the field docs (``flowtact blocks braille_scan``). The text is ``text`` or, with
+    ``random_letters``, letters drawn uniformly from the node's seed.
+
+    Notes
+    -----
+    *Geometry* (``cells``): DIN 32976 nominal Braille (dot pitch 2.5 mm, cell pitch 6 mm, dot
+    base diameter 1.5 mm, height 0.5 mm) scaled by ``scale`` (1.7: 4.25 mm, 10.2 mm, 2.55 mm,
+    0.85 mm). Dots are paraboloid domes.
+    *Sensor* (``fingertip``): the paper's Fig. 1 gives the taxel dimensions only as a drawing, so
+    these are choices: 1.6 mm square electrodes at 2 mm pitch (a 12 × 8 mm array, wide enough to
+    span a scaled cell's 11 mm of dots across the line), 6 rows across the line (±Y) × 4 columns
+    along it. Dots → indentation of the 1 mm cover (plus a uniform ``press_mm``) → Gaussian
+    spread of sd ``spread·cover_mm`` (0.6 mm) → mean over each electrode → a fraction
+    ``transmission`` closes the dielectric gap ``gap_mm`` → ``ΔC/C0 = u / (gap − u)`` (0.06 at
+    rest, ~0.4 with a dot centred on a taxel) + white noise of sd ``noise`` (seeded).
+    *Motion*: sample i at ``t_i = i/rate_hz``; ``x_0 = −lead_mm``, ``x_i = x_{i−1} + v·dt`` with v
+    the latest ``speed`` sample stamped at or before ``t_{i−1}`` (so a loop that answers sample
+    i−1's taxels in the same tick steers sample i: one 4 ms tick of delay at 250 Hz; a later
+    answer takes effect at the first sample after it arrives). The scan ends after the last
+    sample with ``x ≤`` (cells · pitch + lead_mm): nothing is emitted after it. ``ends_at`` is
+    that time exactly at constant speed; with ``speed`` connected, the time at
+    ``min_speed_mm_s`` (a bound; flowtact runs until the latest source end before a graph's
+    ``duration_s``, so shorten a closed loop with ``--duration``).
+    *Safety*: speeds outside the range (0, negative, huge) are clamped and counted
+    (``speed_clamped``); NaN/inf speed or lateral samples follow ``on_bad_data`` (drop and hold
+    both keep the previous command).
+    Chunking-invariant whenever the inputs' samples arrive in the tick that covers their time
+    stamp (offline runs); in a graph the loop's tick fixes what arrived when, so runs are still
+    deterministic.
+
+    Example
+    -------
+    >>> from flowtact.blocks.braille.scan import BrailleScan
+    >>> from flowtact.testing import run_source
+    >>> out = run_source(BrailleScan(text="ab"), 2.0, tick_s=0.1)
+    >>> out["taxels"].data.shape[1], round(float(out["position"].data[-1]), 1)
+    (24, 28.4)
+    """
+
+    config_cls = BrailleScanConfig
+    inputs = {
+        "speed": Port(
+            dtype="float64", shape=(), units="mm/s", optional=True, delay=True, doc="commanded scanning speed"
+        ),
+        "lateral": Port(
+            dtype="float64", shape=(), units="mm", optional=True, delay=True, doc="lateral (±Y) correction"
+        ),
+    }
+    outputs = {
+        "taxels": Port(dtype="float64", shape=(ROWS * COLS,), units="1", doc="ΔC/C0 of the 24 taxels"),
+        "char": Port(
+            dtype="float64", shape=(), units="1", categories=CATEGORIES, doc="letter under the finger"
+        ),
+        "position": Port(dtype="float64", shape=(), units="mm", doc="finger centre along the line"),
+        "y": Port(dtype="float64", shape=(), units="mm", doc="finger centre across the line"),
+    }
+    counter_docs = {
+        "speed_clamped": "speed samples outside [min_speed_mm_s, max_speed_mm_s] (0, negative or too fast), "
+        "clamped into it: the controller asked for more than the rig allows",
+        "lateral_clamped": "lateral corrections beyond ±max_lateral_mm, clamped",
+        **nonfinite_counter_docs("speed or lateral samples"),
+    }
+
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+        self._steered = "speed" in inputs
+        rate = self.config.rate_hz
+        return {
+            "taxels": StreamSpec("float64", (ROWS * COLS,), "1", rate, labels=TAXEL_LABELS),
+            "char": StreamSpec("float64", (), "1", rate, categories=CATEGORIES),
+            "position": StreamSpec("float64", (), "mm", rate),
+            "y": StreamSpec("float64", (), "mm", rate),
+        }
+
+    def ends_at(self) -> float | None:
+        c = self.config
+        v = c.min_speed_mm_s if getattr(self, "_steered", False) else self._clamp_speed(c.speed_mm_s)
+        x0, x_end = c.track()
+        return _samples_at(x0, x_end, v / c.rate_hz) / c.rate_hz
+
+    def _clamp_speed(self, v: float) -> float:
+        return min(max(v, self.config.min_speed_mm_s), self.config.max_speed_mm_s)
+
+    def reset(self) -> None:
+        c = self.config
+        text_rng, self._noise_rng = self.rng.spawn(2)
+        if c.random_letters:
+            self.text = "".join(LETTERS[k] for k in text_rng.integers(0, len(LETTERS), c.random_letters))
+        else:
+            self.text = c.text
+        self._tip = c.fingertip()
+        cells = text_cells(self.text)
+        self._dots = dot_positions(cells, self._tip.geometry)
+        self._cat = np.array([CATEGORIES.index("space" if ch == " " else ch) for ch in self.text], np.float64)
+        self._dt = 1.0 / c.rate_hz
+        self._i = 0
+        self._x0, self._x_end = c.track()
+        self._x = self._x0
+        self._v = self._clamp_speed(c.speed_mm_s)
+        self._lat = 0.0
+        self._done = False
+        self._pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {"speed": [], "lateral": []}
+        self._last = {"speed": self._v, "lateral": 0.0}
+        self._range = {
+            "speed": (c.min_speed_mm_s, c.max_speed_mm_s),
+            "lateral": (-c.max_lateral_mm, c.max_lateral_mm),
+        }
+
+    # -- inputs ----------------------------------------------------------------------------------
+    def _take(self, port: str, chunk: Chunk | None) -> None:
+        """Screen, clamp and queue the commands that arrived on ``port``.
+
+        Non-finite samples: ``raise`` stops the run; ``drop`` removes them; ``hold`` repeats the
+        previous (clamped) command. Finite ones outside the safe range are clamped and counted.
+        """
+        if chunk is None or len(chunk) == 0:
+            return
+        policy = self.config.on_bad_data
+        t = np.asarray(chunk.t, np.float64)
+        v = np.asarray(chunk.data, np.float64)
+        bad = ~np.isfinite(v)
+        if bad.any():
+            if policy == "raise":
+                screen_nonfinite(self, chunk, policy, port, None)  # raises, naming node and port
+            self.count("nonfinite_drop" if policy == "drop" else "nonfinite_hold", int(bad.sum()))
+        lo, hi = self._range[port]
+        clamped = int((~bad & ((v < lo) | (v > hi))).sum())
+        self.count("speed_clamped" if port == "speed" else "lateral_clamped", clamped)
+        v = np.clip(v, lo, hi)
+        if policy == "drop":
+            t, v = t[~bad], v[~bad]
+        elif bad.any():  # hold: forward-fill from the last good (clamped) command
+            good = np.where(~bad, np.arange(len(v)), -1)
+            src = np.maximum.accumulate(good)
+            v = np.where(src >= 0, v[np.maximum(src, 0)], self._last[port])
+        if len(v):
+            self._last[port] = float(v[-1])
+            self._pending[port].append((t, v))
+
+    def _apply_until(self, port: str, t: float) -> float | None:
+        """The latest queued command stamped at or before ``t`` (dropping it and older ones), or None."""
+        latest = None
+        q = self._pending[port]
+        tol = 1e-9 * self._dt
+        while q:
+            ts, vs = q[0]
+            k = int(np.searchsorted(ts, t + tol, side="right"))
+            if k:
+                latest = float(vs[k - 1])
+            if k < len(ts):
+                q[0] = (ts[k:], vs[k:])
+                break
+            q.pop(0)
+        return latest
+
+    # -- step --------------------------------------------------------------------------------------
+    def step(self, now: float, speed: Chunk | None = None, lateral: Chunk | None = None) -> dict[str, Chunk]:
+        self._take("speed", speed)
+        self._take("lateral", lateral)
+        n_due = max(self.due(now, self.config.rate_hz) - self._i, 0)
+        xs, ys = [], []
+        for _ in range(n_due if not self._done else 0):
+            if self._i > 0:
+                t_prev = (self._i - 1) * self._dt
+                v = self._apply_until("speed", t_prev)
+                self._v = self._v if v is None else v
+                lat = self._apply_until("lateral", t_prev)
+                self._lat = self._lat if lat is None else lat
+                self._x = self._x + self._v * self._dt
+            if self._x > self._x_end:
+                self._done = True
+                break
+            xs.append(self._x)
+            ys.append(self.config.y_offset_mm + self._lat)
+            self._i += 1
+        n = len(xs)
+        t = (self._i - n + np.arange(n)) / self.config.rate_hz
+        x, y = np.array(xs, np.float64), np.array(ys, np.float64)
+        out: dict[str, Chunk] = {}
+        want = self.demanded
+        if "taxels" in want:
+            noise = self._noise_rng.standard_normal((n, ROWS * COLS)) * self.config.noise
+            out["taxels"] = Chunk(t, self._tip.reading(self._tip.compression(x, y, self._dots)) + noise)
+        if "char" in want:
+            out["char"] = Chunk(t, self._char(x))
+        if "position" in want:
+            out["position"] = Chunk(t, x)
+        if "y" in want:
+            out["y"] = Chunk(t, y)
+        return out
+
+    def _char(self, x: np.ndarray) -> np.ndarray:
+        """Category of the cell under each finger position (0 between cells and off the text)."""
+        g = self._tip.geometry
+        k = np.floor(x / g.cell_pitch).astype(np.int64)
+        inside = (k >= 0) & (k < len(self._cat))
+        kk = np.clip(k, 0, max(len(self._cat) - 1, 0))
+        lo, hi = g.cell_span(kk)
+        on = inside & (x >= lo) & (x <= hi)
+        return np.where(on, self._cat[kk] if len(self._cat) else 0.0, 0.0)
+
+    @classmethod
+    def example(cls) -> Example:
+        n = 250
+        speed = 30.0 + 20.0 * np.sin(np.arange(n) / 40.0)
+        speed[100] = 0.0  # clamped to the minimum
+        lateral = 0.3 * np.sin(np.arange(n) / 60.0)
+        return Example(
+            params={"text": "bat", "rate_hz": 250.0},
+            inputs={"speed": speed, "lateral": lateral},
+            units={"speed": "mm/s", "lateral": "mm"},
+            rate_hz=250.0,
+            duration_s=1.0,
+        )

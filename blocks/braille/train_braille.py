@@ -1,0 +1,315 @@
+"""Train the Braille decoder: ``flowtact train-braille``.
+
+Runs the open-loop graph (in process, fast) over seeded random letters at one or several constant
+speeds, cuts the first- or second-order spikes into character windows (the ``char`` stream, as
+the ``naive_bayes`` block does online), computes each window's features (spike counts in
+time-normalised sub-bins, or first-spike latencies), fits a naive Bayes model over the 26 letters
+and saves it with its provenance. A counts model also gets the temperature of its running
+posterior, fitted on every prefix of the training windows (``nb_model.fit_temperature``). Run ``k`` (speed ``k`` of ``--speeds``, repetition ``r``) uses
+graph seed ``--seed + k + r·len(speeds)``: its letters and its noise come from that seed. The
+benchmark's held-out text uses seeds from :data:`HELDOUT_SEED` up, which this command refuses.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from flowtact.blocks.spiking.nb_model import (
+    ModelError,
+    NaiveBayesModel,
+    fit_gaussian,
+    fit_multinomial,
+    fit_temperature,
+    save_model,
+)
+from flowtact.blocks.spiking.window_features import window_features
+
+from .cells import LETTERS
+from .reading import LAYERS, OPEN_GRAPH, prefix_windows, read_line
+
+__all__ = ["HELDOUT_SEED", "build_parser", "main", "train_braille", "train_layers"]
+
+#: Graph seeds from here up are the benchmark's held-out text; training never uses them.
+HELDOUT_SEED = 100_000
+
+
+def _speeds(text: str) -> tuple[float, ...]:
+    try:
+        v = tuple(float(s) for s in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected speeds in mm/s separated by commas, got {text!r}"
+        ) from None
+    if not v or any(not 0 < s <= 1000 for s in v):
+        raise argparse.ArgumentTypeError(f"speeds must be in (0, 1000] mm/s; got {text!r}")
+    return v
+
+
+def _positive(kind: type) -> Callable[[str], Any]:
+    def parse(text: str) -> Any:
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a {kind.__name__}, got {text!r}") from None
+        if v <= 0:
+            raise argparse.ArgumentTypeError(f"must be > 0; got {text!r}")
+        return v
+
+    return parse
+
+
+def train_braille(
+    *,
+    graph: str | Path = OPEN_GRAPH,
+    speeds: Sequence[float] = (15.0, 30.0, 60.0),
+    letters: int = 260,
+    repeats: int = 1,
+    layer: str = "first",
+    features: str = "counts",
+    n_bins: int = 2,
+    alpha: float = 1.0,
+    var_smoothing: float = 1e-3,
+    seed: int = 1,
+    progress: Callable[[str, float, float], None] | None = None,
+) -> tuple[NaiveBayesModel, dict[str, Any]]:
+    """Simulate, extract features and fit; returns the model and its provenance."""
+    return train_layers(
+        graph=graph, speeds=speeds, letters=letters, repeats=repeats, layers=(layer,), features=features,
+        n_bins=n_bins, alpha=alpha, var_smoothing=var_smoothing, seed=seed, progress=progress,
+    )[layer]  # fmt: skip
+
+
+def train_layers(
+    *,
+    graph: str | Path = OPEN_GRAPH,
+    speeds: Sequence[float] = (15.0, 30.0, 60.0),
+    letters: int = 260,
+    repeats: int = 1,
+    layers: Sequence[str] = ("first",),
+    features: str = "counts",
+    n_bins: int = 2,
+    alpha: float = 1.0,
+    var_smoothing: float = 1e-3,
+    seed: int = 1,
+    progress: Callable[[str, float, float], None] | None = None,
+) -> dict[str, tuple[NaiveBayesModel, dict[str, Any]]]:
+    """:func:`train_braille` for several layers from the same simulated runs: layer → (model, provenance)."""
+    bad = [k for k in layers if k not in LAYERS]
+    if bad or not layers:
+        raise ValueError(f"layer must be one of {', '.join(LAYERS)}; got {', '.join(bad) or 'none'}")
+    if features not in ("counts", "latency"):
+        raise ValueError(f"features must be counts or latency; got {features!r}")
+    runs = [(s, r) for r in range(repeats) for s in speeds]
+    if seed < 0 or seed + len(runs) > HELDOUT_SEED:
+        raise ValueError(
+            f"seed must be in [0, {HELDOUT_SEED - len(runs)}]: seeds from {HELDOUT_SEED} are held out"
+        )
+    bins = n_bins if features == "counts" else 1
+    data: dict[str, dict[str, list[Any]]] = {k: {"x": [], "prefix": []} for k in layers}
+    ys: list[str] = []
+    prefix_labels: list[str] = []
+    per_run, n_units = [], {}
+    for k, (speed, _) in enumerate(runs):
+
+        def tick(now: float, dur: float | None, k: int = k, speed: float = speed) -> None:
+            if progress is not None:
+                done = k + (now / dur if dur else 0.0)
+                progress(f"run {k + 1}/{len(runs)} at {speed:g} mm/s", done, len(runs))
+
+        r = read_line(
+            graph, seed=seed + k, speed_mm_s=speed, letters=letters, layers=tuple(layers), progress=tick
+        )
+        pw, owner = prefix_windows(r.windows, r.rate_hz)
+        for layer in layers:
+            n_units[layer] = r.n_units[layer]
+            t, u = r.spikes[layer]
+            d = data[layer]
+            d["x"].append(
+                window_features(t, u, r.windows, n_units=n_units[layer], n_bins=bins, kind=features)
+            )  # type: ignore[arg-type]
+            if features == "counts":  # the partial windows the running posterior scores: its calibration
+                d["prefix"].append(window_features(t, u, pw, n_units=n_units[layer]))
+        ys.extend(r.letters)
+        prefix_labels.extend(r.letters[i] for i in owner)
+        per_run.append({"seed": seed + k, "speed_mm_s": speed, "windows": len(r.letters)})
+    missing = sorted(set(LETTERS) - set(ys))
+    if missing:
+        raise ValueError(f"letters {''.join(missing)} never came up in the training text: raise --letters")
+    from flowtact.graph import resolve_graph_path
+    from flowtact.launch import versions
+
+    common = {
+        "graph": str(graph),
+        "graph_sha256": hashlib.sha256(resolve_graph_path(graph).read_bytes()).hexdigest(),
+        "features": features,
+        "n_bins": bins,
+        "alpha": alpha if features == "counts" else None,
+        "var_smoothing": var_smoothing if features == "latency" else None,
+        "seed": seed,
+        "seeds": [p["seed"] for p in per_run],
+        "speeds_mm_s": list(speeds),
+        "letters_per_run": letters,
+        "runs": per_run,
+        "windows": len(ys),
+        "flowtact_version": versions().get("flowtact", "?"),
+    }
+    out = {}
+    for layer in layers:
+        x = np.vstack(data[layer]["x"])
+        if features == "counts":
+            model = fit_multinomial(x, ys, tuple(LETTERS), n_units=n_units[layer], n_bins=bins, alpha=alpha)
+            tau = fit_temperature(model, np.vstack(data[layer]["prefix"]), prefix_labels)
+            model = dataclasses.replace(model, running_temperature=tau)
+        else:
+            model = fit_gaussian(x, ys, tuple(LETTERS), n_units=n_units[layer], var_smoothing=var_smoothing)
+        pred = np.array(list(LETTERS))[np.argmax(model.joint_log_likelihood(x), axis=1)]
+        out[layer] = (
+            model,
+            {
+                **common,
+                "layer": layer,
+                "spikes_stream": f"{LAYERS[layer]}.spikes",
+                "training_accuracy": float(np.mean(pred == np.array(ys))),
+                "running_temperature": model.running_temperature,
+            },
+        )
+    return out
+
+
+class _Bar:
+    """A rich progress bar on stderr (a terminal) or nothing."""
+
+    def __init__(self, show: bool) -> None:
+        self.bar: Any = None
+        if show and sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                TimeElapsedColumn(),
+                console=Console(file=sys.stderr),
+            )
+            self.task = self.bar.add_task("simulating", total=1.0)
+            self.bar.start()
+
+    def __call__(self, text: str, done: float, total: float) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, completed=done / total, description=text)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="flowtact train-braille",
+        description="Train the naive Bayes Braille decoder on simulated reading (graphs/braille_open.yaml).",
+    )
+    p.add_argument(
+        "--out", default="braille_model.npz", help="model file to write (default braille_model.npz)"
+    )
+    p.add_argument(
+        "--graph", default=OPEN_GRAPH, help=f"open-loop graph with a 'scan' node (default {OPEN_GRAPH})"
+    )
+    p.add_argument(
+        "--speeds",
+        type=_speeds,
+        default=(15.0, 30.0, 60.0),
+        help="constant speeds in mm/s (default 15,30,60)",
+    )
+    p.add_argument("--letters", type=_positive(int), default=260, help="random letters per run (default 260)")
+    p.add_argument(
+        "--repeats", type=_positive(int), default=1, help="runs per speed, each its own seed (default 1)"
+    )
+    p.add_argument(
+        "--layer",
+        choices=tuple(LAYERS),
+        default="first",
+        help="first- or second-order spikes (default first)",
+    )
+    p.add_argument(
+        "--features", choices=("counts", "latency"), default="counts", help="window features (default counts)"
+    )
+    p.add_argument(
+        "--bins",
+        type=_positive(int),
+        default=2,
+        help="time-normalised sub-bins per window, counts (default 2)",
+    )
+    p.add_argument(
+        "--alpha", type=_positive(float), default=1.0, help="additive smoothing of counts (default 1)"
+    )
+    p.add_argument(
+        "--var-smoothing",
+        type=_positive(float),
+        default=1e-3,
+        help="variance smoothing of latencies (default 1e-3)",
+    )
+    p.add_argument("--seed", type=int, default=1, help=f"first graph seed (default 1; < {HELDOUT_SEED})")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the provenance as JSON")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``flowtact train-braille``: returns the exit status (0 ok, 1 failed, 2 usage)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:
+        return int(e.code or 0)
+    from flowtact.errors import FlowtactError
+
+    bar = _Bar(not args.no_progress)
+    t0 = time.perf_counter()
+    try:
+        model, prov = train_braille(
+            graph=args.graph,
+            speeds=args.speeds,
+            letters=args.letters,
+            repeats=args.repeats,
+            layer=args.layer,
+            features=args.features,
+            n_bins=args.bins,
+            alpha=args.alpha,
+            var_smoothing=args.var_smoothing,
+            seed=args.seed,
+            progress=bar,
+        )
+        prov["command"] = "flowtact train-braille " + " ".join(argv)
+        path = save_model(args.out, model, prov)
+    except ValueError as e:  # bad arguments found while training (seed range, too few letters)
+        bar.close()
+        print(f"flowtact train-braille: {e}", file=sys.stderr)
+        return 2 if not isinstance(e, ModelError) else 1
+    except (FlowtactError, OSError) as e:
+        bar.close()
+        print(f"flowtact train-braille: {e}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        bar.close()
+        print("flowtact train-braille: interrupted; nothing saved", file=sys.stderr)
+        return 130
+    bar.close()
+    if args.json:
+        print(json.dumps(prov, indent=1))
+    else:
+        print(
+            f"{path}: {args.features} of {prov['spikes_stream']} ({model.n_units} units, "
+            f"{prov['n_bins']} sub-bins), {prov['windows']} windows at {','.join(f'{s:g}' for s in args.speeds)} mm/s; "
+            f"training accuracy {prov['training_accuracy']:.1%}; {time.perf_counter() - t0:.0f} s"
+        )
+    return 0
