@@ -5,12 +5,12 @@ import itertools
 import pytest
 
 pytest.importorskip("matplotlib")
-import matplotlib  # noqa: E402
+import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
-from flowtact.benchmark.labels import PointLabel, label_points  # noqa: E402
+from flowtact.benchmark.labels import PointLabel, label_points
 
 
 def _texts(ax):
