@@ -4,6 +4,7 @@ end to end. No timing is asserted: only that what is measured is recorded, compa
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 import time
@@ -221,7 +222,7 @@ def _fig(ratio, lo, hi):
 
 
 def test_compare_holds_a_run_to_the_ratio_ranges_an_earlier_run_reported():
-    from flowtact.benchmark.compare import compare_records
+    from flowtact.benchmark.compare import compare_records, shift_percentiles
 
     before = {"s": {"figures": {"a": _fig(2.0, 1.8, 2.2), "b": _fig(0.5, 0.45, 0.55), "c": _fig(1, 1, 1)}}}
     now = [
@@ -231,6 +232,10 @@ def test_compare_holds_a_run_to_the_ratio_ranges_an_earlier_run_reported():
     assert set(checks) == {"a", "b"}  # only figures with a ratio in both runs
     assert checks["a"].within and checks["a"].overlaps
     assert not checks["b"].within and not checks["b"].overlaps  # 0.58-0.7 misses 0.45-0.55
+    assert checks["a"].shift == pytest.approx(math.log(2.1 / 2.0))
+    shift = shift_percentiles(list(checks.values()))
+    assert shift["median"] == pytest.approx(math.log(2.1 / 2.0))  # the lower of two shifts
+    assert shift["p90"] == pytest.approx(math.log(0.6 / 0.5))
 
 
 @pytest.mark.usefixtures("suites")

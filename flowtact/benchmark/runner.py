@@ -127,7 +127,7 @@ def run_suites(
 ) -> int:
     """Run the named suites (all when none) into ``out``; 0 all ran, 1 one failed, 2 an unknown name
     or an unreadable ``compare`` folder (an earlier run whose ratios this one is held to)."""
-    from flowtact.benchmark.compare import compare_records, load_results, report_lines
+    from flowtact.benchmark.compare import compare_records, load_results, report_lines, shift_percentiles
     from flowtact.benchmark.report import write_report
     from flowtact.params import did_you_mean
 
@@ -170,6 +170,7 @@ def run_suites(
             "ratios": len(checks),
             "within_earlier_range": sum(c.within for c in checks),
             "ranges_overlap": sum(c.overlaps for c in checks),
+            "shift": shift_percentiles(checks),
         }
         extra = report_lines(checks, compare)
     (out / "results").mkdir(parents=True, exist_ok=True)
@@ -183,7 +184,8 @@ def run_suites(
             r = run["reproducibility"]
             print(
                 f"reproduced: {r['within_earlier_range']} of {r['ratios']} ratios inside the range of "
-                f"{compare} ({r['ranges_overlap']} ranges overlap)"
+                f"{compare} ({r['ranges_overlap']} ranges overlap; ratios moved {r['shift']['median']:.1%} "
+                f"median, {r['shift']['p90']:.1%} at the 90th percentile)"
             )
     return 1 if any(r["status"] == "failed" for r in records) else 0
 
