@@ -244,3 +244,26 @@ def test_sweep_plots_draw_labelled_axes():
         assert axes[0].get_ylabel() == ylabel and all(ax.get_xlabel() == "tick (ms)" for ax in axes)
         assert [len(ax.get_lines()) for ax in axes] == lines
         plt.close(fig)
+
+
+def _raw_round(cpu: float | None) -> dict:
+    lat = {"latency_us": {"p50": 200.0, "p99": 400.0, "n": 1000}}
+    return {
+        "raw": {
+            "small_1khz": {**lat, "cpu_pct": {"source": cpu, "stage": cpu, "sink": None}},
+            "small_flat": {"throughput": {"delivered_msg_s": 5e4}},
+            "image_flat": {"throughput": {"bytes_s": 6e8}},
+        }
+    }
+
+
+def test_the_cpu_figure_needs_every_round_and_says_so_when_one_is_missing():
+    from flowtact.benchmark.suite import Context
+
+    ctx = Context(transport.SUITE, quick=True)
+    transport.record_raw(ctx, [_raw_round(12.0), _raw_round(14.0), _raw_round(13.0)])
+    assert ctx.figures["raw pyzmq, busiest process at 1 kHz"].samples == [12.0, 14.0, 13.0]
+    short = Context(transport.SUITE, quick=True)
+    transport.record_raw(short, [_raw_round(12.0), _raw_round(None), _raw_round(13.0)])
+    assert "raw pyzmq, busiest process at 1 kHz" not in short.figures
+    assert any("CPU was measured in 2 of 3 rounds" in n for n in short.notes)
