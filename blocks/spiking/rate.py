@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
@@ -10,6 +9,7 @@ from typing import Literal
 import numpy as np
 
 from flowtact.block import Block, Example, Port, SpecError
+from flowtact.blocks.spiking.event_bins import EventBins
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
 
@@ -81,73 +81,30 @@ class Rate(Block):
         }
 
     def reset(self) -> None:
-        self._units = int(self.input_specs["spikes"].n_units)  # type: ignore[arg-type]
-        self._next = 0  # first bin not emitted yet
-        self._counts = np.zeros((0, self._units))  # counts of bins _next, _next + 1, ...
-        self._wm = -math.inf  # watermark: every event before it has arrived
-
-    def _bin_of(self, t: np.ndarray) -> np.ndarray:
-        """Index k of the bin [k·bin, (k+1)·bin) holding t, snapping times within 1e-9 bin of a
-        boundary to the later bin (so i / rate on a boundary lands there despite rounding)."""
-        return np.floor(np.asarray(t, np.float64) / self.config.bin_s + 1e-9).astype(np.int64)
-
-    def _complete(self, wm: float) -> int:
-        """Number of bins whose end is at or before the watermark."""
-        if not math.isfinite(wm):
-            return 0
-        return int(self._bin_of(np.array([wm]))[0])
+        units = int(self.input_specs["spikes"].n_units)  # type: ignore[arg-type]
+        self._bins = EventBins(units, self.config.bin_s, f"{self.node} ({self.name})")
 
     def step(self, spikes: Chunk) -> dict[str, Chunk]:
-        if len(spikes):
-            idx = np.asarray(spikes.data, dtype=np.int64)
-            if idx.min() < 0 or idx.max() >= self._units:
-                raise ValueError(
-                    f"{self.node} ({self.name}): unit index out of range 0..{self._units - 1} "
-                    f"(got {idx.min()}..{idx.max()})"
-                )
-            k = self._bin_of(spikes.t)
-            late = k < self._next
-            if late.any():
-                self.count("late_events", int(late.sum()))
-                k, idx = k[~late], idx[~late]
-            if len(k):
-                need = int(k.max()) - self._next + 1
-                if need > len(self._counts):
-                    self._counts = np.vstack(
-                        [self._counts, np.zeros((need - len(self._counts), self._units))]
-                    )
-                flat = (k - self._next) * self._units + idx
-                self._counts += np.bincount(flat, minlength=self._counts.size).reshape(self._counts.shape)
-            self._wm = max(self._wm, float(spikes.t[-1]))
-        if spikes.end is not None:
-            self._wm = max(self._wm, float(spikes.end))
-        return {"y": self._emit(self._complete(self._wm) - self._next, partial=False)}
+        late = self._bins.add(spikes)
+        if late:
+            self.count("late_events", late)
+        return {"y": self._emit(self._bins.complete(), partial=False)}
 
     def _emit(self, n_bins: int, partial: bool) -> Chunk:
-        n_bins = max(n_bins, 0)
         w = self.config.bin_s
-        if len(self._counts) < n_bins:
-            self._counts = np.vstack([self._counts, np.zeros((n_bins - len(self._counts), self._units))])
-        counts, self._counts = self._counts[:n_bins], self._counts[n_bins:]
-        k = self._next + np.arange(n_bins)
-        widths = np.full(n_bins, w)
-        if partial and n_bins:
-            covered = self._wm - k[-1] * w
+        k, counts = self._bins.take(n_bins)
+        widths = np.full(len(k), w)
+        if partial and len(k):
+            covered = self._bins.wm - k[-1] * w
             if 0 < covered < w:
                 widths[-1] = covered
         rates = counts / widths[:, None]
         if self.config.mode == "population":
             rates = rates.mean(axis=1)
-        self._next += n_bins
-        return Chunk(k * w, rates, k[-1] * w + w if n_bins else None)
+        return Chunk(k * w, rates, k[-1] * w + w if len(k) else None)
 
     def flush(self) -> dict[str, Chunk]:
-        n_bins = len(self._counts)
-        if math.isfinite(self._wm):
-            k = self._complete(self._wm)
-            if self._wm > k * self.config.bin_s:  # a partial bin [k·bin, watermark) is open
-                n_bins = max(n_bins, k + 1 - self._next)
-        return {"y": self._emit(n_bins, partial=True)}
+        return {"y": self._emit(self._bins.pending(), partial=True)}
 
     @classmethod
     def example(cls) -> Example:

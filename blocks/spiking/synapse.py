@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 from flowtact import Block, Chunk, Example, Port, SpecError, StreamSpec, param
+from flowtact.blocks.spiking.event_bins import EventBins
 from flowtact.params import Config
 
 __all__ = ["Synapse", "SynapseConfig", "grid_connectivity"]
@@ -192,56 +193,21 @@ class Synapse(Block):
         self._dt = 1.0 / self.config.rate_hz
         self._decay = math.exp(-self._dt / self.config.tau_s)
         self._y = np.zeros(self._n_tgt)
-        self._next = 0  # first bin not emitted
-        self._counts = np.zeros((0, self._n_src), np.int64)
-        self._wm = -math.inf
-
-    def _bin_of(self, t: np.ndarray) -> np.ndarray:
-        return np.floor(np.asarray(t, np.float64) / self._dt + 1e-9).astype(np.int64)
+        self._bins = EventBins(self._n_src, self._dt, f"{self.node} ({self.name})", what="source")
 
     def step(self, spikes: Chunk) -> dict[str, Chunk]:
-        if len(spikes):
-            idx = np.asarray(spikes.data, np.int64)
-            if idx.min() < 0 or idx.max() >= self._n_src:
-                raise ValueError(
-                    f"{self.node} ({self.name}): source index out of range 0..{self._n_src - 1} "
-                    f"(got {idx.min()}..{idx.max()})"
-                )
-            k = self._bin_of(spikes.t)
-            late = k < self._next
-            if late.any():
-                self.count("late_events", int(late.sum()))
-                k, idx = k[~late], idx[~late]
-            if len(k):
-                self._grow(int(k.max()) - self._next + 1)
-                np.add.at(self._counts, (k - self._next, idx), 1)
-            self._wm = max(self._wm, float(spikes.t[-1]))
-        if spikes.end is not None:
-            self._wm = max(self._wm, float(spikes.end))
-        done = int(self._bin_of(np.array([self._wm]))[0]) if math.isfinite(self._wm) else 0
-        return {"y": self._emit(done - self._next)}
-
-    def _grow(self, n_bins: int) -> None:
-        if n_bins > len(self._counts):
-            more = np.zeros((n_bins - len(self._counts), self._n_src), np.int64)
-            self._counts = np.vstack([self._counts, more])
+        late = self._bins.add(spikes)
+        if late:
+            self.count("late_events", late)
+        return {"y": self._emit(self._bins.complete())}
 
     def _emit(self, n_bins: int) -> Chunk:
-        n_bins = max(n_bins, 0)
-        self._grow(n_bins)
-        counts, self._counts = self._counts[:n_bins], self._counts[n_bins:]
+        k, counts = self._bins.take(n_bins)
         y = _integrate(np.ascontiguousarray(counts), self._ptr, self._tgt, self._val, self._decay, self._y)
-        k = self._next + np.arange(n_bins)
-        self._next += n_bins
-        return Chunk(k * self._dt, y, (k[-1] + 1) * self._dt if n_bins else None)
+        return Chunk(k * self._dt, y, (k[-1] + 1) * self._dt if len(k) else None)
 
     def flush(self) -> dict[str, Chunk]:
-        n_bins = len(self._counts)
-        if math.isfinite(self._wm):
-            k = int(self._bin_of(np.array([self._wm]))[0])
-            if self._wm > k * self._dt:  # a partial bin [k·dt, watermark) is open
-                n_bins = max(n_bins, k + 1 - self._next)
-        return {"y": self._emit(n_bins)}
+        return {"y": self._emit(self._bins.pending())}
 
     @classmethod
     def example(cls) -> Example:
