@@ -46,6 +46,8 @@ CHAIN_STREAM = "savgol.y"
 """The chain's 2-hop stream: savgol's output arriving in the sink process (nlif's)."""
 FAST_STREAM = "stage.y"
 """The --fast pipeline's last hop: what the sink process receives."""
+PACED_HZ = 1000.0
+"""Messages per second of the paced 1 kHz pipelines (one sample per message), raw and chain.yaml."""
 ROUNDS = 3
 """Rounds of the headline pipelines, each running raw pyzmq then flowtact, so every ratio has a spread
 measured in the same run (a single run's p99 is one scheduling hiccup away from the next run's)."""
@@ -152,6 +154,7 @@ def check_contract(summary: dict[str, Any], streams: tuple[str, ...], processes:
         for key in ("p50", "p99", "max", "n"):
             _need(summary, "streams", s, "latency_us", key)
     _need(summary, "wall_s")
+    _need(summary, "supervisor", "cpu_pct")
 
 
 def bench_chain(quick: bool) -> dict[str, Any]:
@@ -172,6 +175,7 @@ def bench_chain(quick: bool) -> dict[str, Any]:
         "loss_pct": 100.0 * streams[CHAIN_STREAM]["dropped"] / max(streams[CHAIN_STREAM]["samples"], 1),
         "cpu_pct": cpu,
         "cpu_max_pct": max((c for c in cpu.values() if c is not None), default=None),
+        "supervisor_cpu_pct": summary["supervisor"]["cpu_pct"],
         "summary": summary,
     }
 
@@ -465,6 +469,18 @@ def record_raw(ctx: Context, rounds: list[dict[str, Any]]) -> None:
     else:
         ctx.note(f"raw pyzmq's CPU was measured in {len(cpu)} of {len(rw)} rounds (a run shorter than the "
                  "sampler's window): no CPU figure, so no CPU ratio.")  # fmt: skip
+    per_msg = [cpu_per_message_us(r["small_1khz"]["cpu_pct"].values()) for r in rw]
+    if None not in per_msg:
+        ctx.figure(RAW_PER_MSG, per_msg, "µs CPU per message", "lower", is_baseline=True, reference=True)
+
+
+RAW_PER_MSG = "raw pyzmq, CPU per message at 1 kHz (3 processes)"
+
+
+def cpu_per_message_us(cpu_pcts: Any) -> float | None:
+    """CPU time per message (µs) summed over processes paced at PACED_HZ; None if one is unknown."""
+    cpu = list(cpu_pcts)
+    return None if not cpu or None in cpu else sum(cpu) / 100.0 / PACED_HZ * 1e6
 
 
 def record_flowtact(ctx: Context, rounds: list[dict[str, Any]]) -> None:
@@ -482,6 +498,18 @@ def record_flowtact(ctx: Context, rounds: list[dict[str, Any]]) -> None:
     elif "raw pyzmq, busiest process at 1 kHz" in ctx.figures:
         ctx.figure("flowtact chain.yaml, busiest process at 1 kHz", cpu, "% of a core", "lower",
                    baseline="raw pyzmq, busiest process at 1 kHz", paired=_pairs(ctx, "raw pyzmq, busiest process at 1 kHz", cpu))  # fmt: skip
+    sup = [c["supervisor_cpu_pct"] for c in chains]
+    per_msg = [cpu_per_message_us([*c["cpu_pct"].values(), c["supervisor_cpu_pct"]]) for c in chains]
+    if None not in sup:
+        ctx.figure("flowtact chain.yaml, supervisor at 1 kHz", sup, "% of a core", "lower")
+    if None not in per_msg and RAW_PER_MSG in ctx.figures:
+        ctx.figure("flowtact chain.yaml, CPU per message at 1 kHz (3 processes + supervisor)", per_msg,
+                   "µs CPU per message", "lower", baseline=RAW_PER_MSG,
+                   paired=_pairs(ctx, RAW_PER_MSG, per_msg))  # fmt: skip
+    elif None in per_msg:
+        ctx.note(
+            "flowtact's CPU per message is missing: a process's or the supervisor's CPU was not measured."
+        )
     _thr(
         ctx,
         "flowtact --fast, small",

@@ -104,7 +104,7 @@ def _summary():
     lat = {"p50": 1.0, "p99": 2.0, "max": 3.0, "n": 10}
     stream = {"messages": 10, "samples": 10, "dropped": 0, "policy": "block", "latency_us": lat}
     procs = {n: {"pid": i, "cpu_pct": 1.0, "nodes": [n]} for i, n in enumerate(("a", "b", "c"))}
-    return {"wall_s": 1.0, "processes": procs, "streams": {"stage.y": stream}}
+    return {"wall_s": 1.0, "processes": procs, "streams": {"stage.y": stream}, "supervisor": {"cpu_pct": 0.5}}
 
 
 def test_contract_accepts_a_complete_summary_and_names_a_missing_key():
@@ -117,6 +117,15 @@ def test_contract_accepts_a_complete_summary_and_names_a_missing_key():
         transport.check_contract(_summary(), ("savgol.y",), 3)
     with pytest.raises(transport.ContractError, match="expected 4 processes"):
         transport.check_contract(_summary(), ("stage.y",), 4)
+    no_supervisor = _summary()
+    del no_supervisor["supervisor"]
+    with pytest.raises(transport.ContractError, match="'supervisor'"):
+        transport.check_contract(no_supervisor, ("stage.y",), 3)
+
+
+def test_cpu_per_message_sums_the_processes_at_the_paced_rate():
+    assert transport.cpu_per_message_us([10.0, 20.0, 5.0]) == pytest.approx(350.0)  # 0.35 core / 1 kHz
+    assert transport.cpu_per_message_us([10.0, None]) is None
 
 
 def test_parse_summary_takes_the_json_after_any_other_output():

@@ -277,8 +277,11 @@ def test_deadlines_report_p50_p99_and_warn_on_violations(tmp_path, budget, misse
     proc = flowtact("run", str(path), "--duration", "2.5", "--json")
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
-    path_stats = json.loads(stdout)["paths"]["src -> gain"]
+    summary = json.loads(stdout)
+    path_stats = summary["paths"]["src -> gain"]
     assert path_stats["n"] > 100 and 0 < path_stats["p50_us"] <= path_stats["p99_us"]
+    # the supervisor's own CPU, over the same after-warm-up window as the workers' (it is no worker)
+    assert 0 <= summary["supervisor"]["cpu_pct"] <= 100 * os.cpu_count()
     assert (path_stats["violations"] > 0) is missed
     assert ("deadline src -> gain" in stderr) is missed
 

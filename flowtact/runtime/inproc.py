@@ -59,6 +59,8 @@ class RunSummary:
     ticks: int = 0
     processes: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Multi-process runs: per process group, pid, host, nodes, CPU % of one core, restarts."""
+    supervisor_cpu_pct: float | None = None
+    """Multi-process runs: the supervisor's own CPU (% of one core) over the workers' window."""
     streams: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Multi-process runs: per cross-process stream, messages, samples, drops, latency (µs)."""
     paths: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -98,6 +100,7 @@ class RunSummary:
             "counter_docs": self.counter_docs,
             "pruned": self.pruned,
             "processes": self.processes,
+            "supervisor": {"cpu_pct": self.supervisor_cpu_pct},
             "streams": self.streams,
             "paths": self.paths,
             "notes": self.notes,
@@ -137,6 +140,8 @@ class RunSummary:
             cpu = f"{p['cpu_pct']:.1f}% CPU" if p.get("cpu_pct") is not None else "CPU n/a"
             restarts = f", {p['restarts']} restart(s)" if p.get("restarts") else ""
             lines.append(f"  process {name:<20} {cpu}{restarts}  [{', '.join(p['nodes'])}]")
+        if self.supervisor_cpu_pct is not None:
+            lines.append(f"  supervisor {'':<17} {self.supervisor_cpu_pct:.1f}% CPU  [control, recording]")
         for name, st in self.streams.items():
             lat = st["latency_us"]
             latency = (

@@ -166,6 +166,8 @@ class ProcessExecutor:
         self.interrupts = 0
         self.refused_seen = 0
         self.max_lag_s = 0.0
+        self.self_warm: tuple[float, float] | None = None
+        """The supervisor's own CPU seconds and monotonic time when the first worker was warm."""
         self.late: list[str] = []  # the busiest nodes when the run fell behind real time
         self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
         self.t_run = self.next_ping = time.monotonic()
@@ -499,6 +501,8 @@ class ProcessExecutor:
         wall = msg["wall_ns"]
         if proc.warm is None and time.monotonic() - self.t_run >= WARMUP_S:
             proc.warm = (msg["cpu_s"], wall)
+            if self.self_warm is None:
+                self.self_warm = (time.process_time(), time.monotonic())
         if proc.warm is not None and wall > proc.warm[1]:
             proc.cpu_pct = 100.0 * (msg["cpu_s"] - proc.warm[0]) / ((wall - proc.warm[1]) / 1e9)
         self.max_lag_s = max(self.max_lag_s, msg.get("max_lag_s", 0.0))
@@ -753,6 +757,15 @@ class ProcessExecutor:
             },
         }
 
+    def _own_cpu_pct(self) -> float | None:
+        """The supervisor's CPU (its every thread: control, recording, live view) in % of one core,
+        over the workers' window (after the warm-up), so the two add up; None before any warm-up."""
+        if self.self_warm is None:
+            return None
+        cpu0, t0 = self.self_warm
+        wall = time.monotonic() - t0
+        return 100.0 * (time.process_time() - cpu0) / wall if wall > 0 else None
+
     def _process_table(self) -> dict[str, dict[str, Any]]:
         return {
             p.name: {
@@ -837,6 +850,7 @@ class ProcessExecutor:
             pruned=list(plan.pruned),
             ticks=max((p.last_k for p in self.procs.values()), default=0),
             processes=self._process_table(),
+            supervisor_cpu_pct=self._own_cpu_pct(),
             streams=self._stream_stats(),
             paths=self._path_stats(),
             counter_docs=explain_counters(plan, counters),
