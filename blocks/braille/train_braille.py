@@ -33,6 +33,7 @@ from flowtact.blocks.spiking.nb_model import (
     save_model,
 )
 from flowtact.blocks.spiking.window_features import window_features
+from flowtact.terminal_bar import TerminalBar
 
 from .cells import LETTERS
 from .reading import LAYERS, OPEN_GRAPH, prefix_windows, read_line
@@ -186,31 +187,9 @@ def train_layers(
     return out
 
 
-class _Bar:
-    """A rich progress bar on stderr (a terminal) or nothing."""
-
-    def __init__(self, show: bool) -> None:
-        self.bar: Any = None
-        if show and sys.stderr.isatty():
-            from rich.console import Console
-            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-            self.bar = Progress(
-                TextColumn("{task.description}"),
-                BarColumn(),
-                TimeElapsedColumn(),
-                console=Console(file=sys.stderr),
-            )
-            self.task = self.bar.add_task("simulating", total=1.0)
-            self.bar.start()
-
-    def __call__(self, text: str, done: float, total: float) -> None:
-        if self.bar is not None:
-            self.bar.update(self.task, completed=done / total, description=text)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.stop()
+def _bar_callback(bar: TerminalBar) -> Callable[[str, float, float], None]:
+    """The trainer's ``progress(text, done, total)`` drawn on a terminal bar."""
+    return lambda text, done, total: bar.update(completed=done / total, description=text)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -273,7 +252,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(e.code or 0)
     from flowtact.errors import FlowtactError
 
-    bar = _Bar(not args.no_progress)
+    bar = TerminalBar("train-braille", 1.0, show=not args.no_progress, count=False, description="simulating")
     t0 = time.perf_counter()
     try:
         model, prov = train_braille(
@@ -287,7 +266,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             alpha=args.alpha,
             var_smoothing=args.var_smoothing,
             seed=args.seed,
-            progress=bar,
+            progress=_bar_callback(bar),
         )
         prov["command"] = "flowtact train-braille " + " ".join(argv)
         path = save_model(args.out, model, prov)

@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from flowtact.terminal_bar import TerminalBar
+
 from .cnn import ARCHS, TORCH_HINT, Arch, Preprocess, build_model, import_torch, n_parameters, save_checkpoint
 from .hand import FINGERS
 
@@ -348,35 +350,6 @@ def _predict(model: Any, x: Any, torch: Any, batch: int = 256) -> np.ndarray:
         )
 
 
-class _Bar:
-    """A rich progress bar on stderr, shown only when asked for and stderr is a terminal."""
-
-    def __init__(self, enabled: bool, total: int) -> None:
-        self.progress = None
-        if enabled and sys.stderr.isatty():
-            from rich.console import Console
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-            self.progress = Progress(
-                TextColumn("[bold]train-force"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TimeElapsedColumn(),
-                TextColumn("{task.description}"),
-                console=Console(stderr=True),
-            )
-            self.progress.start()
-            self.task = self.progress.add_task("", total=total)
-
-    def update(self, text: str) -> None:
-        if self.progress is not None:
-            self.progress.update(self.task, advance=1, description=text)
-
-    def close(self) -> None:
-        if self.progress is not None:
-            self.progress.stop()
-
-
 def train_on_arrays(
     data: Dataset,
     config: TrainConfig = TrainConfig(),
@@ -486,7 +459,7 @@ def _train(
     stopped = "max_epochs"
     interrupted_at: int | None = None
     t0 = time.perf_counter()
-    bar = _Bar(progress, config.max_epochs)
+    bar = TerminalBar("train-force", config.max_epochs, show=progress)
     try:
         for epoch in range(1, config.max_epochs + 1):
             perm = torch.randperm(len(train), generator=gen)
@@ -506,7 +479,7 @@ def _train(
             else:
                 bad += 1
             text = f"loss {train_mse:.4f} val {val_mse:.4f} best {best_val:.4f} (epoch {best_epoch})"
-            bar.update(text)
+            bar.update(advance=1, description=text)
             if log is not None:
                 log(f"epoch {epoch}: {text}")
             if bad >= config.patience:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import sys
-from typing import Any, TextIO
+from typing import TextIO
+
+from flowtact.terminal_bar import TerminalBar
 
 __all__ = ["SweepProgress"]
 
@@ -17,39 +19,24 @@ class SweepProgress:
         self.total, self.done, self.failed = total, 0, 0
         self.enabled = enabled
         self.every = every or max(1, total // 10)
-        self._bar: Any = None
-        if enabled and (bar if bar is not None else self.stream.isatty()):
-            from rich.console import Console
-            from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
-            from rich.progress import Progress as RichProgress
-
-            self._bar = RichProgress(
-                TextColumn("[bold]sweep"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("{task.description}"),
-                TimeElapsedColumn(),
-                console=Console(file=self.stream),
-            )
-            self._task = self._bar.add_task(self._text(), total=total)
+        self._bar = TerminalBar(
+            "sweep", total, show=enabled, stream=self.stream, force=bar, description=self._text()
+        )
 
     def _text(self) -> str:
         return f"{self.done} done, {self.failed} failed, {self.total - self.done} remaining"
 
     def __enter__(self) -> SweepProgress:
-        if self._bar:
-            self._bar.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self._bar:
-            self._bar.stop()
+        self._bar.close()
 
     def row(self, ok: bool) -> None:
         """One run finished (``ok`` False: it failed)."""
         self.done += 1
         self.failed += not ok
-        if self._bar:
-            self._bar.update(self._task, completed=self.done, description=self._text())
+        if self._bar.shown:
+            self._bar.update(completed=self.done, description=self._text())
         elif self.enabled and (self.done % self.every == 0 or self.done == self.total):
             print(f"sweep: {self._text()}", file=self.stream, flush=True)
