@@ -426,4 +426,5 @@ SUITE = Suite(
     needs=("matplotlib",),
     minutes_quick=1.0,
     minutes_full=5.0,
+    processes=(1, 1),  # recognition and reading speed: the same in every process, no timing ratios
 )

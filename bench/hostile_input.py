@@ -62,4 +62,5 @@ SUITE = Suite(
     run=run,
     minutes_quick=0.5,
     minutes_full=1.5,
+    processes=(1, 1),  # every sample already comes from fresh processes
 )

@@ -66,4 +66,5 @@ SUITE = Suite(
     run=run,
     minutes_quick=0.3,
     minutes_full=1.0,
+    processes=(1, 1),  # outcomes, not timings
 )

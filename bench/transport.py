@@ -634,4 +634,5 @@ SUITE = Suite(
     run=run,
     minutes_quick=1.5,
     minutes_full=5.0,
+    processes=(1, 1),  # every sample already comes from fresh processes
 )

@@ -208,6 +208,8 @@ def test_a_real_suite_runs_end_to_end_from_the_installed_package(tmp_path):
     assert res["baseline"].startswith("`scipy.signal.lfilter`")
     measured = [f for f in res["figures"].values() if not f["is_baseline"]]
     assert measured and all(f["ratio"] > 0 for f in measured)
+    assert res["processes"] == 2  # quick: a child process measured part of every figure
+    assert all(f["processes"] == 2 for f in res["figures"].values())
     assert res["wall_s"] <= time.monotonic() - start
     report = (tmp_path / "REPORT.md").read_text()
     assert (

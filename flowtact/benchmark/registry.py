@@ -8,7 +8,7 @@ from importlib.metadata import entry_points
 
 from flowtact.benchmark.suite import Suite
 
-__all__ = ["GROUP", "Unavailable", "register", "suites", "unregister"]
+__all__ = ["GROUP", "Unavailable", "in_process_only", "register", "suites", "unregister"]
 
 GROUP = "flowtact.bench"
 _REGISTERED: dict[str, Suite] = {}
@@ -27,6 +27,11 @@ def register(suite: Suite) -> Suite:
     """Make ``suite`` runnable by ``flowtact bench`` in this process (it shadows an entry point)."""
     _REGISTERED[suite.name] = suite
     return suite
+
+
+def in_process_only(name: str) -> bool:
+    """Was suite ``name`` registered in this process (so a child process cannot find it by name)?"""
+    return name in _REGISTERED
 
 
 def unregister(name: str) -> None:

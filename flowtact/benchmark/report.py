@@ -83,7 +83,9 @@ def _suite_section(r: dict[str, Any]) -> list[str]:
     status = r["status"].upper() if r["status"] != "ok" else "ok"
     lines.append(
         f"Status: **{status}** · wall {r['wall_s']:.1f} s · load average before {_load(r['load_before'])}, "
-        f"after {_load(r['load_after'])} · reproduce: `{r['command']}`"
+        f"after {_load(r['load_after'])} · "
+        + (f"samples from {r['processes']} fresh processes · " if r.get("processes", 1) > 1 else "")
+        + f"reproduce: `{r['command']}`"
     )
     lines.append("")
     if r.get("measures"):
@@ -163,7 +165,10 @@ def write_report(
         "",
         "Each speed figure is the median of its repeats (after warm-up), with its interquartile range and "
         "extremes; ratios compare it with a baseline measured in the same run, so they survive a "
-        "busy machine better than absolute figures. A ratio's range spans every pairing of the two figures' samples (worst to best); a rerun reproduces a ratio when its median lands inside that range.",
+        "busy machine better than absolute figures. A ratio's range spans its paired ratios, or every pairing of the two "
+        "figures' samples (worst to best); a rerun reproduces a ratio when its median lands inside that range. A suite "
+        "timed in this process shares its repeats out over several fresh processes (2 in a quick run, 3 in a full "
+        "one): what moves from one process to the next (memory layout, compiled code, the core) is in the spread.",
         "",
         "| suite | status | wall s | load before → after |",
         "|---|---|---|---|",

@@ -15,8 +15,9 @@ from typing import Any
 
 from flowtact.benchmark.machine import THREAD_VARS, load_average, machine_info
 from flowtact.benchmark.plots import draw_tradeoff, save_plot
+from flowtact.benchmark.process_rounds import measure_children
 from flowtact.benchmark.progress import Progress
-from flowtact.benchmark.registry import Unavailable, suites
+from flowtact.benchmark.registry import Unavailable, in_process_only, suites
 from flowtact.benchmark.suite import Context, Suite, SuiteSkipped
 
 __all__ = ["command_line", "list_suites", "run_suites"]
@@ -80,7 +81,16 @@ def run_one(
                 f"needs {', '.join(missing)} (pip install 'flowtact[dev]')",
             )
         else:
-            ctx = Context(suite, quick, peers, on_step=progress.step)
+            parts = 1 if in_process_only(name) else suite.parts(quick)
+            prior, failures = (
+                measure_children(name, quick, peers, parts, progress.step) if parts > 1 else ({}, [])
+            )
+            ctx = Context(
+                suite, quick, peers, on_step=progress.step, part=parts - 1, parts=parts, prior=prior
+            )
+            for line in failures:
+                ctx.note(line)
+            rec["processes"] = parts
             try:
                 suite.run(ctx)
                 rec["status"] = "ok"

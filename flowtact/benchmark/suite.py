@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
+from flowtact.benchmark.process_rounds import Prior, share
 from flowtact.benchmark.timing import spread, time_call, time_paired
 
 __all__ = [
@@ -61,6 +62,14 @@ class Suite:
     minutes_quick: float = 0.5
     minutes_full: float = 2.0
     """Rough budgets on 2 cores, shown by ``--list``."""
+    processes: tuple[int, int] = (2, 3)
+    """Fresh processes the figures are measured in, quick and full (:mod:`process_rounds`): a spread
+    from one process misses what moves between processes. (1, 1) for a suite whose every sample
+    already comes from a fresh process (pipelines of worker processes, subprocess per case)."""
+
+    def parts(self, quick: bool) -> int:
+        """How many processes measure this suite's figures."""
+        return max(1, self.processes[0 if quick else 1])
 
 
 @dataclass
@@ -92,6 +101,8 @@ class Figure:
     """Per-pair ratios, when each sample was measured alongside one of the baseline's."""
     seconds: list[float] | None = None
     """Raw wall seconds per repeat, when the figure was timed here."""
+    processes: int = 1
+    """How many processes measured the samples (:mod:`flowtact.benchmark.process_rounds`)."""
 
 
 @dataclass
@@ -153,13 +164,29 @@ class Context:
     """What a suite's ``run`` measures through; the runner turns it into JSON, tables and plots."""
 
     def __init__(
-        self, suite: Suite, quick: bool, peers: bool = False, on_step: Callable[[str], None] | None = None
+        self,
+        suite: Suite,
+        quick: bool,
+        peers: bool = False,
+        on_step: Callable[[str], None] | None = None,
+        *,
+        part: int = 0,
+        parts: int = 1,
+        prior: Prior | None = None,
     ):
         self.suite = suite
         self.quick = quick
         self.peers = peers
         self.repeats = 5 if quick else 9
-        """Default repeats of a timed figure (after one warm-up call)."""
+        """Default repeats of a timed figure (after one warm-up call), over all its processes."""
+        self.part, self.parts = part, parts
+        """This process is part ``part`` of ``parts`` measuring the suite; each times its share of
+        every figure's repeats, and the last (the runner's) merges the others' samples (``prior``)."""
+        self.partial = part < parts - 1
+        self._prior = prior or {}
+        self._own: dict[str, list[float]] = {}
+        self._own_seconds: dict[str, list[float] | None] = {}
+        self._own_pairs: dict[str, list[tuple[float, float]] | None] = {}
         self.figures: dict[str, Figure] = {}
         self.tables: list[Table] = []
         self.notes: list[str] = []
@@ -170,6 +197,11 @@ class Context:
         """Anything else worth keeping in results/<suite>.json (raw rows, configurations)."""
         self._on_step = on_step
         self._timers: dict[str, _Timer] = {}
+
+    def share(self, repeats: int) -> int:
+        """This process's share of ``repeats`` (for a suite's own rounds; timed figures share
+        theirs already): the runner merges every process's samples."""
+        return share(repeats, self.part, self.parts)
 
     # -- progress and verdicts ------------------------------------------------------------------
 
@@ -271,7 +303,7 @@ class Context:
         params: dict[str, Any] | None,
     ) -> Figure:
         self.step(key)
-        n = repeats or self.repeats
+        n = share(repeats or self.repeats, self.part, self.parts)
         timer = self._timers.get(baseline) if baseline else None
         if timer is None:
             secs = time_call(fn, n, warmup, setup)
@@ -303,13 +335,13 @@ class Context:
         values = [float(samples)] if isinstance(samples, (int, float)) else [float(s) for s in samples]
         pairs = None
         if paired:
-            base = self.figures.get(baseline or "")
-            if base is None or len(base.samples) != len(values):
+            base = self._own.get(baseline or "")
+            if base is None or len(base) != len(values):
                 raise ValueError(
                     f"suite {self.suite.name!r}: paired figure {key!r} needs a recorded baseline with as many "
-                    f"samples ({len(values)}); got {baseline!r} with {len(base.samples) if base else 'none'}"
+                    f"samples ({len(values)}); got {baseline!r} with {len(base) if base else 'none'}"
                 )
-            pairs = list(zip(values, base.samples, strict=True))
+            pairs = list(zip(values, base, strict=True))
         return self._add(key, unit, better, values, baseline, is_baseline, params, None, reference, pairs)
 
     def _add(
@@ -327,9 +359,18 @@ class Context:
     ) -> Figure:
         if key in self.figures:
             raise ValueError(f"suite {self.suite.name!r}: figure {key!r} recorded twice")
+        self._own[key], self._own_seconds[key], self._own_pairs[key] = list(samples), seconds, pairs
+        processes = 1
+        prior = self._prior.get(key)
+        if prior and prior["samples"]:
+            processes += prior["processes"]
+            samples = prior["samples"] + samples
+            seconds = prior["seconds"] + seconds if seconds is not None and prior["seconds"] else seconds
+            pairs = [tuple(p) for p in prior["pairs"]] + pairs if pairs and prior["pairs"] else pairs
         s = spread(samples)
         fig = Figure(key, unit, better, samples, s.median, s.q1, s.q3, s.min, s.max, dict(params or {}),
-                     baseline, is_baseline, reference and is_baseline, seconds=seconds)  # fmt: skip
+                     baseline, is_baseline, reference and is_baseline, seconds=seconds,
+                     processes=processes)  # fmt: skip
         if baseline is not None:
             base = self.figures.get(baseline)
             if base is None:
@@ -338,7 +379,7 @@ class Context:
                     f"(yet) recorded; have {sorted(self.figures)}"
                 )
             short = [f.key for f in (base, fig) if len(f.samples) < MIN_RATIO_SAMPLES]
-            if short:
+            if short and not self.partial:  # a child's share; the merged figure is held to the rule
                 raise ValueError(
                     f"suite {self.suite.name!r}: figure {key!r} has a baseline, so it and its baseline need "
                     f">= {MIN_RATIO_SAMPLES} samples each for the ratio to have a spread; {short} "
@@ -351,6 +392,13 @@ class Context:
             fig.ratio, fig.ratio_range, fig.ratio_samples = _ratio(fig, base, pairs)
         self.figures[key] = fig
         return fig
+
+    def raw_samples(self) -> dict[str, dict[str, Any]]:
+        """What this process measured itself, per figure (a child's output to the runner)."""
+        return {
+            k: {"samples": v, "seconds": self._own_seconds[k], "pairs": self._own_pairs[k]}
+            for k, v in self._own.items()
+        }
 
     def to_dict(self) -> dict[str, Any]:
         return {

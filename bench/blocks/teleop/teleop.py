@@ -97,4 +97,5 @@ SUITE = Suite(
     run=run,
     minutes_quick=0.75,
     minutes_full=2.0,
+    processes=(1, 1),  # every sample already comes from fresh processes
 )
