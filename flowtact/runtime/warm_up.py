@@ -169,18 +169,21 @@ def warm_up_here(
     watch.uninstall()
     if watch.count:
         say(f"{watch.count} kernel{'s' if watch.count > 1 else ''} compiled in {watch.seconds:.1f} s")
-    settle_heap()
+    settle_heap(freeze=False)
     return report
 
 
-def settle_heap() -> None:
-    """Collect garbage now and freeze what survives: the clock has not started yet.
+def settle_heap(*, freeze: bool = True) -> None:
+    """Collect garbage now, before the clock starts, and (``freeze``) set aside what survives.
 
     Compiling leaves ~10^5 objects behind; a full collection walking them during the run paused
-    a real-time worker for 0.1-0.4 s (measured). Frozen objects are skipped by later collections.
+    a real-time worker for 0.1-0.4 s (measured). Frozen objects are skipped by later collections:
+    right for a worker, which exits after its run; a caller's own process (the in-process
+    executor) only collects, so cycles it drops later are still freed.
     """
     gc.collect()
-    gc.freeze()
+    if freeze:
+        gc.freeze()
 
 
 def _warm_one(name: str, real: Block, tick_s: float) -> None:
