@@ -41,6 +41,9 @@ through all, so state built by one step (spikes in a history) is there for the n
 other processes arrive unevenly: in a step where ``first`` or the ``rest`` of the needed inputs
 (sorted by name) lag, they get nothing, and catch up in the next step; a block that holds one
 input back waiting for another then runs that path too."""
+MAX_TICK_S = 0.005
+"""A warm-up tick covers at most this much graph time (5 samples at 1 kHz): a ``--fast`` run's
+1 s tick would have a 100 000-neuron population step seconds of data just to load its kernels."""
 MAX_CHUNK_BYTES = 1 << 20
 """A warm-up chunk holds at most this much data (a few camera frames, not a minute of them)."""
 
@@ -192,7 +195,7 @@ def _warm_one(name: str, real: Block, tick_s: float) -> None:
     ports = sorted(real.needed)
     since = dict.fromkeys(ports, 0.0)  # each input has been fed up to this graph time
     rates = [real.input_specs[p].rate_hz for p in ports if real.input_specs[p].rate_hz]
-    dt = max([tick_s] + [1.0 / r for r in rates])  # a step brings every sampled input a sample
+    dt = max([min(tick_s, MAX_TICK_S)] + [1.0 / r for r in rates])  # every sampled input gets a sample
     now = 0.0
     for ticks, fill, aligned, lagging in VARIANTS:
         now += ticks * dt
