@@ -23,6 +23,7 @@ from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
 from flowtact.runtime.stats import format_factor
+from flowtact.runtime.warm_up import warm_up_here
 
 __all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk", "explain_counters"]
 
@@ -251,6 +252,8 @@ class InprocExecutor:
             for block in self.blocks.values():
                 block.open()
                 opened.append(block)
+            if not self.fast:  # kernels load or compile now, not on the real-time clock
+                warm_up_here(self.blocks, self.tick_s)
             clock.start()
             n_ticks = math.ceil(duration_s / self.tick_s - 1e-9) if duration_s is not None else None
             try:

@@ -43,6 +43,7 @@ import zmq
 from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
+from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.stats import LatencyHistogram, format_factor
@@ -139,6 +140,7 @@ class ProcessExecutor:
         self.progress = progress
         self.live = live
         self.warn = warn or (lambda text: print(f"flowtact: {text}", file=sys.stderr))
+        self.compiles = CompileNotices(self.warn)
         self.placement: Placement = place(plan, fast=fast)
         self.rec_specs = {
             self.placement.stream_ids[(n, p)]: plan.specs[(n, p)]
@@ -338,7 +340,7 @@ class ProcessExecutor:
             for p in self.procs.values():
                 if p.wired:
                     continue
-                if now - p.since > p.startup_s:
+                if now - self.compiles.startup_since(p.name, p.since) > p.startup_s:
                     how = "start it with `flowtact worker`; " if p.host and p.ident is None else ""
                     raise WorkerFailed(
                         f"{p.describe()} did not join within {p.startup_s:g} s ({how}its startup_s sets the window)"
@@ -461,6 +463,7 @@ class ProcessExecutor:
         if proc is None:
             return
         if op == "ready":
+            self.compiles.on_ready(proc.describe(), msg)
             proc.endpoints = {int(k): v for k, v in msg["endpoints"].items()}
             proc.state = "ready"
             if proc.restarts:
@@ -493,6 +496,7 @@ class ProcessExecutor:
         if old:  # ticks per second, for where a stop can reach it
             proc.tick_rate = max(_tick_rate(old, beat), 0.5 * proc.tick_rate)  # slow to forget a fast spell
         proc.beat, proc.beat_at = beat, now
+        self.compiles.on_beat(proc.name, proc.describe(), proc.state == "running", beat)
         proc.last_k = max(proc.last_k, beat["k"])
 
     def _on_stats(self, proc: _Proc, msg: dict[str, Any]) -> None:

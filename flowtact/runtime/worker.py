@@ -50,6 +50,7 @@ from flowtact.registry import load_block
 from flowtact.runtime.inproc import check_chunk
 from flowtact.runtime.placement import spec_from_wire
 from flowtact.runtime.stats import LatencyHistogram
+from flowtact.runtime.warm_up import CompileWatch, settle_heap, warm_up
 from flowtact.runtime.wire import END, recv_message, send_message
 
 __all__ = ["BEAT_S", "ORPHAN_S", "Worker", "main"]
@@ -166,6 +167,7 @@ class Worker:
         self.busy: str | None = None  # the node being built, opened or stepped
         self.busy_first = True  # ... for the first time: kernels may be compiling
         self.lag_s = 0.0
+        self.compiles = CompileWatch()  # numba compilations: announced while warming, a stall after
         self.heart = _Heartbeat(self, control)
 
     # -- control ----------------------------------------------------------------------------
@@ -223,7 +225,10 @@ class Worker:
             self._warm_up()
             self._bind(msg["bind"])
             self._send(
-                "ready", endpoints={i.id: i.sock.last_endpoint.decode() for i in self.inbound.values()}
+                "ready",
+                endpoints={i.id: i.sock.last_endpoint.decode() for i in self.inbound.values()},
+                compiled=self.warm_report.total_compiled,
+                compile_s=self.compiles.seconds,
             )
             wire = self._expect("wire")
             self._connect(wire["connect"], wire["record"])
@@ -232,7 +237,7 @@ class Worker:
                 self._send("wired")
                 start = self._expect("start")
                 self.t0_ns = start["t0_ns"] or time.monotonic_ns()
-                self.warm_ns = self.t0_ns + int(LATENCY_WARMUP_S * 1e9)
+                self.warm_ns = self.t0_ns + int(_latency_from_s() * 1e9)
                 self.k = int(start.get("k0", 0))
                 self._run(resume=bool(start.get("resume")))
                 self._finish()  # steps and flushes the blocks once more: before they are closed
@@ -327,25 +332,14 @@ class Worker:
         self.warm_ns = 0  # data that left its source before this is start-up, not transport
 
     def _warm_up(self) -> None:
-        """Step a throwaway copy of every block once on synthetic input, before the clock starts.
+        """Load or compile every kernel the run will call, before the worker says ready (warm_up.py)."""
 
-        A block's first step loads or compiles its kernels (0.7 s for ``tactip_sim`` even from
-        numba's cache); on the real-time clock that is a lag a loop through several processes
-        never catches up. The copies share nothing with the real blocks but the process' caches;
-        a block that cannot step without ``open()`` (a serial port, a camera) is simply skipped.
-        """
-        for n in self.order:
-            real = self.blocks[n]
+        def naming(n: str) -> None:
             self.busy, self.busy_first = n, True
-            with contextlib.suppress(Exception):
-                copy = type(real)(real.config, node=n)
-                copy.bind(real.input_specs, seed=real.seed, demanded=real.demanded)
-                ins = {p: _synthetic(spec) for p, spec in real.input_specs.items()}
-                if isinstance(copy, Source):
-                    copy(self.tick_s, **ins)
-                else:
-                    copy(**ins)
+
+        self.warm_report = warm_up(self.blocks, self.tick_s, watch=self.compiles, on_node=naming)
         self.busy = None
+        settle_heap()
 
     def _socket(self, kind: int, endpoint: str, hwm: int) -> zmq.Socket:
         s = self.ctx.socket(kind)
@@ -749,6 +743,8 @@ class _Heartbeat:
                     "node": w.busy,
                     "first": w.busy_first,
                     "lag_s": w.lag_s,
+                    "compiling": w.compiles.current,
+                    "compiled": w.compiles.count,
                     "sent_ns": time.monotonic_ns(),  # rates from the sender's clock, not arrivals
                 }
                 with contextlib.suppress(zmq.Again):
@@ -769,12 +765,11 @@ class _NodeFailure(Exception):
         }
 
 
-def _synthetic(spec: StreamSpec, n: int = 8) -> Chunk:
-    """A few zero samples (or one event of unit 0) shaped like ``spec``: input for a warm-up step."""
-    if spec.events:
-        return Chunk(np.array([1e-3]), np.zeros(1, np.int64))
-    dt = 1.0 / spec.rate_hz if spec.rate_hz else 1e-3
-    return Chunk(np.arange(1, n + 1) * dt, np.zeros((n, *spec.shape), spec.dtype or "float64"))
+def _latency_from_s() -> float:
+    """:data:`LATENCY_WARMUP_S`, or ``$FLOWTACT_LATENCY_FROM_S`` (the start-up bench counts from 0)."""
+    with contextlib.suppress(KeyError, ValueError):
+        return max(float(os.environ["FLOWTACT_LATENCY_FROM_S"]), 0.0)
+    return LATENCY_WARMUP_S
 
 
 def _plain(obj: Any) -> Any:

@@ -1,0 +1,271 @@
+"""Warm blocks up before the clock starts: every kernel a run calls is loaded or compiled first.
+
+A block's first step loads its numba kernels from the cache, or compiles them on the first run
+after an install (seconds to tens of seconds); on the real-time clock that is a stall a loop
+through several processes never catches up. So each block's throwaway copy steps on synthetic
+input shaped like the real run's: the declared dtype and sample shape, chunks of one tick and of
+several, zeros and a ramp (a ramp drives neurons over threshold: spike paths run too), read-only
+arrays (what blocks are given; numba compiles read-only arrays apart) both aligned and not (as
+small wire messages arrive), every needed input present. A block whose kernels a synthetic
+step cannot reach defines ``warm_up()`` (docs/writing-a-block.md). :class:`CompileWatch` counts
+what numba actually compiles (cache misses, not cache loads) and names the kernel under way.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import sys
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from flowtact.block import Block, Source
+from flowtact.chunk import Chunk, StreamSpec
+
+__all__ = ["CompileWatch", "WarmUpReport", "settle_heap", "synthetic_inputs", "warm_up", "warm_up_here"]
+
+VARIANTS = (
+    (1, "zeros", True, ""),
+    (1, "ramp", False, ""),
+    (1, "ramp", True, "rest"),
+    (1, "ramp", False, ""),
+    (1, "ramp", True, "first"),
+    (4, "ramp", False, ""),
+)
+"""Warm-up steps in order: (ticks of data, values, aligned arrays, inputs that lag). One copy steps
+through all, so state built by one step (spikes in a history) is there for the next. Inputs from
+other processes arrive unevenly: in a step where ``first`` or the ``rest`` of the needed inputs
+(sorted by name) lag, they get nothing, and catch up in the next step; a block that holds one
+input back waiting for another then runs that path too."""
+MAX_TICK_S = 0.005
+"""A warm-up tick covers at most this much graph time (5 samples at 1 kHz): a ``--fast`` run's
+1 s tick would have a 100 000-neuron population step seconds of data just to load its kernels."""
+MAX_CHUNK_BYTES = 1 << 20
+"""A warm-up chunk holds at most this much data (a few camera frames, not a minute of them)."""
+
+
+class CompileWatch:
+    """Counts numba compilations in this process and names the kernel being compiled.
+
+    Listens to numba's ``numba:compile`` event, which fires on a cache miss only: loading a
+    kernel from numba's cache is not counted. Read from other threads (the heartbeat): plain
+    attributes only.
+    """
+
+    def __init__(self, on_first: Callable[[str], None] | None = None) -> None:
+        self.on_first = on_first
+        """Called once, with the kernel's name, when the first compilation begins."""
+        self.count = 0
+        """Kernels compiled (outermost compilations) since :meth:`install`."""
+        self.current: str | None = None
+        """The kernel being compiled now, or None."""
+        self.seconds = 0.0
+        self._depth = 0
+        self._t0 = 0.0
+        self._listener: Any = None
+
+    def install(self) -> CompileWatch:
+        """Start listening, if numba is loaded (a process whose blocks never imported it compiles nothing)."""
+        if self._listener is not None or "numba" not in sys.modules:
+            return self
+        from numba.core import event
+
+        watch = self
+
+        class _Listener(event.Listener):
+            def on_start(self, ev: Any) -> None:
+                watch._started(ev.data["dispatcher"])
+
+            def on_end(self, ev: Any) -> None:  # noqa: ARG002 — numba's Listener signature
+                watch._ended()
+
+        self._listener = _Listener()
+        event.register("numba:compile", self._listener)
+        return self
+
+    def uninstall(self) -> None:
+        """Stop listening."""
+        if self._listener is not None:
+            from numba.core import event
+
+            event.unregister("numba:compile", self._listener)
+            self._listener = None
+
+    def _started(self, dispatcher: Any) -> None:
+        self._depth += 1
+        if self._depth == 1:
+            self._t0 = time.perf_counter()
+            self.current = _kernel_name(dispatcher)
+            if self.on_first is not None:
+                self.on_first, say = None, self.on_first
+                say(self.current)
+
+    def _ended(self) -> None:
+        self._depth = max(self._depth - 1, 0)
+        if self._depth == 0:
+            self.count += 1
+            self.seconds += time.perf_counter() - self._t0
+            self.current = None
+
+
+@dataclass
+class WarmUpReport:
+    """What a warm-up did: seconds and kernels compiled per node, and which nodes could not step."""
+
+    seconds: dict[str, float] = field(default_factory=dict)
+    compiled: dict[str, int] = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)
+    """Node -> why its synthetic step raised (a block that needs ``open()``, or refuses zeros)."""
+
+    @property
+    def total_compiled(self) -> int:
+        """Kernels compiled over all nodes."""
+        return sum(self.compiled.values())
+
+
+def warm_up(
+    blocks: Mapping[str, Block],
+    tick_s: float,
+    *,
+    watch: CompileWatch | None = None,
+    on_node: Callable[[str], None] | None = None,
+) -> WarmUpReport:
+    """Step a throwaway copy of every block through :data:`VARIANTS`, then its ``warm_up()``.
+
+    The copies share nothing with the real blocks but the process' caches; errors are recorded in
+    the report, never raised (the real step will raise them, with the node named). ``on_node`` is
+    called with each node's name before it is warmed (the worker's heartbeat names it).
+    """
+    watch = watch or CompileWatch()
+    report = WarmUpReport()
+    for name, real in blocks.items():
+        if on_node is not None:
+            on_node(name)
+        watch.install()  # a block built earlier may have imported numba since
+        before, t0 = watch.count, time.perf_counter()
+        try:
+            _warm_one(name, real, tick_s)
+        except Exception as e:  # noqa: BLE001 — a warm-up is best effort; the real step reports errors
+            report.skipped[name] = f"{type(e).__name__}: {e}"
+        report.seconds[name] = time.perf_counter() - t0
+        report.compiled[name] = watch.count - before
+    return report
+
+
+def warm_up_here(
+    blocks: Mapping[str, Block], tick_s: float, say: Callable[[str], None] | None = None
+) -> WarmUpReport:
+    """The in-process executor's warm-up: as a worker's, saying so itself when kernels compile."""
+    say = say or (lambda text: print(f"flowtact: {text}", file=sys.stderr, flush=True))
+    node: list[str] = [""]
+    watch = CompileWatch(
+        on_first=lambda _k: say(
+            f"compiling kernels for {node[0]} (first run after an install or upgrade; numba caches them "
+            "for the next runs)..."
+        )
+    )
+    report = warm_up(blocks, tick_s, watch=watch, on_node=lambda n: node.__setitem__(0, n))
+    watch.uninstall()
+    if watch.count:
+        say(f"{watch.count} kernel{'s' if watch.count > 1 else ''} compiled in {watch.seconds:.1f} s")
+    settle_heap(freeze=False)
+    return report
+
+
+def settle_heap(*, freeze: bool = True) -> None:
+    """Collect garbage now, before the clock starts, and (``freeze``) set aside what survives.
+
+    Compiling leaves ~10^5 objects behind; a full collection walking them during the run paused
+    a real-time worker for 0.1-0.4 s (measured). Frozen objects are skipped by later collections:
+    right for a worker, which exits after its run; a caller's own process (the in-process
+    executor) only collects, so cycles it drops later are still freed.
+    """
+    gc.collect()
+    if freeze:
+        gc.freeze()
+
+
+def _warm_one(name: str, real: Block, tick_s: float) -> None:
+    copy = type(real)(real.config, node=name)
+    copy.bind(real.input_specs, seed=real.seed, demanded=real.demanded)
+    ports = sorted(real.needed)
+    since = dict.fromkeys(ports, 0.0)  # each input has been fed up to this graph time
+    rates = [real.input_specs[p].rate_hz for p in ports if real.input_specs[p].rate_hz]
+    dt = max([min(tick_s, MAX_TICK_S)] + [1.0 / r for r in rates])  # every sampled input gets a sample
+    now = 0.0
+    for ticks, fill, aligned, lagging in VARIANTS:
+        now += ticks * dt
+        late = set(ports[:1] if lagging == "first" else ports[1:] if lagging == "rest" else ())
+        ins = {}
+        for p in ports:
+            spec = real.input_specs[p]
+            if p in late:
+                ins[p] = Chunk.empty(spec)
+                continue
+            ins |= synthetic_inputs({p: spec}, since[p], now, fill=fill, aligned=aligned)
+            since[p] = now
+        if isinstance(copy, Source):
+            copy(now, **ins)
+        else:
+            copy(**ins)
+    hook = getattr(copy, "warm_up", None)
+    if callable(hook):
+        hook()
+    copy.flush()  # the end-of-stream kernels too: they run while the run still counts as running
+
+
+def synthetic_inputs(
+    specs: Mapping[str, StreamSpec], start: float, stop: float, *, fill: str = "ramp", aligned: bool = True
+) -> dict[str, Chunk]:
+    """One chunk per input covering graph time ``(start, stop]`` at the stream's rate, as the run feeds it.
+
+    ``fill`` is ``zeros`` or ``ramp`` (values rising over the chunk: drives neurons over threshold);
+    ``aligned=False`` gives read-only arrays at an odd address, as small wire messages arrive.
+    """
+    out = {}
+    for port, spec in specs.items():
+        c = _synthetic_chunk(spec, start, stop, fill)
+        out[port] = c if aligned else Chunk(_unaligned(c.t), _unaligned(c.data), c.end)
+    return out
+
+
+def _synthetic_chunk(spec: StreamSpec, start: float, stop: float, fill: str) -> Chunk:
+    dtype = np.dtype(spec.dtype or "float64")
+    sample_bytes = max(dtype.itemsize * spec.size, 1)
+    cap = max(1, MAX_CHUNK_BYTES // sample_bytes)
+    if spec.events:
+        units = max(spec.n_units or 1, 1)
+        n = min(units, 8, cap)
+        t = start + (stop - start) * np.arange(1, n + 1) / n
+        data = np.zeros((n, *spec.shape), dtype)
+        data.reshape(n, -1)[:, 0] = np.arange(n) % units  # the unit index is the first column
+        return Chunk(t, data, stop)
+    rate = spec.rate_hz or 1000.0
+    i0, i1 = int(np.floor(start * rate + 1e-9)), int(np.floor(stop * rate + 1e-9))
+    n = min(i1 - i0, cap)  # the samples due in (start, stop]: none, for a slow stream in a short step
+    t = (i1 - n + 1 + np.arange(n)) / rate
+    data = np.zeros((n, *spec.shape), dtype)
+    if fill == "ramp":
+        ramp = np.linspace(0.0, 1.0, n * spec.size).reshape(data.shape)
+        with contextlib.suppress(TypeError, ValueError):
+            data[...] = ramp * (255 if dtype.kind in "ui" else 1) if dtype.kind != "b" else ramp > 0.5
+    return Chunk(t, data)
+
+
+def _unaligned(a: np.ndarray) -> np.ndarray:
+    """A read-only copy of ``a`` at an odd address (what a small message's buffer gives)."""
+    if a.dtype.itemsize == 1:
+        return np.frombuffer(a.tobytes(), a.dtype, a.size).reshape(a.shape)
+    return np.frombuffer(b"\0" + a.tobytes(), a.dtype, a.size, 1).reshape(a.shape)
+
+
+def _kernel_name(dispatcher: Any) -> str:
+    """``module.function`` of a numba dispatcher (``_lif_kernels.lif_grid``)."""
+    f = getattr(dispatcher, "py_func", None)
+    if f is None:
+        return "a kernel"
+    return f"{f.__module__.rsplit('.', 1)[-1]}.{f.__name__}"
