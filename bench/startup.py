@@ -109,4 +109,5 @@ SUITE = Suite(
     run=run,
     minutes_quick=0.8,
     minutes_full=3.0,
+    processes=(1, 1),  # every sample already comes from fresh processes
 )
