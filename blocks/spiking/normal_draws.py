@@ -28,6 +28,8 @@ from numba.extending import intrinsic
 __all__ = ["BATCH", "LANES", "STATE_SCRATCH", "STATE_WORDS", "fill_normal", "fill_normal_py", "seed_state"]
 
 LANES = 32
+#: Words per lane made per load of its state (BATCH is a multiple of ROUNDS·LANES).
+ROUNDS = 4
 BATCH = 512
 _FIX = 4 * LANES
 _CUR = _FIX + 4
@@ -102,19 +104,23 @@ def _rotl(x, k):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
+def _xoshiro(a0, a1, a2, a3):  # type: ignore[no-untyped-def]
+    """One xoshiro256++ step: (output, new state words)."""
+    r = _rotl(a0 + a3, 23) + a0
+    t = a1 << np.uint64(17)
+    a2 ^= a0
+    a3 ^= a1
+    a1 ^= a2
+    a0 ^= a3
+    a2 ^= t
+    return r, a0, a1, a2, _rotl(a3, 45)
+
+
+@njit(cache=True, inline="always")
 def _next_u64(s: np.ndarray) -> np.uint64:
     """One xoshiro256++ output of the scalar state ``s[0:4]``."""
-    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
-    result = _rotl(s0 + s3, 23) + s0
-    t = s1 << np.uint64(17)
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    s3 = _rotl(s3, 45)
-    s[0], s[1], s[2], s[3] = s0, s1, s2, s3
-    return result
+    r, s[0], s[1], s[2], s[3] = _xoshiro(s[0], s[1], s[2], s[3])
+    return r
 
 
 @njit(cache=True, inline="always")
@@ -122,23 +128,31 @@ def _next_double(s: np.ndarray) -> float:
     return float(_next_u64(s) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _lane_words(lanes: np.ndarray, raw: np.ndarray) -> None:
-    """``raw`` (a multiple of LANES long) from the LANES xoshiro256++ states (4 rows of ``lanes``):
-    word ``j`` from lane ``j % LANES``. The lane loop is independent per lane, so it vectorises."""
-    for o in range(0, raw.shape[0], LANES):
+    """``raw`` (a multiple of ROUNDS·LANES long) from the LANES xoshiro256++ states (4 rows of
+    ``lanes``): word ``j`` from lane ``j % LANES``, each lane's words in its own order. The lane loop is
+    independent per lane, so it vectorises; each load and store of a lane's state serves ROUNDS words
+    (one word per load costs 2.5×: the state goes through memory every round)."""
+    s0, s1, s2, s3 = (
+        lanes[0:LANES],
+        lanes[LANES : 2 * LANES],
+        lanes[2 * LANES : 3 * LANES],
+        lanes[3 * LANES :],
+    )
+    for o in range(0, raw.shape[0], ROUNDS * LANES):
+        r = raw[o : o + ROUNDS * LANES]
         for lane in range(LANES):
-            a0, a1 = lanes[lane], lanes[LANES + lane]
-            a2, a3 = lanes[2 * LANES + lane], lanes[3 * LANES + lane]
-            raw[o + lane] = _rotl(a0 + a3, 23) + a0
-            t = a1 << np.uint64(17)
-            a2 ^= a0
-            a3 ^= a1
-            a1 ^= a2
-            a0 ^= a3
-            a2 ^= t
-            lanes[lane], lanes[LANES + lane] = a0, a1
-            lanes[2 * LANES + lane], lanes[3 * LANES + lane] = a2, _rotl(a3, 45)
+            a0, a1, a2, a3 = s0[lane], s1[lane], s2[lane], s3[lane]
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[lane] = x
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[LANES + lane] = x
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[2 * LANES + lane] = x
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[3 * LANES + lane] = x
+            s0[lane], s1[lane], s2[lane], s3[lane] = a0, a1, a2, a3
 
 
 @njit(cache=True)
