@@ -23,10 +23,9 @@ The drive is clamped to ``±DRIVE_MAX`` (1e100) so that no finite input can over
 drive of 1e100 fires at every allowed step anyway. Non-finite inputs never reach a kernel (the
 block applies its bad-data policy first).
 
-Noise: standard normals from a xoshiro256++ generator with a 256-layer ziggurat (Marsaglia & Tsang
-2000, the layout of NumPy's ``random_standard_normal``; ≈ 2 ns per normal against 10 ns for
-``Generator.standard_normal``), ``N`` draws per step in neuron order, so the stream is the same
-whatever the chunking; or from an external ``(T, N)`` array (tests).
+Noise: exact standard normals from :mod:`normal_draws` (32 SIMD xoshiro256++ lanes feeding a
+256-layer ziggurat with its exact tail; one flat stream per block), ``N`` draws per step in neuron
+order, so the stream is the same whatever the chunking; or from an external ``(T, N)`` array (tests).
 
 Execution order (results are bit-identical whichever is used; the tests check it against the
 plain-numpy twins, which step one sample at a time):
@@ -55,6 +54,7 @@ import numpy as np
 from numba import njit
 
 from flowtact.blocks.spiking._spike_history import ring_add
+from flowtact.blocks.spiking.normal_draws import fill_normal, fill_normal_py, seed_state
 
 __all__ = [
     "DRIVE_MAX",
@@ -79,159 +79,6 @@ SCALAR_N = 8
 #: Steps per time block when neurons are tiled (a tile's state stays in cache for the block).
 TIME_BLOCK = 64
 NOISE_OFF, NOISE_INTERNAL, NOISE_EXTERNAL = 0, 1, 2
-
-# -- random numbers: xoshiro256++ and a 256-layer ziggurat ------------------------------------
-
-_M64 = (1 << 64) - 1
-_ZIG_R = 3.6541528853610088
-_ZIG_INV_R = 1.0 / _ZIG_R
-_ZIG_V = 0.00492867323399
-
-
-def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``k`` (uint64 acceptance bounds), ``w`` (scales), ``f`` (densities) for 52-bit mantissas."""
-    m1 = float(2**52)
-    k = np.zeros(256, np.uint64)
-    w = np.zeros(256)
-    f = np.zeros(256)
-    dn = tn = _ZIG_R
-    q = _ZIG_V / math.exp(-0.5 * dn * dn)
-    k[0] = np.uint64(int((dn / q) * m1))
-    k[1] = np.uint64(0)
-    w[0] = q / m1
-    w[255] = dn / m1
-    f[0] = 1.0
-    f[255] = math.exp(-0.5 * dn * dn)
-    for i in range(254, 0, -1):
-        dn = math.sqrt(-2.0 * math.log(_ZIG_V / dn + math.exp(-0.5 * dn * dn)))
-        k[i + 1] = np.uint64(int((dn / tn) * m1))
-        tn = dn
-        f[i] = math.exp(-0.5 * dn * dn)
-        w[i] = dn / m1
-    return k, w, f
-
-
-ZIG_K, ZIG_W, ZIG_F = _ziggurat_tables()
-
-
-def seed_state(rng: np.random.Generator) -> np.ndarray:
-    """A xoshiro256++ state (4 × uint64, never all zero) drawn from ``rng``."""
-    s = rng.integers(0, 2**64, size=4, dtype=np.uint64, endpoint=False)
-    if not s.any():
-        s[0] = np.uint64(0x9E3779B97F4A7C15)
-    return s
-
-
-@njit(cache=True, inline="always")
-def _rotl(x, k):  # type: ignore[no-untyped-def]
-    return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
-
-
-@njit(cache=True, inline="always")
-def _next_u64(s: np.ndarray) -> np.uint64:
-    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
-    result = _rotl(s0 + s3, 23) + s0
-    t = s1 << np.uint64(17)
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    s3 = _rotl(s3, 45)
-    s[0], s[1], s[2], s[3] = s0, s1, s2, s3
-    return result
-
-
-@njit(cache=True, inline="always")
-def _next_double(s: np.ndarray) -> float:
-    return float(_next_u64(s) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
-
-
-@njit(cache=True)
-def _zig_slow(s: np.ndarray, idx: int, rabs: np.uint64, x: float) -> tuple[bool, float]:
-    """The rare ziggurat branches (base-strip tail, wedges): (accepted, value)."""
-    if idx == 0:
-        while True:
-            xx = -_ZIG_INV_R * math.log1p(-_next_double(s))
-            yy = -math.log1p(-_next_double(s))
-            if yy + yy > xx * xx:
-                if (rabs >> np.uint64(8)) & np.uint64(1):
-                    return True, -(_ZIG_R + xx)
-                return True, _ZIG_R + xx
-    if (ZIG_F[idx - 1] - ZIG_F[idx]) * _next_double(s) + ZIG_F[idx] < math.exp(-0.5 * x * x):
-        return True, x
-    return False, 0.0
-
-
-@njit(cache=True)
-def fill_normal(state: np.ndarray, out: np.ndarray) -> None:
-    """Fill ``out`` (1-D float64) with standard normals, advancing the xoshiro256++ ``state``."""
-    for k in range(out.shape[0]):
-        while True:
-            r = _next_u64(state)
-            idx = np.intp(r & np.uint64(0xFF))
-            r >>= np.uint64(8)
-            sign = r & np.uint64(1)
-            rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
-            x = float(rabs) * ZIG_W[idx]
-            if sign:
-                x = -x
-            if rabs < ZIG_K[idx]:
-                out[k] = x
-                break
-            ok, y = _zig_slow(state, idx, rabs, x)
-            if ok:
-                out[k] = y
-                break
-
-
-def _next_u64_py(s: list[int]) -> int:
-    s0, s1, s2, s3 = s
-    result = ((((s0 + s3) & _M64) << 23 | ((s0 + s3) & _M64) >> 41) & _M64) + s0
-    t = (s1 << 17) & _M64
-    s2 ^= s0
-    s3 ^= s1
-    s1 ^= s2
-    s0 ^= s3
-    s2 ^= t
-    s3 = ((s3 << 45) | (s3 >> 19)) & _M64
-    s[:] = [s0, s1, s2, s3]
-    return result & _M64
-
-
-def fill_normal_py(state: np.ndarray, out: np.ndarray) -> None:
-    """Pure-Python twin of :func:`fill_normal` (same bits; slow, for tests)."""
-    s = [int(x) for x in state]
-    k_tab = [int(x) for x in ZIG_K]
-
-    def next_double() -> float:
-        return float(_next_u64_py(s) >> 11) * (1.0 / 9007199254740992.0)
-
-    for i in range(out.shape[0]):
-        while True:
-            r = _next_u64_py(s)
-            idx = r & 0xFF
-            r >>= 8
-            sign = r & 1
-            rabs = (r >> 1) & 0x000FFFFFFFFFFFFF
-            x = float(rabs) * float(ZIG_W[idx])
-            if sign:
-                x = -x
-            if rabs < k_tab[idx]:
-                break
-            if idx == 0:
-                while True:
-                    xx = -_ZIG_INV_R * math.log1p(-next_double())
-                    yy = -math.log1p(-next_double())
-                    if yy + yy > xx * xx:
-                        x = -(_ZIG_R + xx) if (rabs >> 8) & 1 else _ZIG_R + xx
-                        break
-                break
-            if (ZIG_F[idx - 1] - ZIG_F[idx]) * next_double() + ZIG_F[idx] < math.exp(-0.5 * x * x):
-                break
-        out[i] = x
-    state[:] = np.array(s, dtype=np.uint64)
-
 
 # -- coefficients ------------------------------------------------------------------------------
 

@@ -23,6 +23,7 @@ from flowtact.blocks.spiking._lif_kernels import (
 )
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.blocks.spiking.nlif import Nlif
+from flowtact.blocks.spiking.normal_draws import STATE_SCRATCH
 from flowtact.blocks.touch.presets import NEURON_PRESETS
 from flowtact.testing import assert_same, run_offline
 
@@ -172,7 +173,7 @@ def _run_kernel(method, impl, n, u, noise, h, ref_s, chunks, tile, xi=None, seed
         "idx": np.concatenate(idx),
         "offs": np.concatenate(offs) if offs else None,
         "v": np.concatenate(vs),
-        "state": (v.copy(), refc.copy(), rl.copy(), ring.copy(), state.copy()),
+        "state": (v.copy(), refc.copy(), rl.copy(), ring.copy(), state[:STATE_SCRATCH].copy()),
     }
 
 
@@ -240,21 +241,17 @@ def test_external_noise_equals_internal_stream():
         np.testing.assert_array_equal(a["v"], b["v"])
 
 
-def test_normal_generator_twin_and_distribution():
-    st, st2 = seed_state(np.random.default_rng(3)), None
+def test_normal_generator_twin():
+    """The numba generator and its pure-Python twin give the same bits, whatever the request sizes."""
+    st = seed_state(np.random.default_rng(3))
     st2 = st.copy()
     a, b = np.empty(5000), np.empty(5000)
-    fill_normal(st, a)
-    fill_normal_py(st2, b)
+    for lo, hi in ((0, 7), (7, 1500), (1500, 5000)):
+        fill_normal(st, a[lo:hi])
+    for lo, hi in ((0, 1000), (1000, 5000)):
+        fill_normal_py(st2, b[lo:hi])
     np.testing.assert_array_equal(a, b)
-    np.testing.assert_array_equal(st, st2)
-    x = np.empty(400_000)
-    fill_normal(st, x)
-    assert abs(x.mean()) < 5 * 1 / math.sqrt(len(x))
-    assert abs(x.std() - 1) < 5 * 1 / math.sqrt(2 * len(x))
-    # tail beyond the ziggurat's base strip (r = 3.654) and a middle quantile
-    assert abs((np.abs(x) > 3.6541528853610088).mean() / 2.58e-4 - 1) < 0.25
-    assert abs((np.abs(x) < 1.0).mean() - 0.682689) < 0.003
+    np.testing.assert_array_equal(st[:STATE_SCRATCH], st2[:STATE_SCRATCH])
 
 
 # -- the block ----------------------------------------------------------------------------------

@@ -1,0 +1,290 @@
+"""Exact standard normals for the NLIF kernels: 32 xoshiro256++ lanes (SIMD) feeding a ziggurat.
+
+Why: one scalar xoshiro256++ stream is a serial dependency chain (~2–3 ns per normal); 32 independent
+lanes advance together in vector registers. Each 64-bit word feeds the 256-layer ziggurat of
+Marsaglia & Tsang (2000) (NumPy's layout): bits 0–7 pick the layer, bit 8 the sign, bits 12–63 a
+52-bit uniform ``u``; ``x = u·x_i`` is accepted when ``u < x_{i+1}/x_i`` (~98.8 %). Rejected words
+finish the exact algorithm on a separate scalar xoshiro256++ stream (the wedge test, Marsaglia's
+exponential tail beyond r = 3.654 for the base strip, or a fresh draw), so the distribution is the
+exact normal, tails included — no truncated table.
+
+The stream is one flat sequence per state: :func:`fill_normal` continues it whatever the request
+sizes (values are made in batches of :data:`BATCH`; the unused rest of a batch is kept in the state),
+so T calls of N values equal one call of T·N — the kernels' chunking invariance rests on this.
+
+State (uint64, :data:`STATE_WORDS`): ``[4·LANES lane words | 4 fix-up words | cursor | BATCH buffered
+values (float64 bits) | 2·BATCH scratch words]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
+
+__all__ = ["BATCH", "LANES", "STATE_SCRATCH", "STATE_WORDS", "fill_normal", "fill_normal_py", "seed_state"]
+
+LANES = 32
+#: Words per lane made per load of its state (BATCH is a multiple of ROUNDS·LANES).
+ROUNDS = 4
+BATCH = 512
+_FIX = 4 * LANES
+_CUR = _FIX + 4
+_BUF = _CUR + 1
+_RAW = _BUF + BATCH
+_REJ = _RAW + BATCH
+STATE_WORDS = _REJ + BATCH
+#: Words of the state that carry the stream (the rest is scratch).
+STATE_SCRATCH = _RAW
+
+_M64 = (1 << 64) - 1
+_ZIG_R = 3.6541528853610088
+_ZIG_INV_R = 1.0 / _ZIG_R
+_ZIG_V = 0.00492867323399
+_ONE_BITS = 0x3FF0000000000000
+
+
+def _numpy_layout_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``x_i`` (layer scales), ``k_i/2^52`` (acceptance bounds) and ``f_i`` in NumPy's index order."""
+    m1 = float(2**52)
+    k = np.zeros(256)
+    w = np.zeros(256)
+    f = np.zeros(256)
+    dn = tn = _ZIG_R
+    q = _ZIG_V / math.exp(-0.5 * dn * dn)
+    k[0] = math.floor((dn / q) * m1)
+    k[1] = 0.0
+    w[0] = q
+    w[255] = dn
+    f[0] = 1.0
+    f[255] = math.exp(-0.5 * dn * dn)
+    for i in range(254, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(_ZIG_V / dn + math.exp(-0.5 * dn * dn)))
+        k[i + 1] = math.floor((dn / tn) * m1)
+        tn = dn
+        f[i] = math.exp(-0.5 * dn * dn)
+        w[i] = dn
+    return w, k / m1, f
+
+
+ZIG_X, ZIG_ACCEPT, ZIG_F = _numpy_layout_tables()
+
+
+def seed_state(rng: np.random.Generator) -> np.ndarray:
+    """A fresh generator state drawn from ``rng``: 32 + 1 xoshiro256++ states, none all zero."""
+    s = np.zeros(STATE_WORDS, np.uint64)
+    words = rng.integers(0, 2**64, size=4 * LANES + 4, dtype=np.uint64, endpoint=False)
+    lanes = words[: 4 * LANES].reshape(4, LANES)
+    lanes[0, ~lanes.any(axis=0)] = np.uint64(0x9E3779B97F4A7C15)
+    fix = words[4 * LANES :]
+    if not fix.any():
+        fix[0] = np.uint64(0x9E3779B97F4A7C15)
+    s[: 4 * LANES] = lanes.ravel()
+    s[_FIX:_CUR] = fix
+    s[_CUR] = BATCH  # the buffer is empty
+    return s
+
+
+@intrinsic
+def _bits_to_f64(typingctx, x):  # type: ignore[no-untyped-def]  # noqa: ARG001 — numba intrinsic signature
+    """Reinterpret a uint64 as the float64 with the same bits."""
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]  # noqa: ARG001
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(types.uint64), codegen
+
+
+@njit(cache=True, inline="always")
+def _rotl(x, k):  # type: ignore[no-untyped-def]
+    return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
+
+
+@njit(cache=True, inline="always")
+def _xoshiro(a0, a1, a2, a3):  # type: ignore[no-untyped-def]
+    """One xoshiro256++ step: (output, new state words)."""
+    r = _rotl(a0 + a3, 23) + a0
+    t = a1 << np.uint64(17)
+    a2 ^= a0
+    a3 ^= a1
+    a1 ^= a2
+    a0 ^= a3
+    a2 ^= t
+    return r, a0, a1, a2, _rotl(a3, 45)
+
+
+@njit(cache=True, inline="always")
+def _next_u64(s: np.ndarray) -> np.uint64:
+    """One xoshiro256++ output of the scalar state ``s[0:4]``."""
+    r, s[0], s[1], s[2], s[3] = _xoshiro(s[0], s[1], s[2], s[3])
+    return r
+
+
+@njit(cache=True, inline="always")
+def _next_double(s: np.ndarray) -> float:
+    return float(_next_u64(s) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, error_model="numpy")
+def _lane_words(lanes: np.ndarray, raw: np.ndarray) -> None:
+    """``raw`` (a multiple of ROUNDS·LANES long) from the LANES xoshiro256++ states (4 rows of
+    ``lanes``): word ``j`` from lane ``j % LANES``, each lane's words in its own order. The lane loop is
+    independent per lane, so it vectorises; each load and store of a lane's state serves ROUNDS words
+    (one word per load costs 2.5×: the state goes through memory every round)."""
+    s0, s1, s2, s3 = (
+        lanes[0:LANES],
+        lanes[LANES : 2 * LANES],
+        lanes[2 * LANES : 3 * LANES],
+        lanes[3 * LANES :],
+    )
+    for o in range(0, raw.shape[0], ROUNDS * LANES):
+        r = raw[o : o + ROUNDS * LANES]
+        for lane in range(LANES):
+            a0, a1, a2, a3 = s0[lane], s1[lane], s2[lane], s3[lane]
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[lane] = x
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[LANES + lane] = x
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[2 * LANES + lane] = x
+            x, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+            r[3 * LANES + lane] = x
+            s0[lane], s1[lane], s2[lane], s3[lane] = a0, a1, a2, a3
+
+
+@njit(cache=True)
+def _finish(fix: np.ndarray, idx: int, u: float, neg: bool) -> float:
+    """The exact ziggurat after a failed fast test of word (layer ``idx``, uniform ``u``, sign):
+    the base strip's exponential tail, the wedge test, or a fresh draw from the ``fix`` stream."""
+    while True:
+        x = u * ZIG_X[idx]
+        if idx == 0:  # beyond r: Marsaglia's tail algorithm
+            while True:
+                xx = -_ZIG_INV_R * math.log1p(-_next_double(fix))
+                yy = -math.log1p(-_next_double(fix))
+                if yy + yy > xx * xx:
+                    return -(_ZIG_R + xx) if neg else _ZIG_R + xx
+        if (ZIG_F[idx - 1] - ZIG_F[idx]) * _next_double(fix) + ZIG_F[idx] < math.exp(-0.5 * x * x):
+            return -x if neg else x
+        # rejected: a whole new draw on the fix-up stream
+        r = _next_u64(fix)
+        idx = np.intp(r & np.uint64(0xFF))
+        u = _bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
+        neg = (r >> np.uint64(8)) & np.uint64(1) != 0
+        if u < ZIG_ACCEPT[idx]:
+            return -u * ZIG_X[idx] if neg else u * ZIG_X[idx]
+
+
+@njit(cache=True)
+def _batch(state: np.ndarray, dst: np.ndarray) -> None:
+    """The next BATCH normals of the stream into ``dst``: a branch-free fast pass over all words
+    (the sign as a factor ±1), then the rare rejected words finished in order."""
+    raw = state[_RAW : _RAW + BATCH]
+    _lane_words(state[:_FIX], raw)
+    rej = state[_REJ : _REJ + BATCH]
+    n_rej = 0
+    for j in range(BATCH):
+        r = raw[j]
+        idx = np.intp(r & np.uint64(0xFF))
+        u = _bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
+        sign = _bits_to_f64((((r >> np.uint64(8)) & np.uint64(1)) << np.uint64(63)) | np.uint64(_ONE_BITS))
+        dst[j] = u * ZIG_X[idx] * sign
+        rej[n_rej] = j  # kept only when rejected: branch-free compaction
+        n_rej += u >= ZIG_ACCEPT[idx]
+    fix = state[_FIX:_CUR]
+    for q in range(n_rej):
+        j = np.intp(rej[q])
+        r = raw[j]
+        idx = np.intp(r & np.uint64(0xFF))
+        u = _bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
+        dst[j] = _finish(fix, idx, u, (r >> np.uint64(8)) & np.uint64(1) != 0)
+
+
+@njit(cache=True)
+def fill_normal(state: np.ndarray, out: np.ndarray) -> None:
+    """Fill ``out`` (1-D float64) with the next standard normals of the stream in ``state``."""
+    n = out.shape[0]
+    buf = state[_BUF : _BUF + BATCH].view(np.float64)
+    cur = np.intp(state[_CUR])
+    k = min(BATCH - cur, n)
+    for j in range(k):
+        out[j] = buf[cur + j]
+    cur += k
+    while n - k >= BATCH:
+        _batch(state, out[k : k + BATCH])
+        k += BATCH
+    if k < n:
+        _batch(state, buf)
+        cur = n - k
+        for j in range(cur):
+            out[k + j] = buf[j]
+    state[_CUR] = np.uint64(cur)
+
+
+# -- plain Python/numpy twin (same bits; slow, for tests) ---------------------------------------
+
+
+def _xoshiro_py(s: list[int]) -> int:
+    s0, s1, s2, s3 = s
+    x = (s0 + s3) & _M64
+    result = (((x << 23) | (x >> 41)) + s0) & _M64
+    t = (s1 << 17) & _M64
+    s2 ^= s0
+    s3 ^= s1
+    s1 ^= s2
+    s0 ^= s3
+    s2 ^= t
+    s3 = ((s3 << 45) | (s3 >> 19)) & _M64
+    s[:] = [s0, s1, s2, s3]
+    return result
+
+
+def _word_py(r: int) -> tuple[int, float, bool]:
+    u = float(np.array([(r >> 12) | _ONE_BITS], np.uint64).view(np.float64)[0]) - 1.0
+    return r & 0xFF, u, bool((r >> 8) & 1)
+
+
+def _finish_py(fix: list[int], idx: int, u: float, neg: bool) -> float:
+    def next_double() -> float:
+        return float(_xoshiro_py(fix) >> 11) * (1.0 / 9007199254740992.0)
+
+    while True:
+        x = u * float(ZIG_X[idx])
+        if idx == 0:
+            while True:
+                xx = -_ZIG_INV_R * math.log1p(-next_double())
+                yy = -math.log1p(-next_double())
+                if yy + yy > xx * xx:
+                    return -(_ZIG_R + xx) if neg else _ZIG_R + xx
+        if (ZIG_F[idx - 1] - ZIG_F[idx]) * next_double() + ZIG_F[idx] < math.exp(-0.5 * x * x):
+            return -x if neg else x
+        idx, u, neg = _word_py(_xoshiro_py(fix))
+        if u < ZIG_ACCEPT[idx]:
+            return -u * float(ZIG_X[idx]) if neg else u * float(ZIG_X[idx])
+
+
+def fill_normal_py(state: np.ndarray, out: np.ndarray) -> None:
+    """Pure-Python twin of :func:`fill_normal`: lane by lane, word by word (same bits)."""
+    lanes = [[int(state[w * LANES + lane]) for w in range(4)] for lane in range(LANES)]
+    fix = [int(x) for x in state[_FIX:_CUR]]
+    buf = state[_BUF : _BUF + BATCH].view(np.float64)
+    cur = int(state[_CUR])
+    for i in range(out.shape[0]):
+        if cur == BATCH:
+            for j in range(BATCH):
+                idx, u, neg = _word_py(_xoshiro_py(lanes[j % LANES]))
+                if u < ZIG_ACCEPT[idx]:
+                    buf[j] = -u * float(ZIG_X[idx]) if neg else u * float(ZIG_X[idx])
+                else:
+                    buf[j] = _finish_py(fix, idx, u, neg)
+            cur = 0
+        out[i] = buf[cur]
+        cur += 1
+    for lane in range(LANES):
+        for w in range(4):
+            state[w * LANES + lane] = np.uint64(lanes[lane][w])
+    state[_FIX:_CUR] = np.array(fix, np.uint64)
+    state[_CUR] = np.uint64(cur)
