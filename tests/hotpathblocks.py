@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from toyblocks import Ramp, RampConfig
+from toyblocks import Ramp, RampConfig, Scale, ScaleConfig
 
 from flowtact import param
 
@@ -23,3 +23,21 @@ class SlowRamp(Ramp):
     def step(self, now):
         time.sleep(self.config.step_delay_s)
         return super().step(now)
+
+
+@dataclass(frozen=True)
+class SlowScaleConfig(ScaleConfig):
+    step_delay_s: float = param(
+        0.0, doc="wall time each step takes (a consumer slower than its producer)", ge=0
+    )
+
+
+class SlowScale(Scale):
+    """The toy gain, taking ``step_delay_s`` of wall time per step that brings data."""
+
+    config_cls = SlowScaleConfig
+
+    def step(self, x):
+        if len(x):
+            time.sleep(self.config.step_delay_s)
+        return super().step(x)
