@@ -36,6 +36,7 @@ class SlowScale(Scale):
     """The toy gain, taking ``step_delay_s`` of wall time per step that brings data."""
 
     config_cls = SlowScaleConfig
+    chunking_invariant = True  # so --fast may step it once over several ticks (ticks_mergeable)
 
     def step(self, x):
         if len(x):

@@ -47,7 +47,7 @@ seed: 3
 nodes:
   src:  {block: "toyblocks:Ramp", process: a, params: {noise: 0.1, channels: 2}}
   slow: {block: "hotpathblocks:SlowScale", process: b, params: {gain: 2.0, step_delay_s: 0.002}}
-  last: {block: "toyblocks:Scale", process: c, params: {gain: 3.0}}
+  last: {block: "hotpathblocks:SlowScale", process: c, params: {gain: 3.0}}
 edges:
   - src.y -> slow.x
   - slow.y -> last.x
@@ -120,3 +120,19 @@ def test_loops_and_sources_with_inputs_are_not_mergeable(tmp_path):
     )
     assert not ticks_mergeable(load_plan(loop))
     assert not ticks_mergeable(load_plan(plant))
+
+
+def test_blocks_not_known_to_be_chunking_invariant_are_not_merged(tmp_path):
+    """toyblocks:Scale is neither registered nor declared chunking-invariant; savgol is registered."""
+    undeclared = tmp_path / "undeclared.yaml"
+    undeclared.write_text(
+        CHAIN.replace('"hotpathblocks:SlowScale", process: c', '"toyblocks:Scale", process: c')
+    )
+    assert not ticks_mergeable(load_plan(undeclared))
+    registered = tmp_path / "registered.yaml"
+    registered.write_text(
+        "name: reg\nnodes:\n  src: {block: 'toyblocks:Ramp', process: a}\n"
+        "  f: {block: savgol, process: b, params: {window: 5, order: 2}}\n"
+        "edges:\n  - src.y -> f.x\nrecord: [f.y]\n"
+    )
+    assert ticks_mergeable(load_plan(registered))

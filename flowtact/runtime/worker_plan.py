@@ -98,15 +98,20 @@ def ticks_mergeable(plan: Any) -> bool:
     """May a ``--fast`` worker without sources step once over every tick its inputs already hold?
 
     Only when the result cannot depend on it: every node has at most one input edge (no fan-in,
-    so no node sees two streams chunked differently), no source has inputs, and no edge is
-    delayed (no loops). Chunking invariance then makes one step over ticks ``k+1..K`` give the
-    same output as ``K-k`` steps, and a ``--fast`` run stays bit-identical to ``--inproc``.
+    so no node sees two streams chunked differently), no source has inputs, no edge is delayed
+    (no loops), and every fed block is known to be chunking-invariant: registered (the
+    conformance suite proves it) or a ``module:Class`` block whose class says
+    ``chunking_invariant = True``. One step over ticks ``k+1..K`` then gives the same output as
+    ``K-k`` steps, and a ``--fast`` run stays bit-identical to ``--inproc``.
     """
     graph = plan.graph
     fed: set[str] = set()
     for e in plan.active_edges:
-        cls = graph.nodes[e.dst].cls
+        node = graph.nodes[e.dst]
+        cls = node.cls
         if e.dst in fed or issubclass(cls, Source) or cls.inputs[e.dst_port].delay:
+            return False
+        if ":" in node.block and not getattr(cls, "chunking_invariant", False):
             return False
         fed.add(e.dst)
     return True
