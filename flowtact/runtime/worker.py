@@ -9,6 +9,15 @@ stream carries only data and the consumer takes whatever is newest. ``END`` mess
 node's end-of-stream output (its flush). Nodes wait for remote input just before they step, so
 chains that leave a process and come back within a tick do not deadlock.
 
+The hot path: every node's step plan (input queues, output routes) is resolved once
+(:mod:`flowtact.runtime.worker_plan`); a receive reads the socket's events instead of catching
+``zmq.Again`` and takes everything queued in one wake-up; control is read every
+:data:`CONTROL_NS`, not every tick; recorded chunks are coalesced for :data:`RECORD_FLUSH_NS`; a
+source's data is stamped once its step has made it, so latency is transport, not the source's
+own work. In ``--fast`` runs a worker without sources that already holds ticks ``k+1..K`` on
+every input steps once at ``K`` when :func:`~flowtact.runtime.worker_plan.ticks_mergeable`
+says no result can depend on it.
+
 Lifecycle, driven by the supervisor over the control socket (msgpack dicts): hello -> plan ->
 ready (bound endpoints) -> wire (connect) -> wired -> start -> stats -> done -> exit. A stop
 names the tick every worker ends on (``stop`` with ``k``), so a loop through several processes
