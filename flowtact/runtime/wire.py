@@ -4,7 +4,7 @@ The header is little-endian: a fixed part (magic, flags, ndim, number of origins
 stream, seq, tick, watermark ``end`` or NaN), the dtype string and the sample shape (cached per
 stream: they rarely change), then the ``origins``: pairs mapping a source index to the monotonic
 time (ns) at which the oldest data behind the chunk left that source, for latency. It is padded
-to a multiple of 8 bytes so the arrays behind it are aligned. A small chunk travels as one frame
+to a multiple of 8 bytes (the arrays behind it are as aligned as the frame). A small chunk travels as one frame
 ``header + t + data`` (per-message costs dominate small messages; pyzmq advises zero-copy only
 above ~64 KiB); a large one (data of :data:`COPY_THRESHOLD` bytes or more, a camera frame) as the
 multipart message ``[header, t, data]``, flagged in the header so the receiver reads its frames
