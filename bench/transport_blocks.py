@@ -85,6 +85,7 @@ class BenchStage(Block):
     """
 
     config_cls = Config
+    chunking_invariant = True  # the --fast runtime may step it once over several ticks
     inputs = {"x": Port(dtype=None, doc="float samples or uint8 frames")}
     outputs = {"y": Port(dtype=None, doc="2 x (float) or 255 - x (uint8)")}
 
@@ -109,6 +110,7 @@ class BenchSink(Block):
     """
 
     config_cls = Config
+    chunking_invariant = True  # the --fast runtime may step it once over several ticks
     sink = True
     inputs = {"x": Port(dtype=None, doc="anything")}
     outputs = {}

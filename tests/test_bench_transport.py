@@ -276,3 +276,29 @@ def test_the_cpu_figure_needs_every_round_and_says_so_when_one_is_missing():
     transport.record_raw(short, [_raw_round(12.0), _raw_round(None), _raw_round(13.0)])
     assert "raw pyzmq, busiest process at 1 kHz" not in short.figures
     assert any("CPU was measured in 2 of 3 rounds" in n for n in short.notes)
+
+
+def test_peers_are_recorded_with_one_sample_per_round_beside_raw_s():
+    """A peer runs each pipeline once per round; its figures carry every round (ratios need >= 3)."""
+    from flowtact.benchmark.suite import Context
+
+    ctx = Context(transport.SUITE, quick=True)
+    transport.record_raw(ctx, [_raw_round(12.0), _raw_round(14.0), _raw_round(13.0)])
+    lat = [{"latency_us": {"p50": 300.0 + i, "p99": 800.0 + i, "n": 900}} for i in range(3)]
+    small = [{"throughput": {"delivered_msg_s": 7000.0 + i}} for i in range(3)]
+    image = [{"throughput": {"bytes_s": 5e8 + 1e6 * i}} for i in range(3)]
+    peer = {
+        "versions": {"ezmsg": "3.6"},
+        "small_1khz": transport.median_run(lat),
+        "small_1khz_runs": lat,
+        "small_flat": transport.median_run(small),
+        "small_flat_runs": small,
+        "image_flat": transport.median_run(image),
+        "image_flat_runs": image,
+    }
+    assert peer["small_1khz"]["latency_us"]["p99"] == 801.0
+    transport.record_peers(ctx, {"ezmsg": peer, "timeflux": {"skipped": "pip install failed"}})
+    assert ctx.figures["ezmsg (ezmsg 3.6), small @ 1 kHz, p99 latency"].samples == [800.0, 801.0, 802.0]
+    assert ctx.figures["ezmsg, small, flat out"].samples == [7000.0, 7001.0, 7002.0]
+    assert ctx.figures["ezmsg, image, flat out"].samples == [500.0, 501.0, 502.0]
+    assert any("timeflux: skipped" in n for n in ctx.notes)

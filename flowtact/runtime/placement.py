@@ -17,6 +17,7 @@ from flowtact.chunk import StreamSpec
 from flowtact.compile import Plan
 from flowtact.deployment import ProcessDef
 from flowtact.graph import GraphError, GraphErrors
+from flowtact.runtime.worker_plan import ticks_mergeable
 
 __all__ = ["DEFAULT_GROUP", "MAX_LOCAL_PROCESSES", "Placement", "place", "spec_from_wire", "spec_to_wire"]
 
@@ -147,6 +148,7 @@ class Placement:
             "process": group,
             "graph": graph.name,
             "fast": fast,
+            "merge_ticks": fast and ticks_mergeable(plan),
             "tick_s": tick_s,
             "duration_s": duration_s,
             "nodes": nodes,

@@ -9,6 +9,15 @@ stream carries only data and the consumer takes whatever is newest. ``END`` mess
 node's end-of-stream output (its flush). Nodes wait for remote input just before they step, so
 chains that leave a process and come back within a tick do not deadlock.
 
+The hot path: every node's step plan (input queues, output routes) is resolved once
+(:mod:`flowtact.runtime.worker_plan`); a receive reads the socket's events instead of catching
+``zmq.Again`` and takes everything queued in one wake-up; control is read every
+:data:`CONTROL_NS`, not every tick; recorded chunks are coalesced for :data:`RECORD_FLUSH_NS`; a
+source's data is stamped once its step has made it, so latency is transport, not the source's
+own work. In ``--fast`` runs a worker without sources that already holds ticks ``k+1..K`` on
+every input steps once at ``K`` when :func:`~flowtact.runtime.worker_plan.ticks_mergeable`
+says no result can depend on it.
+
 Lifecycle, driven by the supervisor over the control socket (msgpack dicts): hello -> plan ->
 ready (bound endpoints) -> wire (connect) -> wired -> start -> stats -> done -> exit. A stop
 names the tick every worker ends on (``stop`` with ``k``), so a loop through several processes
@@ -52,6 +61,7 @@ from flowtact.runtime.placement import spec_from_wire
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.warm_up import CompileWatch, settle_heap, warm_up
 from flowtact.runtime.wire import END, recv_message, send_message
+from flowtact.runtime.worker_plan import NodePlan, OutPort, merge_origins
 
 __all__ = ["BEAT_S", "ORPHAN_S", "Worker", "main"]
 
@@ -73,6 +83,12 @@ MERGE_MAX_S = 0.1
 STOP_MERGE_MAX_S = 1.0
 """... and this much once a stop is asked: a run far behind real time (an overloaded machine) then
 drains its backlog to the stop tick in a tenth of the ticks, within ``stop_grace_s``."""
+CONTROL_NS = 5_000_000
+"""The control socket (stop, abort, pings) is read this often (ns) from the tick loop, not every tick."""
+RECORD_FLUSH_NS = 50_000_000
+"""Recorded chunks are coalesced and sent to the recorder this often (ns), or sooner when many."""
+RECORD_MAX_CHUNKS = 256
+"""... or once this many chunks of one stream wait (a fast run's memory stays bounded)."""
 INF = math.inf
 FOREVER = 2**62
 
@@ -94,6 +110,7 @@ class _Inbound:
         self.same_host: bool = d["same_host"]
         self.sock: zmq.Socket | None = None
         self.poller: zmq.Poller | None = None
+        self.targets: list[tuple[deque[Any], bool]] = []  # input queues it feeds (queue, delayed)
         self.upto = 0  # highest tick received
         self.ended = False
         self.messages = self.samples = self.dropped = self.gaps = 0
@@ -115,6 +132,7 @@ class _Outbound:
         self.seq = 0
         self.sent_tick = 0
         self.dropped = 0
+        self.empty: Chunk | None = None  # the empty chunk that closes a tick with nothing in it
 
 
 class _Deadline:
@@ -204,15 +222,28 @@ class Worker:
             raise Stop("the supervisor is gone")
 
     def _service(self) -> None:
-        """Handle pending control messages (pings, stop, abort) without blocking."""
+        """Handle pending control messages (pings, stop, abort) without blocking; send statistics."""
         while self.ctl.get(zmq.EVENTS) & zmq.POLLIN:
             self._control(msgpack.unpackb(self.ctl.recv(), strict_map_key=False))
             self.last_ping = time.monotonic()
         self._check_orphan()
-        now = time.monotonic()
+        now_ns = time.monotonic_ns()
+        self.next_service = now_ns + CONTROL_NS
+        if now_ns >= self.next_record:
+            self._flush_records()
+        now = now_ns / 1e9
         if now >= self.next_beat:
             self.next_beat = now + HEARTBEAT_S
             self._send("stats", **self._stats())
+
+    def _flush_records(self) -> None:
+        """Send every recorded stream's coalesced chunks to the recorder (one message each)."""
+        self.next_record = time.monotonic_ns() + RECORD_FLUSH_NS
+        for o in self.recorded_ports:
+            if o.rec_buf:
+                chunk = concat(o.rec_buf, o.spec)
+                o.rec_buf = []
+                self._send_lossless(self.rec, o.record, 0, self.k, chunk)  # type: ignore[arg-type]
 
     # -- set-up -----------------------------------------------------------------------------
     def serve(self) -> int:
@@ -297,18 +328,9 @@ class Worker:
             if nd["src_idx"] is not None:
                 self.src_idx[name] = nd["src_idx"]
         self.busy = None
-        self.warmed: set[str] = set()  # nodes past their first data-carrying step
-        self.node_ns = dict.fromkeys(self.order, 0)  # wall time spent in each node's steps
         self.max_lag_s = 0.0
         self.merged_ticks = 0  # real-time ticks taken together to catch up with the clock
         self.sources = [n for n in self.order if isinstance(self.blocks[n], Source)]
-        # queues[(node, port)] -> deque of (available from tick, chunk, origins)
-        self.queues: dict[tuple[str, str], deque[tuple[float, Chunk, dict[int, int]]]] = {
-            (n, p): deque() for n in self.order for p in self.needed[n]
-        }
-        self.local: dict[tuple[str, str], list[tuple[str, str, bool]]] = {}
-        for src, sport, dst, dport, delayed in plan["edges"]:
-            self.local.setdefault((src, sport), []).append((dst, dport, delayed))
         self.inbound = {d["id"]: _Inbound(d) for d in plan["inbound"]}
         self.remote_inputs: dict[str, list[tuple[_Inbound, bool]]] = {n: [] for n in self.order}
         for ib in self.inbound.values():
@@ -316,20 +338,43 @@ class Worker:
                 if (ib, delayed) not in self.remote_inputs[dst]:
                     self.remote_inputs[dst].append((ib, delayed))
         self.outbound = [_Outbound(d) for d in plan["outbound"]]
-        self.out_by_port: dict[tuple[str, str], list[_Outbound]] = {}
-        for ob in self.outbound:
-            self.out_by_port.setdefault((ob.node, ob.port), []).append(ob)
         self.recorded = {(n, p): sid for n, p, sid in plan["record"]}
         self.deadlines = {}
         for d in plan["deadlines"]:
             self.deadlines.setdefault(d["dst"], []).append(_Deadline(d))
-        self.names = {(n, p): f"{n}.{p}" for n in self.order for p in self.demanded[n]}
-        self.counts = dict.fromkeys(self.names.values(), 0)
+        self._plan_nodes(plan)
         self.block_inputs = [ib for ib in self.inbound.values() if ib.policy == "block"]
         self.latest_inputs = [ib for ib in self.inbound.values() if ib.policy == "latest"]
+        # --fast, no sources here, a graph where merging cannot change a result (ticks_mergeable)
+        self.merge = bool(plan.get("merge_ticks")) and not self.sources and not self.latest_inputs
         self.now = 0.0
         self.next_beat = 0.0
+        self.next_service = 0
+        self.next_record = 0
         self.warm_ns = 0  # data that left its source before this is start-up, not transport
+
+    def _plan_nodes(self, plan: dict[str, Any]) -> None:
+        """Resolve once what every node's step reads and where each output goes (see worker_plan)."""
+        self.plans = [NodePlan(n, self.blocks[n], self.needed[n], self.src_idx.get(n)) for n in self.order]
+        by_name = {nd.name: nd for nd in self.plans}
+        for nd in self.plans:
+            for port in sorted(self.demanded[nd.name]):
+                nd.outputs[port] = OutPort(nd.name, port, self.out_specs[nd.name][port])
+            nd.deadlines = self.deadlines.get(nd.name, [])
+            nd.remote = self.remote_inputs[nd.name]
+        queue = {(nd.name, ip.name): ip.queue for nd in self.plans for ip in nd.inputs}
+        for src, sport, dst, dport, delayed in plan["edges"]:
+            if sport in by_name[src].outputs:  # an output nobody demands is never delivered
+                by_name[src].outputs[sport].local.append((queue[(dst, dport)], delayed))
+        for ib in self.inbound.values():
+            ib.targets = [(queue[(dst, dport)], delayed) for dst, dport, delayed in ib.dsts]
+        for ob in self.outbound:
+            ob.empty = by_name[ob.node].outputs[ob.port].empty
+            by_name[ob.node].outputs[ob.port].outbound.append(ob)
+        for (n, p), sid in self.recorded.items():
+            by_name[n].outputs[p].record = sid
+        self.recorded_ports = [o for nd in self.plans for o in nd.outputs.values() if o.record is not None]
+        self.lossless_out = [ob for ob in self.outbound if ob.policy == "block"]
 
     def _warm_up(self) -> None:
         """Load or compile every kernel the run will call, before the worker says ready (warm_up.py)."""
@@ -413,17 +458,20 @@ class Worker:
                 break
             if not sources and not self.block_inputs and not self.latest_inputs:
                 break
-            if not sources and self.block_inputs and all(ib.ended for ib in self.block_inputs):
+            if not sources and self.block_inputs and all(self._consumed(ib) for ib in self.block_inputs):
                 break
             if not sources and not self.block_inputs and not self._wait_latest():
                 break
             self.k += 1
+            if self.merge and self.block_inputs:
+                self._merge_ahead()
             if sources and not self.fast:
                 self._catch_up()
             self.now = self._tick_time(self.k)
             if sources and not self.fast:
                 self._wait_clock(self.now)
-            self._service()
+            if time.monotonic_ns() >= self.next_service:
+                self._service()
             self._tick(self.k, self.now)
 
     def _catch_up(self) -> None:
@@ -445,9 +493,38 @@ class Worker:
         k = min(self.k + min(behind, step), self.stop_k, self.n_ticks or FOREVER)
         self.merged_ticks += k - self.k
         self.k = k
-        for ob in self.outbound:
-            if ob.policy == "block" and ob.sent_tick < k - 1:
-                self._send_out(ob, k - 1, Chunk.empty(self.out_specs[ob.node][ob.port]), {})
+        for ob in self.lossless_out:
+            if ob.sent_tick < k - 1:
+                self._send_out(ob, k - 1, ob.empty, {})
+
+    def _merge_ahead(self) -> None:
+        """--fast: take every tick all block inputs already hold in this one (see ticks_mergeable).
+
+        What is queued is read without waiting; when every input holds ticks up to ``K`` beyond
+        this tick, one step covers them all: one message downstream instead of ``K - k``.
+        """
+        for ib in self.block_inputs:
+            if not ib.ended:
+                self._drain(ib)
+        upto = min((ib.upto for ib in self.block_inputs if not self._consumed(ib)), default=self.k)
+        if upto > self.k:
+            self.k = min(upto, self.stop_k, self.n_ticks if self.n_ticks is not None else FOREVER)
+
+    def _consumed(self, ib: _Inbound) -> bool:
+        """Has block stream ``ib`` ended, and have the ticks it carried all been stepped?
+
+        A drain may read a stream's END ahead of the ticks queued before it: those still run.
+        """
+        return ib.ended and ib.upto <= self.k
+
+    def _drain(self, ib: _Inbound) -> None:
+        """Accept what block stream ``ib`` holds (at most its queue bound), without waiting."""
+        sock = ib.sock
+        budget = ib.queue
+        while budget and not ib.ended and sock.get(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[union-attr]
+            m = recv_message(sock, zmq.NOBLOCK)  # type: ignore[arg-type]
+            self._accept(ib, m, m.tick)
+            budget -= 1
 
     def _wait_clock(self, now: float) -> None:
         target = self.t0_ns + int(now * 1e9)
@@ -479,82 +556,88 @@ class Worker:
         return False
 
     def _tick(self, k: int, now: float) -> None:
-        for n in self.order:
-            for ib, delayed in self.remote_inputs[n]:
+        for nd in self.plans:
+            for ib, delayed in nd.remote:
                 self._fetch(ib, k - 1 if delayed else k)
-            self._step(n, k, now, k)
-        for ob in self.outbound:  # a block stream carries every tick, empty or not
-            if ob.policy == "block" and ob.sent_tick < k:
-                spec = self.out_specs[ob.node][ob.port]
-                self._send_out(ob, k, Chunk.empty(spec), {})
+            self._step(nd, k, now, k)
+        for ob in self.lossless_out:  # a block stream carries every tick, empty or not
+            if ob.sent_tick < k:
+                self._send_out(ob, k, ob.empty, {})
 
-    def _step(self, n: str, k: int, now: float, avail: float) -> None:
-        """Step node ``n`` on what reached it up to tick ``avail`` (a source: every tick)."""
-        block = self.blocks[n]
-        source = isinstance(block, Source)
+    def _step(self, nd: NodePlan, k: int, now: float, avail: float) -> None:
+        """Step node ``nd`` on what reached it up to tick ``avail`` (a source: every tick)."""
+        ins, origins, data = self._gather(nd, avail)
+        if not data and not nd.source:
+            return
+        block = nd.block
+        self.busy, self.busy_first = nd.name, not nd.warmed
+        t0 = time.perf_counter_ns()
+        try:
+            out = block(now, **ins) if nd.source else block(**ins)
+        except Exception as e:
+            raise _NodeFailure(nd.name, block, now, e) from e
+        nd.ns += time.perf_counter_ns() - t0
+        self.busy = None
+        self.steps += 1
+        if not nd.warmed and (nd.source or any(len(c) for c in ins.values())):
+            nd.warmed = True
+        if nd.deadlines:
+            self._deadlines(nd, origins)
+        if nd.source:  # stamped once the source has made its data: its own step is not transport
+            origins = {nd.src_idx: time.monotonic_ns()} if nd.src_idx is not None else {}
+        self._deliver(nd, out, k, origins)
+
+    @staticmethod
+    def _gather(nd: NodePlan, avail: float) -> tuple[dict[str, Chunk], dict[int, int], bool]:
+        """Node ``nd``'s inputs up to tick ``avail``, the oldest origin per source behind their
+        data, and whether anything came (data or a watermark)."""
         ins: dict[str, Chunk] = {}
-        own = {self.src_idx[n]: time.monotonic_ns()} if source else None
-        origins = (
-            dict(own) if own else {}
-        )  # a source's own data starts here; its inputs still count for deadlines
-        empty = not source
-        for p in self.needed[n]:
-            q = self.queues[(n, p)]
+        origins: dict[int, int] = {}
+        data = False
+        for ip in nd.inputs:
+            q = ip.queue
+            if not q or q[0][0] > avail:
+                ins[ip.name] = ip.empty
+                continue
             parts = []
             while q and q[0][0] <= avail:
                 _, c, o = q.popleft()
                 parts.append(c)
-                if not len(c):  # a watermark alone carries no data whose latency counts
-                    continue
-                for s, ns in o.items():
-                    if ns < origins.get(s, ns + 1):
-                        origins[s] = ns
-            c = concat(parts, block.input_specs[p])
-            if len(c) or c.end is not None:
-                empty = False
-            ins[p] = c
-        if empty:
-            return
-        first = n not in self.warmed
-        self.busy, self.busy_first = n, first
-        t0 = time.perf_counter_ns()
-        try:
-            out = block(now, **ins) if source else block(**ins)
-        except Exception as e:
-            raise _NodeFailure(n, block, now, e) from e
-        self.node_ns[n] += time.perf_counter_ns() - t0
-        self.busy = None
-        self.steps += 1
-        if first and (source or any(len(c) for c in ins.values())):
-            self.warmed.add(n)
-        if n in self.deadlines:
-            t = time.monotonic_ns()
-            for d in self.deadlines[n]:
-                if origins.get(d.src, 0) >= self.warm_ns:
-                    lat = t - origins[d.src]
-                    d.hist.add(lat)
-                    if lat > d.budget_ns:
-                        d.violations += 1
-                        d.worst_ns = max(d.worst_ns, lat)
-        self._deliver(n, out, k, own if own is not None else origins)
+                if len(c):  # a watermark alone carries no data whose latency counts
+                    merge_origins(origins, o)
+            c = parts[0] if len(parts) == 1 else concat(parts, ip.spec)
+            data = data or bool(len(c)) or c.end is not None
+            ins[ip.name] = c
+        return ins, origins, data
 
-    def _deliver(self, n: str, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
-        demanded = self.demanded[n]
+    def _deadlines(self, nd: NodePlan, origins: dict[int, int]) -> None:
+        t = time.monotonic_ns()
+        for d in nd.deadlines:
+            if origins.get(d.src, 0) >= self.warm_ns:
+                lat = t - origins[d.src]
+                d.hist.add(lat)
+                if lat > d.budget_ns:
+                    d.violations += 1
+                    d.worst_ns = max(d.worst_ns, lat)
+
+    def _deliver(self, nd: NodePlan, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
+        outputs = nd.outputs
         for port, chunk in out.items():
-            if port not in demanded:
+            o = outputs.get(port)
+            if o is None:  # not demanded
                 continue
-            spec = self.out_specs[n][port]
-            check_chunk(n, port, chunk, spec, self.now)
-            key = (n, port)
-            if len(chunk):
-                self.counts[self.names[key]] += len(chunk)
-            for dst, dport, delayed in self.local.get(key, ()):
-                self.queues[(dst, dport)].append((k + 1 if delayed else k, chunk, origins))
-            for ob in self.out_by_port.get(key, ()):
+            check_chunk(nd.name, port, chunk, o.spec, self.now)
+            n = len(chunk)
+            if n:
+                o.samples += n
+            for q, delayed in o.local:
+                q.append((k + 1 if delayed else k, chunk, origins))
+            for ob in o.outbound:
                 self._send_out(ob, k, chunk, origins)
-            sid = self.recorded.get(key)
-            if sid is not None and (len(chunk) or chunk.end is not None):
-                self._send_lossless(self.rec, sid, 0, k, chunk)  # type: ignore[arg-type]
+            if o.record is not None and (n or chunk.end is not None):
+                o.rec_buf.append(chunk)
+                if len(o.rec_buf) >= RECORD_MAX_CHUNKS:
+                    self._flush_records()
 
     def _send_lossless(self, sock: zmq.Socket, *args: Any, **kw: Any) -> None:
         """Send, waiting while the consumer's queue is full, and still hear the supervisor meanwhile."""
@@ -576,20 +659,24 @@ class Worker:
         ob.sent_tick = k
 
     def _fetch(self, ib: _Inbound, tick: int) -> None:
-        """Receive what stream ``ib`` holds for ticks up to ``tick`` (block) or what is there (latest)."""
+        """Receive what stream ``ib`` holds for ticks up to ``tick`` (block) or what is there (latest).
+
+        A block stream is read without exceptions: the socket's events say whether a message is
+        queued; once one is, everything queued (up to the stream's bound) is taken in the same
+        wake-up, so the next ticks find their input already here.
+        """
         if ib.ended:
             return
         if ib.policy == "latest":
             self._fetch_latest(ib)
             return
+        sock = ib.sock
         while ib.upto < tick and not ib.ended:
-            try:
-                m = recv_message(ib.sock, zmq.NOBLOCK)  # type: ignore[arg-type]
-            except zmq.Again:
-                if not ib.poller.poll(POLL_MS):
+            if not sock.get(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[union-attr]
+                if not ib.poller.poll(POLL_MS):  # type: ignore[union-attr]
                     self._service()
                 continue
-            self._accept(ib, m, m.tick)
+            self._drain(ib)
 
     def _fetch_latest(self, ib: _Inbound) -> None:
         """Take the newest ``queue`` messages of a ``latest`` stream; count the older ones as dropped.
@@ -600,32 +687,29 @@ class Worker:
         """
         got: deque[Any] = deque(maxlen=ib.queue)
         received = 0
+        sock = ib.sock
         while True:
             batch = 0
-            while True:
-                try:
-                    m = recv_message(ib.sock, zmq.NOBLOCK)  # type: ignore[arg-type]
-                except zmq.Again:
-                    break
-                got.append(m)
+            while sock.get(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[union-attr]
+                got.append(recv_message(sock, zmq.NOBLOCK))  # type: ignore[arg-type]
                 batch += 1
             received += batch
-            if batch < ib.queue or not ib.sock.poll(LATEST_DRAIN_MS):  # type: ignore[union-attr]
+            if batch < ib.queue or not sock.poll(LATEST_DRAIN_MS):  # type: ignore[union-attr]
                 break
         ib.dropped += received - len(got)
         for m in got:
             self._accept(ib, m, -INF)
 
     def _accept(self, ib: _Inbound, m: Any, tick: float) -> None:
-        if m.seq != ib.next_seq and not m.is_end:
+        if m.seq != ib.next_seq and not m.flags & END:
             ib.gaps += 1
         ib.next_seq = m.seq + 1
-        if m.is_end:
+        if m.flags & END:
             ib.ended = True
             tick = INF
-        else:
-            ib.upto = max(ib.upto, m.tick)
-        n = len(m.chunk)
+        elif m.tick > ib.upto:
+            ib.upto = m.tick
+        n = len(m.chunk.t)
         if n:
             ib.messages += 1
             ib.samples += n
@@ -633,9 +717,8 @@ class Worker:
                 origin = min(m.origins.values())
                 if origin >= self.warm_ns:
                     ib.hist.add(time.monotonic_ns() - origin)
-        for dst, dport, delayed in ib.dsts:
-            avail = tick + (1 if delayed and tick != INF else 0)
-            self.queues[(dst, dport)].append((avail, m.chunk, m.origins))
+        for q, delayed in ib.targets:
+            q.append((tick + 1 if delayed and tick != INF else tick, m.chunk, m.origins))
 
     # -- end of stream ----------------------------------------------------------------------
     def _finish(self) -> None:
@@ -650,21 +733,21 @@ class Worker:
         ends: dict[str, list[_Outbound]] = {}
         for ob in self.outbound:
             ends.setdefault(ob.node, []).append(ob)
-        for n in self.order:
-            block = self.blocks[n]
-            if not isinstance(block, Source):
-                for ib, delayed in self.remote_inputs[n]:
+        for nd in self.plans:
+            n, block = nd.name, nd.block
+            if not nd.source:
+                for ib, delayed in nd.remote:
                     self._fetch(ib, self.k if delayed else FOREVER)
-                self._step(n, k, self.now, INF)
+                self._step(nd, k, self.now, INF)
             try:
                 out = block.flush()
             except Exception as e:
                 raise _NodeFailure(n, block, self.now, e) from e
-            self._deliver(n, out, k, {})
+            self._deliver(nd, out, k, {})
             for ob in ends.get(n, ()):
-                end = Chunk.empty(self.out_specs[n][ob.port])
-                self._send_lossless(ob.sock, ob.id, ob.seq, k, end, flags=END)  # type: ignore[arg-type]
+                self._send_lossless(ob.sock, ob.id, ob.seq, k, ob.empty, flags=END)  # type: ignore[arg-type]
         if self.rec is not None:
+            self._flush_records()
             self._send_lossless(self.rec, -1, 0, k, Chunk.empty(), flags=END)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
         self._send("done", **self._stats(), counters=counters)
@@ -679,8 +762,8 @@ class Worker:
             "lag_s": self.lag_s,
             "max_lag_s": self.max_lag_s,
             "merged_ticks": self.merged_ticks,
-            "node_ns": self.node_ns,
-            "counts": self.counts,
+            "node_ns": {nd.name: nd.ns for nd in self.plans},
+            "counts": {o.key: o.samples for nd in self.plans for o in nd.outputs.values()},
             "inbound": {
                 ib.id: {
                     "messages": ib.messages,
@@ -807,6 +890,7 @@ def main(argv: list[str] | None = None) -> int:
     except SecurityError as e:
         print(f"flowtact worker: {e}", file=sys.stderr)
         return 1
+
     return worker.serve()
 
 

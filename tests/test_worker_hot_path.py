@@ -1,0 +1,138 @@
+"""The worker's hot path: what its latency figures mean, and that fast runs stay exact."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from runs import flowtact
+
+from flowtact.launch import load_plan, run_plan
+from flowtact.record import read_recording
+from flowtact.runtime.worker_plan import ticks_mergeable
+
+pytestmark = pytest.mark.slow
+
+SLOW_SOURCE = """
+name: slow_source
+tick_s: 0.1
+nodes:
+  src:  {block: "hotpathblocks:SlowRamp", process: a, params: {rate_hz: 100, step_delay_s: 0.06}}
+  gain: {block: "toyblocks:Scale", process: b}
+edges:
+  - src.y -> gain.x
+record: [gain.y]
+"""
+
+
+def test_a_source_s_own_step_time_is_not_counted_as_transport_latency(tmp_path):
+    """Each source step takes 60 ms; the message's latency starts once the data exists."""
+    path = tmp_path / "slow.yaml"
+    path.write_text(SLOW_SOURCE)
+    proc = flowtact("run", str(path), "--duration", "3", "--json")
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    summary = json.loads(stdout)
+    lat = summary["streams"]["src.y"]["latency_us"]
+    assert lat["n"] >= 5, lat
+    # stamped before the step, every latency would be >= 60 000 µs
+    assert lat["p50"] < 30_000, lat
+
+
+CHAIN = """
+name: merged
+tick_s: 0.001
+seed: 3
+nodes:
+  src:  {block: "toyblocks:Ramp", process: a, params: {noise: 0.1, channels: 2}}
+  slow: {block: "hotpathblocks:SlowScale", process: b, params: {gain: 2.0, step_delay_s: 0.002}}
+  last: {block: "hotpathblocks:SlowScale", process: c, params: {gain: 3.0}}
+edges:
+  - src.y -> slow.x
+  - slow.y -> last.x
+record: [slow.y, last.y]
+"""
+
+FAN_IN = """
+name: fan_in
+tick_s: 0.001
+seed: 3
+nodes:
+  src:  {block: "toyblocks:Ramp", process: a, params: {noise: 0.1}}
+  slow: {block: "hotpathblocks:SlowScale", process: b, params: {gain: 2.0, step_delay_s: 0.002}}
+  add:  {block: "toyblocks:Add", process: c}
+edges:
+  - src.y -> slow.x
+  - src.y -> add.a
+  - slow.y -> add.b
+record: [add.y]
+"""
+
+
+def _same(a, b) -> None:
+    ra, rb = read_recording(a), read_recording(b)
+    assert set(ra.streams) == set(rb.streams)
+    for name in rb.streams:
+        x, y = ra.streams[name], rb.streams[name]
+        assert len(y.t) > 0, name
+        assert np.array_equal(x.t, y.t) and np.array_equal(x.data, y.data), name
+
+
+def _fast_and_inproc(tmp_path, text: str):
+    path = tmp_path / "g.yaml"
+    path.write_text(text)
+    summary = run_plan(load_plan(path), duration_s=1.0, fast=True, record=tmp_path / "procs.h5")
+    run_plan(load_plan(path), duration_s=1.0, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    _same(tmp_path / "procs.h5", tmp_path / "inproc.h5")
+    return summary, load_plan(path)
+
+
+def test_a_fast_consumer_behind_steps_once_over_the_ticks_it_holds_and_stays_bit_identical(tmp_path):
+    """The slow stage holds many ticks whenever it looks: it sends far fewer messages than ticks."""
+    summary, plan = _fast_and_inproc(tmp_path, CHAIN)
+    assert ticks_mergeable(plan)
+    slow = summary.streams["slow.y"]
+    assert slow["samples"] == 1000
+    assert slow["messages"] < 500, slow  # one per tick without merging
+    assert summary.streams["src.y"]["messages"] == 1000  # a source still sends every tick
+
+
+def test_fan_in_keeps_one_message_per_tick(tmp_path):
+    """Add pairs its inputs chunk by chunk: merging ticks on one path would misalign them."""
+    summary, plan = _fast_and_inproc(tmp_path, FAN_IN)
+    assert not ticks_mergeable(plan)
+    assert summary.streams["slow.y"]["messages"] == 1000
+
+
+def test_loops_and_sources_with_inputs_are_not_mergeable(tmp_path):
+    loop = tmp_path / "loop.yaml"
+    loop.write_text(
+        "name: loop\nnodes:\n  src: {block: 'toyblocks:Ramp', process: a}\n"
+        "  l: {block: 'toyblocks:Loop', process: b}\n  g: {block: 'toyblocks:Scale', process: c}\n"
+        "edges:\n  - src.y -> l.x\n  - l.y -> g.x\n  - g.y -> l.fb\nrecord: [g.y]\n"
+    )
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(
+        "name: plant\nnodes:\n  p: {block: 'toyblocks:Plant', process: a}\n"
+        "  g: {block: 'toyblocks:Scale', process: b, params: {gain: 0.5}}\n"
+        "edges:\n  - p.y -> g.x\n  - g.y -> p.u\nrecord: [p.y]\n"
+    )
+    assert not ticks_mergeable(load_plan(loop))
+    assert not ticks_mergeable(load_plan(plant))
+
+
+def test_blocks_not_known_to_be_chunking_invariant_are_not_merged(tmp_path):
+    """toyblocks:Scale is neither registered nor declared chunking-invariant; savgol is registered."""
+    undeclared = tmp_path / "undeclared.yaml"
+    undeclared.write_text(
+        CHAIN.replace('"hotpathblocks:SlowScale", process: c', '"toyblocks:Scale", process: c')
+    )
+    assert not ticks_mergeable(load_plan(undeclared))
+    registered = tmp_path / "registered.yaml"
+    registered.write_text(
+        "name: reg\nnodes:\n  src: {block: 'toyblocks:Ramp', process: a}\n"
+        "  f: {block: savgol, process: b, params: {window: 5, order: 2}}\n"
+        "edges:\n  - src.y -> f.x\nrecord: [f.y]\n"
+    )
+    assert ticks_mergeable(load_plan(registered))
