@@ -54,7 +54,9 @@ def test_the_quoted_outputs_are_what_the_commands_print(walked):
     head = next(p for c, p in results if "head -3 log.csv" in c)
     assert head.stdout == quoted("head -3 log.csv")
     past = next(p for c, p in results if "--duration 5" in c)
-    said = [ln for ln in past.stderr.splitlines() if "compil" not in ln]  # a cold numba cache announces compiling
+    said = [
+        ln for ln in past.stderr.splitlines() if "compil" not in ln
+    ]  # a cold numba cache announces compiling
     assert "\n".join(said).strip() == quoted("Asked to run longer").strip()
     assert (here / "out.png").stat().st_size > 10_000
     # the bad-file example: the log with one cell spoiled, refused as the page says
