@@ -10,19 +10,20 @@ from __future__ import annotations
 
 import functools
 import math
-from collections import defaultdict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
-from flowtact.block import Block, Source
+from flowtact.block import Block
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
+from flowtact.runtime.sealing import sealed
 from flowtact.runtime.stats import format_factor
+from flowtact.runtime.step_plan import NodePlan, OutPlan, build_plans, tallies
 
 __all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk", "explain_counters"]
 
@@ -183,70 +184,80 @@ class InprocExecutor:
         self.blocks: dict[str, Block] = {n: plan.graph.nodes[n].make() for n in plan.order}
         for n, block in self.blocks.items():
             plan.bind(n, block)
-        # routes[(node, port)] -> [(dst node, dst port, delayed)]
-        self.routes: dict[tuple[str, str], list[tuple[str, str, bool]]] = defaultdict(list)
-        for e in plan.active_edges:
-            delayed = plan.graph.nodes[e.dst].cls.inputs[e.dst_port].delay
-            self.routes[(e.src, e.src_port)].append((e.dst, e.dst_port, delayed))
-        self.recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in self.blocks}
-        self.inputs = {n: sorted(plan.needed[n]) for n in plan.order}
-        self.samples: dict[str, int] = defaultdict(int)
-        self.events: dict[str, int] = defaultdict(int)
+        self.nodes, self._delay_ports = build_plans(plan, self.blocks)
+        self._delivered: list[OutPlan] = []  # outputs counted in the summary, by first delivery
 
-    def _deliver(
-        self,
-        node: str,
-        out: dict[str, Chunk],
-        now: float,
-        pending: dict[tuple[str, str], list[Chunk]],
-        later: dict[tuple[str, str], list[Chunk]],
-    ) -> None:
-        demanded = self.plan.demanded[node]
-        for port, chunk in out.items():
-            if port not in demanded:
-                continue
-            spec = self.plan.specs[(node, port)]
-            check_chunk(node, port, chunk, spec, now)
-            key = (node, port)
-            for dst, dport, delayed in self.routes.get(key, ()):
-                (later if delayed else pending)[(dst, dport)].append(chunk)
-            name = self.recorded.get(key)
-            if name is not None:
-                (self.events if spec.events else self.samples)[name] += len(chunk)
-                if self.recorder is not None:
-                    self.recorder.write(name, chunk)
-            elif spec.events:
-                self.events[f"{node}.{port}"] += len(chunk)
+    def _step(self, nd: NodePlan, now: float, flushing: bool) -> None:
+        """Step one node on its inboxes (a non-source only when something came) and deliver.
 
-    def _step(
-        self,
-        node: str,
-        now: float,
-        pending: dict[tuple[str, str], list[Chunk]],
-        later: dict[tuple[str, str], list[Chunk]],
-    ) -> None:
-        block = self.blocks[node]
-        try:
-            ins = {p: concat(pending.pop((node, p), []), block.input_specs[p]) for p in self.inputs[node]}
-            if isinstance(block, Source):
-                out = block(now, **ins)
+        Inputs reach ``step`` as they left their producer (read-only, see :meth:`_deliver`), an
+        inbox holding several chunks joined; ``step`` is called directly (looked up each time, as a
+        test may replace it), the block being bound.
+        """
+        kw = {}
+        live = nd.source
+        for port, box, empty, spec in nd.inputs:
+            if box:
+                c = box[0] if len(box) == 1 else concat(box, spec).readonly()
+                box.clear()
+                if not live and (c.t.shape[0] or c.end is not None):
+                    live = True
             else:
-                if all(len(c) == 0 and c.end is None for c in ins.values()):
-                    return
-                out = block(**ins)
+                c = empty
+            if port is not None:
+                kw[port] = c
+        if not live:
+            return
+        try:
+            out = nd.block.step(now, **kw) if nd.source else nd.block.step(**kw)
         except Exception as e:
-            raise NodeError(node, block.name, now, e) from e
-        self._deliver(node, out, now, pending, later)
+            raise NodeError(nd.name, nd.block.name, now, e) from e
+        self._deliver(nd, out, now, flushing)
+
+    def _deliver(self, nd: NodePlan, out: dict[str, Chunk], now: float, flushing: bool) -> None:
+        """Check each demanded output, make it read-only once, hand it to consumers and recorder.
+
+        A chunk leaves its block read-only (:func:`~flowtact.runtime.sealing.sealed`), so every
+        consumer can be given the same object: none can change what another receives.
+        """
+        outs = nd.outs
+        for port, chunk in out.items():
+            o = outs.get(port)
+            if o is None:
+                continue  # not demanded
+            t, d = chunk.t, chunk.data
+            shape = d.shape
+            if (
+                not shape
+                or shape[:1] != t.shape
+                or shape[1:] != o.tail
+                or (d.dtype is not o.dtype and d.dtype != o.dtype)
+            ):
+                check_chunk(nd.name, port, chunk, o.spec, now)  # the full check, which names the bug
+            if t.flags.writeable or d.flags.writeable:
+                chunk = sealed(chunk, t, d)
+            for box in o.now:
+                box.append(chunk)
+            if o.later:
+                for box in o.delayed_into if flushing else o.later:
+                    box.append(chunk)
+            if o.tally is not None:
+                if not o.seen:
+                    o.seen = True
+                    self._delivered.append(o)
+                o.count += t.shape[0]
+                if o.record is not None and self.recorder is not None:
+                    self.recorder.write(o.record, chunk)
 
     def run(self, duration_s: float | None) -> RunSummary:
         """Run until ``duration_s`` of graph time (None: until interrupted; realtime only)."""
         if duration_s is None and self.fast:
             raise ValueError("a --fast run needs a duration (--duration or the graph's duration_s)")
         clock: Clock = FastClock() if self.fast else RealtimeClock()
-        pending: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
         opened: list[Block] = []
         stopped_by = "duration"
         now, k, lag = 0.0, 0, 0.0
+        nodes, step, delay_ports = self.nodes, self._step, self._delay_ports
         try:
             for block in self.blocks.values():
                 block.open()
@@ -258,29 +269,33 @@ class InprocExecutor:
                     k += 1
                     now = k * self.tick_s if n_ticks is None or k < n_ticks else float(duration_s)  # type: ignore[arg-type]
                     lag = max(lag, clock.wait_until(now))
-                    later: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
-                    for node in self.plan.order:
-                        self._step(node, now, pending, later)
-                    for key, chunks in later.items():
-                        pending[key].extend(chunks)
+                    for nd in nodes:
+                        step(nd, now, False)
+                    for box, later in delay_ports:  # what went through a delay port arrives next tick
+                        if later:
+                            box.extend(later)
+                            later.clear()
                     if self.recorder is not None:
                         self.recorder.maybe_flush()  # a quiet spell must not hold data back
                     if self.progress is not None:
                         self.progress(now, duration_s)
             except KeyboardInterrupt:
                 stopped_by = "interrupted"
-            self._flush_all(now, pending)
+                for _, later in delay_ports:  # the interrupted tick's delayed outputs never arrive
+                    later.clear()
+            self._flush_all(now)
         finally:
             for block in reversed(opened):
                 block.close()
         counters = {n: dict(b.counters) for n, b in self.blocks.items() if b.counters}
+        samples, events = tallies(self._delivered)
         return RunSummary(
             graph=self.plan.graph.name,
             duration_s=now,
             wall_s=clock.elapsed(),
             stopped_by=stopped_by,
-            samples=dict(self.samples),
-            events=dict(self.events),
+            samples=samples,
+            events=events,
             event_units={
                 f"{n}.{p}": self.plan.specs[(n, p)].n_units or 1
                 for n in self.plan.order
@@ -295,17 +310,16 @@ class InprocExecutor:
             max_lag_s=lag,
         )
 
-    def _flush_all(self, now: float, pending: dict[tuple[str, str], list[Chunk]]) -> None:
+    def _flush_all(self, now: float) -> None:
         """End of stream: feed what is pending, then flush each node in order."""
-        for node in self.plan.order:
-            block = self.blocks[node]
-            if not isinstance(block, Source):
-                self._step(node, now, pending, pending)
+        for nd in self.nodes:
+            if not nd.source:
+                self._step(nd, now, True)
             try:
-                out = block.flush()
+                out = nd.block.flush()
             except Exception as e:
-                raise NodeError(node, block.name, now, e) from e
-            self._deliver(node, out, now, pending, pending)
+                raise NodeError(nd.name, nd.block.name, now, e) from e
+            self._deliver(nd, out, now, True)
 
 
 def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:
