@@ -86,3 +86,37 @@ class Writes(Block):
     @classmethod
     def example(cls) -> Example:
         return Example(inputs={"x": np.ones((3, 1))})
+
+
+class Relabels(Block):
+    """Hands on the float64 chunk it got as its float32 output (a bug the output check must catch)."""
+
+    inputs = {"x": Port(doc="in")}
+    outputs = {"y": Port(dtype="float32", doc="x, claimed float32")}
+
+    def step(self, x: Chunk) -> dict[str, Chunk]:
+        return {"y": x}
+
+    @classmethod
+    def example(cls) -> Example:
+        return Example(inputs={"x": np.ones((3, 1))})
+
+
+class KeepsChunk(Block):
+    """Keeps the chunk it returned (only the chunk) and writes into its data on the next step."""
+
+    inputs = {"x": Port(doc="in")}
+    outputs = {"y": Port(doc="x, then overwritten")}
+
+    def reset(self) -> None:
+        self.prev: Chunk | None = None
+
+    def step(self, x: Chunk) -> dict[str, Chunk]:
+        if self.prev is not None:
+            self.prev.data[:] = -1.0  # raises if the executor sealed the kept chunk's array
+        self.prev = Chunk(x.t, x.data.copy())
+        return {"y": self.prev}
+
+    @classmethod
+    def example(cls) -> Example:
+        return Example(inputs={"x": np.ones((3, 1))})

@@ -66,6 +66,19 @@ def test_a_block_that_rewrites_the_buffer_it_returned_keeps_running_and_consumer
     assert [float(c.data[0, 0]) for c in rec["p.y"]] == [6.0] * 5
 
 
+def test_a_block_that_keeps_the_chunk_it_returned_may_still_write_into_it():
+    rec = run(
+        """
+        nodes:
+          src: {block: "sealblocks:Fresh"}
+          k: {block: "sealblocks:KeepsChunk"}
+        edges: [src.y -> k.x]
+        record: [k.y]
+        """
+    )
+    assert len(rec["k.y"]) == 5 and all(not c.data.flags.writeable for c in rec["k.y"])
+
+
 def test_a_consumer_cannot_write_what_another_consumer_also_receives():
     with pytest.raises(NodeError, match=r"node 'w' \(writes\) failed.*read-only"):
         run(
@@ -87,3 +100,20 @@ def test_readonly_returns_a_read_only_chunk_itself_and_views_otherwise():
     assert r is not c and r.t.base is t and not (r.t.flags.writeable or r.data.flags.writeable)
     assert t.flags.writeable and d.flags.writeable  # the given arrays stay writable
     assert r.readonly() is r
+
+
+def test_a_chunk_handed_on_is_checked_again_against_a_stream_of_another_kind():
+    # the source's chunk was checked as float64 this tick; handed on as float32 it must not pass
+    with pytest.raises(
+        RuntimeError, match=r"node 'r' produced float64\[1, 1\].*on 'y'.*float32.*a bug in the block"
+    ):
+        run(
+            """
+            nodes:
+              src: {block: "sealblocks:Fresh"}
+              p: {block: "sealblocks:Probe"}
+              r: {block: "sealblocks:Relabels"}
+            edges: [src.y -> p.x, p.y -> r.x]
+            record: [r.y]
+            """
+        )

@@ -186,68 +186,89 @@ class InprocExecutor:
             plan.bind(n, block)
         self.nodes, self._delay_ports = build_plans(plan, self.blocks)
         self._delivered: list[OutPlan] = []  # outputs counted in the summary, by first delivery
+        self._admitted: dict[int, tuple[Chunk, object]] = {}  # id -> (chunk, stream kind), this tick
 
-    def _step(self, nd: NodePlan, now: float, flushing: bool) -> None:
-        """Step one node on its inboxes (a non-source only when something came) and deliver.
+    def _step(self, nd: NodePlan, now: float, at_end: bool, flush: bool = False) -> None:
+        """Step one node on its inboxes (a non-source only when something came), or ``flush`` it,
+        and deliver what it produced (``at_end``: delayed outputs go straight to their consumers).
 
-        Inputs reach ``step`` as they left their producer (read-only, see :meth:`_deliver`), an
-        inbox holding several chunks joined; ``step`` is called directly (looked up each time, as a
-        test may replace it), the block being bound.
+        Inputs reach ``step`` as they left their producer (read-only, see :meth:`_admit`), an inbox
+        holding several chunks joined. ``step`` is called directly (the block is bound), with the
+        node's own keyword dict refilled every time: every needed port is set, and Python hands the
+        callee its own copy of the keywords, so reusing the dict is safe.
         """
-        kw = {}
-        live = nd.source
-        for port, box, empty, spec in nd.inputs:
-            if box:
-                c = box[0] if len(box) == 1 else concat(box, spec).readonly()
-                box.clear()
-                if not live and (c.t.shape[0] or c.end is not None):
-                    live = True
-            else:
-                c = empty
-            if port is not None:
-                kw[port] = c
-        if not live:
-            return
         try:
-            out = nd.block.step(now, **kw) if nd.source else nd.block.step(**kw)
+            if flush:
+                out = nd.block.flush()
+            else:
+                kw = nd.kw
+                live = nd.source
+                for port, box, empty, spec in nd.inputs:
+                    if len(box) == 1:
+                        c = box.pop()
+                    elif box:
+                        c = concat(box, spec).readonly()
+                        box.clear()
+                    else:
+                        c = empty
+                    if port is not None:
+                        kw[port] = c
+                    if not live and (len(c.t) or c.end is not None):
+                        live = True
+                if not live:
+                    return
+                out = nd.call(now, **kw) if nd.source else nd.call(**kw)
         except Exception as e:
             raise NodeError(nd.name, nd.block.name, now, e) from e
-        self._deliver(nd, out, now, flushing)
+        self._deliver(nd, out, now, at_end)
 
-    def _deliver(self, nd: NodePlan, out: dict[str, Chunk], now: float, flushing: bool) -> None:
-        """Check each demanded output, make it read-only once, hand it to consumers and recorder.
-
-        A chunk leaves its block read-only (:func:`~flowtact.runtime.sealing.sealed`), so every
-        consumer can be given the same object: none can change what another receives.
-        """
-        outs = nd.outs
+    def _deliver(self, nd: NodePlan, out: dict[str, Chunk], now: float, at_end: bool) -> None:
+        """Hand each demanded output, admitted once (:meth:`_admit`), to its consumers and recorder."""
+        outs, admitted = nd.outs, self._admitted
         for port, chunk in out.items():
             o = outs.get(port)
             if o is None:
                 continue  # not demanded
-            t, d = chunk.t, chunk.data
-            shape = d.shape
-            if (
-                not shape
-                or shape[:1] != t.shape
-                or shape[1:] != o.tail
-                or (d.dtype is not o.dtype and d.dtype != o.dtype)
-            ):
-                check_chunk(nd.name, port, chunk, o.spec, now)  # the full check, which names the bug
-            if t.flags.writeable or d.flags.writeable:
-                chunk = sealed(chunk, t, d)
+            seen = admitted.get(id(chunk))
+            if seen is None or seen[1] is not o.kind:
+                chunk = self._admit(nd.name, port, chunk, o, now)
             for box in o.now:
                 box.append(chunk)
             if o.later:
-                for box in o.delayed_into if flushing else o.later:
+                for box in o.delayed_into if at_end else o.later:
                     box.append(chunk)
             if o.tally is not None:
                 if not o.seen:
                     o.seen = True
                     self._delivered.append(o)
-                o.count += t.shape[0]
+                o.count += len(chunk.t)
                 if o.record is not None and self.recorder is not None:
                     self.recorder.write(o.record, chunk)
+
+    def _admit(self, node: str, port: str, chunk: Chunk, o: OutPlan, now: float) -> Chunk:
+        """Check a produced chunk against its stream and seal it read-only, once per tick.
+
+        The check is the common case of :func:`check_chunk` (1-D ``t``, one data row per time
+        stamp, the declared sample shape and dtype); anything else goes to the full check, which
+        names the bug. Sealing (:func:`~flowtact.runtime.sealing.sealed`) lets every consumer get
+        the same object: none can change what another receives. The chunk is then noted as
+        admitted to streams of this kind (dtype, sample shape) until the tick ends, so a block that
+        hands on a chunk it received (a gate, a selector) costs no second check or seal.
+        """
+        t, d = chunk.t, chunk.data
+        shape = d.shape
+        if (
+            t.ndim != 1
+            or not shape
+            or shape[0] != len(t)
+            or shape[1:] != o.tail
+            or (d.dtype is not o.dtype and d.dtype != o.dtype)
+        ):
+            check_chunk(node, port, chunk, o.spec, now)
+        if t.flags.writeable or d.flags.writeable:
+            chunk = sealed(chunk, t, d)
+        self._admitted[id(chunk)] = (chunk, o.kind)
+        return chunk
 
     def run(self, duration_s: float | None) -> RunSummary:
         """Run until ``duration_s`` of graph time (None: until interrupted; realtime only)."""
@@ -257,7 +278,15 @@ class InprocExecutor:
         opened: list[Block] = []
         stopped_by = "duration"
         now, k, lag = 0.0, 0, 0.0
-        nodes, step, delay_ports = self.nodes, self._step, self._delay_ports
+        nodes, step, delay_ports, fast, admitted = (
+            self.nodes,
+            self._step,
+            self._delay_ports,
+            self.fast,
+            self._admitted,
+        )
+        for nd in nodes:
+            nd.call = nd.block.step  # looked up per run, so a test may replace it
         try:
             for block in self.blocks.values():
                 block.open()
@@ -268,13 +297,15 @@ class InprocExecutor:
                 while n_ticks is None or k < n_ticks:
                     k += 1
                     now = k * self.tick_s if n_ticks is None or k < n_ticks else float(duration_s)  # type: ignore[arg-type]
-                    lag = max(lag, clock.wait_until(now))
+                    if not fast:
+                        lag = max(lag, clock.wait_until(now))
                     for nd in nodes:
                         step(nd, now, False)
                     for box, later in delay_ports:  # what went through a delay port arrives next tick
                         if later:
                             box.extend(later)
                             later.clear()
+                    admitted.clear()  # chunks admitted this tick (their ids are only theirs while held)
                     if self.recorder is not None:
                         self.recorder.maybe_flush()  # a quiet spell must not hold data back
                     if self.progress is not None:
@@ -315,11 +346,8 @@ class InprocExecutor:
         for nd in self.nodes:
             if not nd.source:
                 self._step(nd, now, True)
-            try:
-                out = nd.block.flush()
-            except Exception as e:
-                raise NodeError(nd.name, nd.block.name, now, e) from e
-            self._deliver(nd, out, now, True)
+            self._step(nd, now, True, flush=True)
+        self._admitted.clear()
 
 
 def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:

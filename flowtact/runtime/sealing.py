@@ -16,19 +16,20 @@ from flowtact.chunk import Chunk
 
 __all__ = ["sealed"]
 
-_CHUNK_REFS = 5
-"""References to a produced chunk nobody but the delivery holds, as counted inside :func:`sealed`:
-the block's output dict, the tuple the caller's ``out.items()`` loop keeps, the caller's loop
-variable, the parameter and getrefcount's own argument."""
+_CHUNK_REFS = 6
+"""References to a produced chunk nobody but the delivery holds, as counted inside :func:`sealed`
+called from ``InprocExecutor._admit``: the block's output dict, the tuple the delivery's
+``out.items()`` loop keeps, that loop's variable, ``_admit``'s parameter, this function's parameter
+and getrefcount's own argument."""
 _ARRAY_REFS = 4
-"""The same for one of its arrays: the chunk's field, the caller's local, the parameter and the
+"""The same for one of its arrays: the chunk's field, ``_admit``'s local, the parameter and the
 argument. More references than these mean the block (or something else) keeps the object.
 tests/test_inproc_sealing.py pins both: fewer would seal a kept buffer, more only costs a view."""
 
 
 def sealed(chunk: Chunk, t: np.ndarray, d: np.ndarray) -> Chunk:
-    """``chunk`` with read-only arrays, for a caller iterating the block's output dict with
-    ``for port, chunk in out.items()`` and holding ``t = chunk.t``, ``d = chunk.data``.
+    """``chunk`` with read-only arrays, for the executor's ``_admit`` (which holds ``t = chunk.t``,
+    ``d = chunk.data``, called from a loop over the block's output dict).
 
     Arrays nobody else refers to are flagged in place and the chunk itself is returned; otherwise
     a chunk of read-only views (:meth:`Chunk.readonly`), so a block that keeps and rewrites its

@@ -7,6 +7,7 @@ shape, and whether it is recorded; no per-tick dicts keyed by (node, port), no s
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +28,9 @@ class OutPlan:
     dtype: np.dtype
     tail: tuple[int, ...]
     """The declared sample shape (``data.shape[1:]``)."""
+    kind: tuple[np.dtype, tuple[int, ...]]
+    """(dtype, tail), one shared object per distinct kind in the plan: what a chunk admitted to
+    one stream is known to fit (compared by identity)."""
     now: tuple[list[Chunk], ...]
     """Inboxes of the consumers that get it this tick."""
     later: tuple[list[Chunk], ...]
@@ -52,6 +56,10 @@ class NodePlan:
     inputs: tuple[tuple[str | None, list[Chunk], Chunk, StreamSpec], ...]
     """(port passed to ``step`` or None when only drained, inbox, its empty chunk, its spec)."""
     outs: dict[str, OutPlan] = field(default_factory=dict)
+    kw: dict[str, Chunk] = field(default_factory=dict)
+    """The keywords ``step`` is called with, refilled every step."""
+    call: Callable[..., dict[str, Chunk]] | None = None
+    """The block's ``step``, looked up when a run starts."""
 
 
 def build_plans(
@@ -78,16 +86,19 @@ def build_plans(
         if delayed:
             later.setdefault((e.dst, e.dst_port), [])
     recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in blocks}
+    kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
     for n, nd in nodes.items():
         for p in sorted(plan.demanded[n]):
             spec = plan.specs[(n, p)]
             dst = routes.get((n, p), [])
             name = recorded.get((n, p))
+            kind = (np.dtype(spec.dtype), tuple(spec.shape))
             nd.outs[p] = OutPlan(
                 port=p,
                 spec=spec,
-                dtype=np.dtype(spec.dtype),
-                tail=tuple(spec.shape),
+                dtype=kind[0],
+                tail=kind[1],
+                kind=kinds.setdefault(kind, kind),
                 now=tuple(boxes[(d, dp)] for d, dp, delayed in dst if not delayed),
                 later=tuple(later[(d, dp)] for d, dp, delayed in dst if delayed),
                 delayed_into=tuple(boxes[(d, dp)] for d, dp, delayed in dst if delayed),
