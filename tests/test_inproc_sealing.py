@@ -117,3 +117,28 @@ def test_a_chunk_handed_on_is_checked_again_against_a_stream_of_another_kind():
             record: [r.y]
             """
         )
+
+
+def test_step_gets_its_one_input_by_position_only_where_that_binds_the_same():
+    from flowtact.runtime.step_plan import takes_first
+
+    one = (("x", [], None, None),)
+
+    def first(x, gain=None):
+        return {"x": x, "gain": gain}
+
+    def second(gain=None, x=None):
+        return {"x": x, "gain": gain}
+
+    def kw_only(*, x):
+        return {"x": x}
+
+    def anything(*_a, **_k):
+        return {}
+
+    assert takes_first(first, one)
+    assert not takes_first(second, one)  # step(chunk) would bind it to gain
+    assert not takes_first(kw_only, one)
+    assert not takes_first(anything, one)
+    assert not takes_first(first, (("x", [], None, None), ("y", [], None, None)))
+    assert not takes_first(first, ((None, [], None, None),))  # drained, not passed

@@ -7,8 +7,10 @@ shape, and whether it is recorded; no per-tick dicts keyed by (node, port), no s
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +18,7 @@ from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.compile import Plan
 
-__all__ = ["NodePlan", "OutPlan", "build_plans", "tallies"]
+__all__ = ["NodePlan", "OutPlan", "build_plans", "takes_first", "tallies"]
 
 
 @dataclass(slots=True, eq=False)
@@ -60,6 +62,8 @@ class NodePlan:
     """The keywords ``step`` is called with, refilled every step."""
     call: Callable[..., dict[str, Chunk]] | None = None
     """The block's ``step``, looked up when a run starts."""
+    solo: bool = False
+    """``call`` takes the node's one input as its first parameter (see :func:`takes_first`)."""
 
 
 def build_plans(
@@ -116,3 +120,16 @@ def tallies(delivered: list[OutPlan]) -> tuple[dict[str, int], dict[str, int]]:
     for o in delivered:
         (events if o.events else samples)[o.tally] = o.count  # type: ignore[index]
     return samples, events
+
+
+def takes_first(step: Callable[..., Any], inputs: tuple[tuple[str | None, Any, Any, Any], ...]) -> bool:
+    """Whether ``step(chunk)`` binds exactly as ``step(port=chunk)`` does for a node whose only
+    input is ``port``: true when ``port`` is ``step``'s first parameter and may be given by
+    position (the other parameters then take their defaults either way)."""
+    if len(inputs) != 1 or inputs[0][0] is None:
+        return False
+    try:
+        first = next(iter(inspect.signature(step).parameters.values()), None)
+    except (TypeError, ValueError):  # no signature to read: keep the keyword call
+        return False
+    return first is not None and first.name == inputs[0][0] and first.kind is first.POSITIONAL_OR_KEYWORD
