@@ -201,27 +201,24 @@ class InprocExecutor:
         try:
             if flush:
                 out = nd.block.flush()
+            elif nd.solo:  # the common filter: one input, ``step``'s first parameter
+                _, box, empty, spec = nd.inputs[0]
+                c = box.pop() if len(box) == 1 else _take(box, empty, spec)
+                if not (len(c.t) or c.end is not None):
+                    return
+                out = nd.call(c)
             else:
                 kw = nd.kw
                 live = nd.source
                 for port, box, empty, spec in nd.inputs:
-                    if len(box) == 1:
-                        c = box.pop()
-                    elif box:
-                        c = concat(box, spec).readonly()
-                        box.clear()
-                    else:
-                        c = empty
+                    c = box.pop() if len(box) == 1 else _take(box, empty, spec)
                     if port is not None:
                         kw[port] = c
                     if not live and (len(c.t) or c.end is not None):
                         live = True
                 if not live:
                     return
-                if nd.source:
-                    out = nd.call(now, **kw) if kw else nd.call(now)
-                else:
-                    out = nd.call(c) if nd.solo else nd.call(**kw)
+                out = nd.call(now, **kw) if nd.source else nd.call(**kw)
         except Exception as e:
             raise NodeError(nd.name, nd.block.name, now, e) from e
         self._deliver(nd, out, now, at_end)
@@ -353,6 +350,15 @@ class InprocExecutor:
                 self._step(nd, now, True)
             self._step(nd, now, True, flush=True)
         self._admitted.clear()
+
+
+def _take(box: list[Chunk], empty: Chunk, spec: StreamSpec) -> Chunk:
+    """What an inbox holding other than one chunk gives: its empty chunk, or its chunks joined."""
+    if not box:
+        return empty
+    c = concat(box, spec).readonly()
+    box.clear()
+    return c
 
 
 def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:
