@@ -173,6 +173,7 @@ class Block:
         self.counters: dict[str, int] = {}
         self.rng: np.random.Generator = np.random.default_rng(0)
         self._bound = False
+        self._empty_inputs: dict[str, Chunk | None] = {}  # needed port -> its empty chunk, set by bind
 
     @classmethod
     def configure(cls, params: Mapping[str, Any], owner: str | None = None) -> Config:
@@ -255,6 +256,10 @@ class Block:
         self.check_inputs(inputs)
         self.input_specs = dict(inputs)
         self.needed = self.needs(frozenset(self.input_specs))
+        self._empty_inputs = {
+            p: Chunk.empty(self.input_specs[p]).readonly() if p in self.input_specs else None
+            for p in sorted(self.needed)
+        }
         self.output_specs = self.specs(self.input_specs)
         self.seed = int(seed)
         if demanded is not None:
@@ -290,11 +295,20 @@ class Block:
         return self.step(**self._inputs(chunks))
 
     def _inputs(self, chunks: Mapping[str, Chunk]) -> dict[str, Chunk]:
-        """The needed inputs as read-only chunks (an empty chunk for each that got nothing)."""
+        """The needed inputs as read-only chunks (an empty chunk for each that got nothing).
+
+        A chunk already read-only is passed as it is; the empty chunks are made once, by ``bind``
+        (zero-sample and read-only, so every step can share them).
+        """
         got = {}
-        for p in self.needed:
+        for p, empty in self._empty_inputs.items():
             c = chunks.get(p)
-            got[p] = c.readonly() if c is not None else Chunk.empty(self.input_specs[p])
+            if c is not None:
+                got[p] = c.readonly()
+            elif empty is not None:
+                got[p] = empty
+            else:  # a port ``needs`` named that is not connected: fails as it always did
+                got[p] = Chunk.empty(self.input_specs[p])
         return got
 
     def count(self, what: str, n: int = 1) -> None:

@@ -43,7 +43,10 @@ class Chunk:
         return Chunk(np.empty(0, np.float64), np.empty((0, *shape), dtype), end)
 
     def readonly(self) -> Chunk:
-        """A view of this chunk whose arrays cannot be written (what blocks receive)."""
+        """This chunk with arrays that cannot be written (what blocks receive): itself when both
+        already are, else a chunk of read-only views (the arrays given stay writable)."""
+        if not (self.t.flags.writeable or self.data.flags.writeable):
+            return self
         t, d = self.t.view(), self.data.view()
         t.flags.writeable = False
         d.flags.writeable = False

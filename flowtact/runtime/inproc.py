@@ -10,19 +10,20 @@ from __future__ import annotations
 
 import functools
 import math
-from collections import defaultdict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
-from flowtact.block import Block, Source
+from flowtact.block import Block
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
+from flowtact.runtime.sealing import sealed
 from flowtact.runtime.stats import format_factor
+from flowtact.runtime.step_plan import NodePlan, OutPlan, build_plans, takes_first, tallies
 from flowtact.runtime.warm_up import warm_up_here
 
 __all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk", "explain_counters"]
@@ -184,70 +185,111 @@ class InprocExecutor:
         self.blocks: dict[str, Block] = {n: plan.graph.nodes[n].make() for n in plan.order}
         for n, block in self.blocks.items():
             plan.bind(n, block)
-        # routes[(node, port)] -> [(dst node, dst port, delayed)]
-        self.routes: dict[tuple[str, str], list[tuple[str, str, bool]]] = defaultdict(list)
-        for e in plan.active_edges:
-            delayed = plan.graph.nodes[e.dst].cls.inputs[e.dst_port].delay
-            self.routes[(e.src, e.src_port)].append((e.dst, e.dst_port, delayed))
-        self.recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in self.blocks}
-        self.inputs = {n: sorted(plan.needed[n]) for n in plan.order}
-        self.samples: dict[str, int] = defaultdict(int)
-        self.events: dict[str, int] = defaultdict(int)
+        self.nodes, self._delay_ports = build_plans(plan, self.blocks)
+        self._delivered: list[OutPlan] = []  # outputs counted in the summary, by first delivery
+        self._admitted: dict[int, tuple[Chunk, object]] = {}  # id -> (chunk, stream kind), this tick
 
-    def _deliver(
-        self,
-        node: str,
-        out: dict[str, Chunk],
-        now: float,
-        pending: dict[tuple[str, str], list[Chunk]],
-        later: dict[tuple[str, str], list[Chunk]],
-    ) -> None:
-        demanded = self.plan.demanded[node]
-        for port, chunk in out.items():
-            if port not in demanded:
-                continue
-            spec = self.plan.specs[(node, port)]
-            check_chunk(node, port, chunk, spec, now)
-            key = (node, port)
-            for dst, dport, delayed in self.routes.get(key, ()):
-                (later if delayed else pending)[(dst, dport)].append(chunk)
-            name = self.recorded.get(key)
-            if name is not None:
-                (self.events if spec.events else self.samples)[name] += len(chunk)
-                if self.recorder is not None:
-                    self.recorder.write(name, chunk)
-            elif spec.events:
-                self.events[f"{node}.{port}"] += len(chunk)
+    def _step(self, nd: NodePlan, now: float, at_end: bool, flush: bool = False) -> None:
+        """Step one node on its inboxes (a non-source only when something came), or ``flush`` it,
+        and deliver what it produced (``at_end``: delayed outputs go straight to their consumers).
 
-    def _step(
-        self,
-        node: str,
-        now: float,
-        pending: dict[tuple[str, str], list[Chunk]],
-        later: dict[tuple[str, str], list[Chunk]],
-    ) -> None:
-        block = self.blocks[node]
+        Inputs reach ``step`` as they left their producer (read-only, see :meth:`_admit`), an inbox
+        holding several chunks joined. ``step`` is called directly (the block is bound), with the
+        node's own keyword dict refilled every time: every needed port is set, and Python hands the
+        callee its own copy of the keywords, so reusing the dict is safe. A node with one input
+        that is its ``step``'s first parameter gets it positionally (the same binding, cheaper).
+        """
         try:
-            ins = {p: concat(pending.pop((node, p), []), block.input_specs[p]) for p in self.inputs[node]}
-            if isinstance(block, Source):
-                out = block(now, **ins)
-            else:
-                if all(len(c) == 0 and c.end is None for c in ins.values()):
+            if flush:
+                out = nd.block.flush()
+            elif nd.solo:  # the common filter: one input, ``step``'s first parameter
+                _, box, empty, spec = nd.inputs[0]
+                c = box.pop() if len(box) == 1 else _take(box, empty, spec)
+                if not (len(c.t) or c.end is not None):
                     return
-                out = block(**ins)
+                out = nd.call(c)
+            else:
+                kw = nd.kw
+                live = nd.source
+                for port, box, empty, spec in nd.inputs:
+                    c = box.pop() if len(box) == 1 else _take(box, empty, spec)
+                    if port is not None:
+                        kw[port] = c
+                    if not live and (len(c.t) or c.end is not None):
+                        live = True
+                if not live:
+                    return
+                out = nd.call(now, **kw) if nd.source else nd.call(**kw)
         except Exception as e:
-            raise NodeError(node, block.name, now, e) from e
-        self._deliver(node, out, now, pending, later)
+            raise NodeError(nd.name, nd.block.name, now, e) from e
+        self._deliver(nd, out, now, at_end)
+
+    def _deliver(self, nd: NodePlan, out: dict[str, Chunk], now: float, at_end: bool) -> None:
+        """Hand each demanded output, admitted once (:meth:`_admit`), to its consumers and recorder."""
+        outs, admitted = nd.outs, self._admitted
+        for port, chunk in out.items():
+            o = outs.get(port)
+            if o is None:
+                continue  # not demanded
+            seen = admitted.get(id(chunk))
+            if seen is None or seen[1] is not o.kind:
+                chunk = self._admit(nd.name, port, chunk, o, now)
+            for box in o.now:
+                box.append(chunk)
+            if o.later:
+                for box in o.delayed_into if at_end else o.later:
+                    box.append(chunk)
+            if o.tally is not None:
+                if not o.seen:
+                    o.seen = True
+                    self._delivered.append(o)
+                o.count += len(chunk.t)
+                if o.record is not None and self.recorder is not None:
+                    self.recorder.write(o.record, chunk)
+
+    def _admit(self, node: str, port: str, chunk: Chunk, o: OutPlan, now: float) -> Chunk:
+        """Check a produced chunk against its stream and seal it read-only, once per tick.
+
+        The check is the common case of :func:`check_chunk` (1-D ``t``, one data row per time
+        stamp, the declared sample shape and dtype); anything else goes to the full check, which
+        names the bug. Sealing (:func:`~flowtact.runtime.sealing.sealed`) lets every consumer get
+        the same object: none can change what another receives. The chunk is then noted as
+        admitted to streams of this kind (dtype, sample shape) until the tick ends, so a block that
+        hands on a chunk it received (a gate, a selector) costs no second check or seal.
+        """
+        t, d = chunk.t, chunk.data
+        shape = d.shape
+        if (
+            t.ndim != 1
+            or not shape
+            or shape[0] != len(t)
+            or shape[1:] != o.tail
+            or (d.dtype is not o.dtype and d.dtype != o.dtype)
+        ):
+            check_chunk(node, port, chunk, o.spec, now)
+        if t.flags.writeable or d.flags.writeable:
+            chunk = sealed(chunk, t, d)
+        self._admitted[id(chunk)] = (chunk, o.kind)
+        return chunk
 
     def run(self, duration_s: float | None) -> RunSummary:
         """Run until ``duration_s`` of graph time (None: until interrupted; realtime only)."""
         if duration_s is None and self.fast:
             raise ValueError("a --fast run needs a duration (--duration or the graph's duration_s)")
         clock: Clock = FastClock() if self.fast else RealtimeClock()
-        pending: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
         opened: list[Block] = []
         stopped_by = "duration"
         now, k, lag = 0.0, 0, 0.0
+        nodes, step, delay_ports, fast, admitted = (
+            self.nodes,
+            self._step,
+            self._delay_ports,
+            self.fast,
+            self._admitted,
+        )
+        for nd in nodes:
+            nd.call = nd.block.step  # looked up per run, so a test may replace it
+            nd.solo = takes_first(nd.call, nd.inputs)
         try:
             for block in self.blocks.values():
                 block.open()
@@ -260,30 +302,36 @@ class InprocExecutor:
                 while n_ticks is None or k < n_ticks:
                     k += 1
                     now = k * self.tick_s if n_ticks is None or k < n_ticks else float(duration_s)  # type: ignore[arg-type]
-                    lag = max(lag, clock.wait_until(now))
-                    later: dict[tuple[str, str], list[Chunk]] = defaultdict(list)
-                    for node in self.plan.order:
-                        self._step(node, now, pending, later)
-                    for key, chunks in later.items():
-                        pending[key].extend(chunks)
+                    if not fast:
+                        lag = max(lag, clock.wait_until(now))
+                    for nd in nodes:
+                        step(nd, now, False)
+                    for box, later in delay_ports:  # what went through a delay port arrives next tick
+                        if later:
+                            box.extend(later)
+                            later.clear()
+                    admitted.clear()  # chunks admitted this tick (their ids are only theirs while held)
                     if self.recorder is not None:
                         self.recorder.maybe_flush()  # a quiet spell must not hold data back
                     if self.progress is not None:
                         self.progress(now, duration_s)
             except KeyboardInterrupt:
                 stopped_by = "interrupted"
-            self._flush_all(now, pending)
+                for _, later in delay_ports:  # the interrupted tick's delayed outputs never arrive
+                    later.clear()
+            self._flush_all(now)
         finally:
             for block in reversed(opened):
                 block.close()
         counters = {n: dict(b.counters) for n, b in self.blocks.items() if b.counters}
+        samples, events = tallies(self._delivered)
         return RunSummary(
             graph=self.plan.graph.name,
             duration_s=now,
             wall_s=clock.elapsed(),
             stopped_by=stopped_by,
-            samples=dict(self.samples),
-            events=dict(self.events),
+            samples=samples,
+            events=events,
             event_units={
                 f"{n}.{p}": self.plan.specs[(n, p)].n_units or 1
                 for n in self.plan.order
@@ -298,17 +346,22 @@ class InprocExecutor:
             max_lag_s=lag,
         )
 
-    def _flush_all(self, now: float, pending: dict[tuple[str, str], list[Chunk]]) -> None:
+    def _flush_all(self, now: float) -> None:
         """End of stream: feed what is pending, then flush each node in order."""
-        for node in self.plan.order:
-            block = self.blocks[node]
-            if not isinstance(block, Source):
-                self._step(node, now, pending, pending)
-            try:
-                out = block.flush()
-            except Exception as e:
-                raise NodeError(node, block.name, now, e) from e
-            self._deliver(node, out, now, pending, pending)
+        for nd in self.nodes:
+            if not nd.source:
+                self._step(nd, now, True)
+            self._step(nd, now, True, flush=True)
+        self._admitted.clear()
+
+
+def _take(box: list[Chunk], empty: Chunk, spec: StreamSpec) -> Chunk:
+    """What an inbox holding other than one chunk gives: its empty chunk, or its chunks joined."""
+    if not box:
+        return empty
+    c = concat(box, spec).readonly()
+    box.clear()
+    return c
 
 
 def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:

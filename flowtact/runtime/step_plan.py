@@ -1,0 +1,135 @@
+"""Per-node step plans of the in-process executor: every lookup a tick needs, resolved once.
+
+A tick then touches only lists and slots: each input port owns an inbox (a list its producer
+appends to), each demanded output knows its consumers' inboxes, its checked dtype and sample
+shape, and whether it is recorded; no per-tick dicts keyed by (node, port), no spec lookups.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from flowtact.block import Block, Source
+from flowtact.chunk import Chunk, StreamSpec
+from flowtact.compile import Plan
+
+__all__ = ["NodePlan", "OutPlan", "build_plans", "takes_first", "tallies"]
+
+
+@dataclass(slots=True, eq=False)
+class OutPlan:
+    """One demanded output: how to check what the block produced and where it goes."""
+
+    port: str
+    spec: StreamSpec
+    dtype: np.dtype
+    tail: tuple[int, ...]
+    """The declared sample shape (``data.shape[1:]``)."""
+    kind: tuple[np.dtype, tuple[int, ...]]
+    """(dtype, tail), one shared object per distinct kind in the plan: what a chunk admitted to
+    one stream is known to fit (compared by identity)."""
+    now: tuple[list[Chunk], ...]
+    """Inboxes of the consumers that get it this tick."""
+    later: tuple[list[Chunk], ...]
+    """Next-tick inboxes of consumers reading it through a delay port (moved in at the tick's end)."""
+    delayed_into: tuple[list[Chunk], ...]
+    """Those consumers' own inboxes: where it goes directly at the end of the run (the flush)."""
+    record: str | None
+    """Stream name given to the recorder, or None when not recorded."""
+    tally: str | None
+    """Name its samples (or events) are counted under in the run summary, or None."""
+    events: bool
+    count: int = 0
+    seen: bool = False
+
+
+@dataclass(slots=True, eq=False)
+class NodePlan:
+    """One active node: its block, its inputs and its demanded outputs."""
+
+    name: str
+    block: Block
+    source: bool
+    inputs: tuple[tuple[str | None, list[Chunk], Chunk, StreamSpec], ...]
+    """(port passed to ``step`` or None when only drained, inbox, its empty chunk, its spec)."""
+    outs: dict[str, OutPlan] = field(default_factory=dict)
+    kw: dict[str, Chunk] = field(default_factory=dict)
+    """The keywords ``step`` is called with, refilled every step."""
+    call: Callable[..., dict[str, Chunk]] | None = None
+    """The block's ``step``, looked up when a run starts."""
+    solo: bool = False
+    """``call`` takes the node's one input as its first parameter (see :func:`takes_first`)."""
+
+
+def build_plans(
+    plan: Plan, blocks: dict[str, Block]
+) -> tuple[list[NodePlan], list[tuple[list[Chunk], list[Chunk]]]]:
+    """Node plans in execution order, and the (inbox, next-tick inbox) pairs of delay ports."""
+    nodes: dict[str, NodePlan] = {}
+    boxes: dict[tuple[str, str], list[Chunk]] = {}
+    for n in plan.order:
+        block = blocks[n]
+        drained, passed = plan.needed[n], block.needed
+        inputs = []
+        for p in sorted(drained | passed):
+            box: list[Chunk] = []
+            boxes[(n, p)] = box
+            spec = block.input_specs[p]
+            inputs.append((p if p in passed else None, box, Chunk.empty(spec).readonly(), spec))
+        nodes[n] = NodePlan(n, block, isinstance(block, Source), tuple(inputs))
+    later: dict[tuple[str, str], list[Chunk]] = {}
+    routes: dict[tuple[str, str], list[tuple[str, str, bool]]] = {}
+    for e in plan.active_edges:
+        delayed = plan.graph.nodes[e.dst].cls.inputs[e.dst_port].delay
+        routes.setdefault((e.src, e.src_port), []).append((e.dst, e.dst_port, delayed))
+        if delayed:
+            later.setdefault((e.dst, e.dst_port), [])
+    recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in blocks}
+    kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
+    for n, nd in nodes.items():
+        for p in sorted(plan.demanded[n]):
+            spec = plan.specs[(n, p)]
+            dst = routes.get((n, p), [])
+            name = recorded.get((n, p))
+            kind = (np.dtype(spec.dtype), tuple(spec.shape))
+            nd.outs[p] = OutPlan(
+                port=p,
+                spec=spec,
+                dtype=kind[0],
+                tail=kind[1],
+                kind=kinds.setdefault(kind, kind),
+                now=tuple(boxes[(d, dp)] for d, dp, delayed in dst if not delayed),
+                later=tuple(later[(d, dp)] for d, dp, delayed in dst if delayed),
+                delayed_into=tuple(boxes[(d, dp)] for d, dp, delayed in dst if delayed),
+                record=name,
+                tally=name if name is not None else (f"{n}.{p}" if spec.events else None),
+                events=spec.events,
+            )
+    return list(nodes.values()), [(boxes[k], v) for k, v in later.items()]
+
+
+def tallies(delivered: list[OutPlan]) -> tuple[dict[str, int], dict[str, int]]:
+    """Samples and events counted per stream, in the order the streams first delivered."""
+    samples: dict[str, int] = {}
+    events: dict[str, int] = {}
+    for o in delivered:
+        (events if o.events else samples)[o.tally] = o.count  # type: ignore[index]
+    return samples, events
+
+
+def takes_first(step: Callable[..., Any], inputs: tuple[tuple[str | None, Any, Any, Any], ...]) -> bool:
+    """Whether ``step(chunk)`` binds exactly as ``step(port=chunk)`` does for a node whose only
+    input is ``port``: true when ``port`` is ``step``'s first parameter and may be given by
+    position (the other parameters then take their defaults either way)."""
+    if len(inputs) != 1 or inputs[0][0] is None:
+        return False
+    try:
+        first = next(iter(inspect.signature(step).parameters.values()), None)
+    except (TypeError, ValueError):  # no signature to read: keep the keyword call
+        return False
+    return first is not None and first.name == inputs[0][0] and first.kind is first.POSITIONAL_OR_KEYWORD
