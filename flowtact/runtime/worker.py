@@ -245,6 +245,17 @@ class Worker:
                 o.rec_buf = []
                 self._send_lossless(self.rec, o.record, 0, self.k, chunk)  # type: ignore[arg-type]
 
+    def _salvage_records(self) -> None:
+        """On an abort or a failure, hand the recorder what was coalesced but not yet sent, without
+        waiting: the recording keeps everything that came before (the supervisor drains it)."""
+        if self.rec is None:
+            return
+        for o in getattr(self, "recorded_ports", ()):
+            if o.rec_buf:
+                chunk = concat(o.rec_buf, o.spec)
+                o.rec_buf = []
+                send_message(self.rec, o.record, 0, self.k, chunk, nowait=True)  # type: ignore[arg-type]
+
     # -- set-up -----------------------------------------------------------------------------
     def serve(self) -> int:
         """Run the whole lifecycle; returns the process exit status."""
@@ -277,11 +288,14 @@ class Worker:
             self._expect("exit")
             return 0
         except Stop:
+            self._salvage_records()
             return 0
         except _NodeFailure as f:
+            self._salvage_records()
             self._send("error", **f.report)
             return 1
         except Exception as e:  # noqa: BLE001 — any framework failure is reported to the supervisor, not lost
+            self._salvage_records()
             self._send(
                 "error",
                 node=None,
