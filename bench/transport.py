@@ -555,6 +555,11 @@ def record_peers(ctx: Context, peers: dict[str, Any]) -> None:
         if "latency_us" in p.get("small_1khz", {}):
             runs = p.get("small_1khz_runs", [p["small_1khz"]])
             _lat(ctx, f"{name} ({v}), small @ 1 kHz", runs, "raw pyzmq, small @ 1 kHz, 2 hops")
+            per_msg = [cpu_per_message_us([r.get("cpu_pct")]) for r in runs]
+            if None not in per_msg and RAW_PER_MSG in ctx.figures:
+                ctx.figure(f"{name}, CPU per message at 1 kHz (its whole process tree)", per_msg,
+                           "µs CPU per message", "lower", reference=True, baseline=RAW_PER_MSG,
+                           paired=_pairs(ctx, RAW_PER_MSG, per_msg))  # fmt: skip
         for key, unit in (("small_flat", "msg/s"), ("image_flat", "MB/s")):
             ts = [r.get("throughput") for r in p.get(f"{key}_runs", [p.get(key, {})])]
             if ts and all(ts):
@@ -563,6 +568,38 @@ def record_peers(ctx: Context, peers: dict[str, Any]) -> None:
                      f"raw pyzmq, {key.replace('_flat', '')}, flat out", unit)  # fmt: skip
             elif "error" in p.get(key, {}):
                 ctx.note(f"{name} {key}: {p[key]['error'].splitlines()[0]}")
+
+
+FLOWTACT_VS_PEER = {
+    "p50 latency": ("flowtact chain.yaml, 2 hops (savgol.y at the nlif process), p50 latency", "small @ 1 kHz, p50 latency"),
+    "p99 latency": ("flowtact chain.yaml, 2 hops (savgol.y at the nlif process), p99 latency", "small @ 1 kHz, p99 latency"),
+    "CPU per message": ("flowtact chain.yaml, CPU per message at 1 kHz (3 processes + supervisor)",
+                        "CPU per message at 1 kHz (its whole process tree)"),
+    "small msg/s": ("flowtact --fast, small", "small, flat out"),
+    "frames MB/s": ("flowtact --fast, image", "image, flat out"),
+}  # fmt: skip
+"""Issue 14's "ahead of ezmsg and Timeflux on every figure": flowtact's figure and the peer's, by label."""
+
+
+def check_versus_peers(ctx: Context, peers: dict[str, Any]) -> None:
+    """One check per measured peer: flowtact's median ahead of the peer's on every figure both have.
+
+    flowtact's latency and CPU figures are chain.yaml's (five real blocks), the peers' a ``y = 2 x``
+    stage: the comparison is tilted against flowtact, and the check says so.
+    """
+    for name in peers:
+        ours_theirs = []
+        for what, (ours, suffix) in FLOWTACT_VS_PEER.items():
+            theirs = next((k for k in ctx.figures if k.startswith(f"{name}") and k.endswith(suffix)), None)
+            if ours in ctx.figures and theirs is not None:
+                f, p = ctx.figures[ours], ctx.figures[theirs]
+                ahead = f.median > p.median if f.better == "higher" else f.median < p.median
+                ours_theirs.append((what, f.median, p.median, f.unit, ahead))
+        if not ours_theirs:
+            continue
+        detail = "; ".join(f"{w} {a:.4g} vs {b:.4g} {u}" for w, a, b, u, _ in ours_theirs)
+        ctx.check(f"flowtact ahead of {name} on every figure (chain.yaml's five blocks against its y = 2 x)",
+                  all(x[-1] for x in ours_theirs), detail)  # fmt: skip
 
 
 def record_sweep(ctx: Context, sw: dict[str, Any]) -> None:
@@ -622,6 +659,7 @@ def run(ctx: Context) -> None:
         ctx.step("peers (ezmsg, Timeflux)")
         res["peers"] = bench_peers(ctx.quick)
         record_peers(ctx, res["peers"])
+        check_versus_peers(ctx, res["peers"])
     else:
         ctx.note("Timeflux and ezmsg were not measured: run with --peers (each is pip-installed into a throw-away "
                  "venv under ~/.cache/flowtact-bench/ on first use).")  # fmt: skip

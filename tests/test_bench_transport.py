@@ -302,3 +302,46 @@ def test_peers_are_recorded_with_one_sample_per_round_beside_raw_s():
     assert ctx.figures["ezmsg, small, flat out"].samples == [7000.0, 7001.0, 7002.0]
     assert ctx.figures["ezmsg, image, flat out"].samples == [500.0, 501.0, 502.0]
     assert any("timeflux: skipped" in n for n in ctx.notes)
+
+
+def test_each_peer_gets_a_cpu_per_message_figure_and_a_check_against_flowtact_on_every_figure():
+    """The peer's whole process tree at 1 kHz in µs per message; the check fails on one figure lost."""
+    from flowtact.benchmark.suite import Context
+
+    def full_round(cpu: float) -> dict:
+        r = _raw_round(cpu)
+        r["raw"]["small_1khz"]["cpu_pct"]["sink"] = cpu
+        return r
+
+    def peer(cpu: float) -> dict:
+        lat = [{"latency_us": {"p50": 500.0, "p99": 1200.0, "n": 900}, "cpu_pct": cpu} for _ in range(3)]
+        return {
+            "small_1khz_runs": lat,
+            "small_1khz": lat[0],
+            "small_flat_runs": [{"throughput": {"delivered_msg_s": 7000.0}}] * 3,
+            "image_flat_runs": [{"throughput": {"bytes_s": 4.9e8}}] * 3,
+        }
+
+    ctx = Context(transport.SUITE, quick=True)
+    transport.record_raw(ctx, [full_round(10.0)] * 3)
+    ours = {
+        "p50 latency": 366.0,
+        "p99 latency": 713.0,
+        "CPU per message": 668.0,
+        "small msg/s": 33e3,
+        "frames MB/s": 577.0,
+    }
+    for what, (label, _) in transport.FLOWTACT_VS_PEER.items():
+        ctx.figure(label, [ours[what]] * 3, "x", "higher" if "/s" in what else "lower")
+    transport.record_peers(ctx, {"ezmsg": peer(62.5), "timeflux": peer(180.0)})
+    assert ctx.figures["ezmsg, CPU per message at 1 kHz (its whole process tree)"].median == 625.0
+    assert (
+        ctx.figures["ezmsg, CPU per message at 1 kHz (its whole process tree)"].baseline
+        == transport.RAW_PER_MSG
+    )
+    transport.check_versus_peers(ctx, {"ezmsg": {}, "timeflux": {}})
+    verdict = {c.name.split(" on ")[0]: (c.passed, c.detail) for c in ctx.checks}
+    assert verdict["flowtact ahead of timeflux"][0] is True
+    passed, detail = verdict["flowtact ahead of ezmsg"]
+    assert passed is False  # 668 µs of CPU per message against ezmsg's 625
+    assert "CPU per message 668 vs 625" in detail and detail.count(" vs ") == 5
