@@ -288,7 +288,7 @@ def _grid_neuron(
     """All steps of neuron ``k`` with its state in registers (neuron-major path for small N);
     ``noisy``: add the normals ``xi[:, k]``."""
     n_t, n_in = u.shape
-    n_lags = ring.shape[0]
+    n_lags = ring.shape[1]
     want_v = v_out.shape[0] > 0
     col = 0 if n_in == 1 else k
     a, b, s, vl, g = coef[0, k], coef[1, k], coef[2, k], coef[3, k], coef[4, k]
@@ -297,8 +297,8 @@ def _grid_neuron(
     for i in range(n_t):
         drv = vl + g * u[i, col]
         if n_lags > 0:
-            drv += ring[p, k]
-            ring[p, k] = 0.0
+            drv += ring[k, p]
+            ring[k, p] = 0.0
         if want_v:
             v_out[i, k] = vk
         d = min(max(drv, -DRIVE_MAX), DRIVE_MAX)
@@ -349,7 +349,7 @@ def _grid_tile_steps(
     every array handed to an inlined helper here, and a called one costs ~20 ns per step.
     """
     n_in = u.shape[1]
-    n_lags = ring.shape[0]
+    n_lags = ring.shape[1]
     want_v = v_out.shape[0] > 0
     m = k1 - k0
     # views of this tile: every inner loop runs over 0 … m−1
@@ -366,7 +366,7 @@ def _grid_tile_steps(
             for k in range(m):
                 drv[k] = vl[k] + g[k] * u[i, k0 + k]
         if n_lags > 0:
-            rr = ring[p, k0:k1]
+            rr = ring[k0:k1, p]
             for k in range(m):
                 drv[k] += rr[k]
                 rr[k] = 0.0
@@ -410,7 +410,7 @@ def _grid_by_tile(
         nb0 = n_spk
         for k0 in range(0, n, tile):
             spk_step, spk_off, spk_idx, n_spk, pos_end = _grid_tile_steps(
-                u, ib, ie, k0, min(k0 + tile, n), coef, v, refc, n_clamp, ring, _ring_slot(pos, ib, ring.shape[0]),
+                u, ib, ie, k0, min(k0 + tile, n), coef, v, refc, n_clamp, ring, _ring_slot(pos, ib, ring.shape[1]),
                 h_table, noise_mode, rng, xi_ext, work, v_out, spk_step, spk_off, spk_idx, n_spk,
             )  # fmt: skip
         if tile < n:
@@ -425,7 +425,7 @@ def lif_grid(
     v: np.ndarray,  # (N,) membrane, in/out
     refc: np.ndarray,  # (N,) int64 refractory steps left, in/out
     n_clamp: int,  # steps held at reset after a spike
-    ring: np.ndarray,  # (L, N) post-spike ring buffer (L = 0: no history current)
+    ring: np.ndarray,  # (N, L) post-spike ring buffer (L = 0: no history current)
     pos: int,  # ring slot of the first step
     h_table: np.ndarray,  # (L + 1,) h(j·dt)
     noise_mode: int,  # 0 off, 1 internal generator, 2 external normals
@@ -455,26 +455,26 @@ def lif_grid(
 
 def _ring_add_py(ring: np.ndarray, pos: int, k: int, h_table: np.ndarray, frac: float) -> None:
     """Numpy twin of :func:`ring_add` (the same sums, element by element)."""
-    n_lags = ring.shape[0]
+    n_lags = ring.shape[1]
     lags = (pos + np.arange(1, n_lags + 1)) % n_lags
     if frac == 0.0:
-        ring[lags, k] += h_table[1:]
+        ring[k, lags] += h_table[1:]
     else:
-        ring[lags, k] += (1.0 - frac) * h_table[1:] + frac * h_table[:-1]
+        ring[k, lags] += (1.0 - frac) * h_table[1:] + frac * h_table[:-1]
 
 
 def lif_grid_py(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out):  # type: ignore[no-untyped-def]
     """Plain-numpy twin of :func:`lif_grid`: the same arguments but the scratch and tuning ones
     (``work``, ``tile``, ``cap_hint``), the same results; one step at a time."""
     n_t = u.shape[0]
-    n_lags = ring.shape[0]
+    n_lags = ring.shape[1]
     a, b, s, vl, g = coef
     steps, idx = [], []
     for i in range(n_t):
         drv = vl + g * u[i]
         if n_lags > 0:
-            drv = drv + ring[pos]
-            ring[pos] = 0.0
+            drv = drv + ring[:, pos]
+            ring[:, pos] = 0.0
         if v_out.shape[0]:
             v_out[i] = v
         d = np.clip(drv, -DRIVE_MAX, DRIVE_MAX)
@@ -566,7 +566,7 @@ def _interp_neuron(u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, no
     """All steps of neuron ``k`` with its state in registers (neuron-major path for small N);
     ``noisy``: add the normals ``xi[:, k]``."""
     n_t, n_in = u.shape
-    n_lags = ring.shape[0]
+    n_lags = ring.shape[1]
     want_v = v_out.shape[0] > 0
     col = 0 if n_in == 1 else k
     a, b, e, s, tau, sig, vl, g = (
@@ -579,10 +579,10 @@ def _interp_neuron(u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, no
         d0 = d1 if n_lags == 0 else vl + g * (u_first[col] if i == 0 else u[i - 1, col])
         d1 = vl + g * u[i, col]
         if n_lags > 0:
-            ih = ring[p, k]
+            ih = ring[k, p]
             d0 += ih
             d1 += ih
-            ring[p, k] = 0.0
+            ring[k, p] = 0.0
         d0 = min(max(d0, -DRIVE_MAX), DRIVE_MAX)
         d1c = min(max(d1, -DRIVE_MAX), DRIVE_MAX)
         xr = xi[i, k] if noisy else 0.0
@@ -637,7 +637,7 @@ def _interp_tile_steps(  # noqa: C901 — one hot loop; see the docstring
     helpers without a per-step cost.
     """
     n_in = u.shape[1]
-    n_lags = ring.shape[0]
+    n_lags = ring.shape[1]
     want_v = v_out.shape[0] > 0
     m = k1 - k0
     vt, rlt = v[k0:k1], rl[k0:k1]
@@ -657,7 +657,7 @@ def _interp_tile_steps(  # noqa: C901 — one hot loop; see the docstring
                 d0[k] = vl[k] + g[k] * ura[k]
                 d1[k] = vl[k] + g[k] * u[i, k0 + k]
         if n_lags > 0:
-            rr = ring[p, k0:k1]
+            rr = ring[k0:k1, p]
             for k in range(m):
                 d0[k] += rr[k]
                 d1[k] += rr[k]
@@ -713,7 +713,7 @@ def _interp_by_tile(
         for k0 in range(0, n, tile):
             spk_step, spk_off, spk_idx, n_spk, pos_end = _interp_tile_steps(
                 u_first, u, ib, ie, k0, min(k0 + tile, n), dt, coef, v, rl, ref_s, ring,
-                _ring_slot(pos, ib, ring.shape[0]), h_table, noise_mode, rng, xi_ext, work, v_out,
+                _ring_slot(pos, ib, ring.shape[1]), h_table, noise_mode, rng, xi_ext, work, v_out,
                 spk_step, spk_off, spk_idx, n_spk,
             )  # fmt: skip
         if tile < n:
@@ -765,7 +765,7 @@ def lif_interp_py(u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_
     crossing and restart is the kernel's own scalar code (``_interp_cross``) run as Python."""
     n_t = u.shape[0]
     n = v.shape[0]
-    n_lags = ring.shape[0]
+    n_lags = ring.shape[1]
     a, b, e, s, tau, sig, vl, g = coef
     cross = _interp_cross.py_func
     steps, offs, idx = [], [], []
@@ -774,9 +774,9 @@ def lif_interp_py(u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_
         d0 = vl + g * ua
         d1 = vl + g * u[i]
         if n_lags > 0:
-            d0 = d0 + ring[pos]
-            d1 = d1 + ring[pos]
-            ring[pos] = 0.0
+            d0 = d0 + ring[:, pos]
+            d1 = d1 + ring[:, pos]
+            ring[:, pos] = 0.0
         d0 = np.clip(d0, -DRIVE_MAX, DRIVE_MAX) * np.ones(n)
         d1 = np.clip(d1, -DRIVE_MAX, DRIVE_MAX) * np.ones(n)
         xr = np.zeros(n)

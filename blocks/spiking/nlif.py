@@ -312,10 +312,10 @@ class Nlif(Block):
         w = p["h_weights"]
         if w and any(x != 0.0 for x in w):
             self._h = history_table(w, p["h_peaks_s"], p["h_offset_s"], dt)
-            self._ring = np.zeros((len(self._h) - 1, n))
+            self._ring = np.zeros((n, len(self._h) - 1))  # (N, L): see _spike_history
         else:
             self._h = np.zeros(1)
-            self._ring = np.zeros((0, n))
+            self._ring = np.zeros((n, 0))
         self._pos = 0
         self._noise = NOISE_INTERNAL if (p["sigma"] > 0).any() else NOISE_OFF
         self._rng_state = seed_state(self.rng)

@@ -139,7 +139,7 @@ def _run_kernel(method, impl, n, u, noise, h, ref_s, chunks, tile, xi=None, seed
     dt = 1e-3
     coef = _coef(method, n, rng, dt, 0.8 if noise else 0.0)
     h_tab = history_table((-0.4, -0.2, 0.1, -0.05), (0.002, 0.03), 0.004, dt) if h else np.zeros(1)
-    ring = np.zeros((len(h_tab) - 1 if h else 0, n))
+    ring = np.zeros((n, len(h_tab) - 1 if h else 0))
     state = seed_state(np.random.default_rng(seed + 1))
     v = np.zeros(n)
     refc = np.zeros(n, np.int64)
@@ -410,10 +410,10 @@ def test_only_demanded_outputs_are_computed():
 def test_zero_history_weights_cost_nothing():
     blk = Nlif(n=4, h_weights=[0.0, 0.0, 0.0])
     run_offline(blk, x=drive(50))
-    assert blk._ring.shape[0] == 0  # noqa: SLF001 — the ring buffer's size is the cost in question
+    assert blk._ring.shape[1] == 0  # noqa: SLF001 — the ring buffer's size is the cost in question
     blk = Nlif(n=4, h_weights=[-0.1, 0.0, 0.0])
     run_offline(blk, x=drive(50))
-    assert blk._ring.shape[0] > 0  # noqa: SLF001 — the ring buffer's size is the cost in question
+    assert blk._ring.shape[1] > 0  # noqa: SLF001 — the ring buffer's size is the cost in question
 
 
 def test_negative_history_current_adapts_the_rate():

@@ -171,7 +171,7 @@ def _kernel_membrane(integrator, dt, xi, sigma, tau=TAU, v_leak=0.0, u=0.0):
     """Threshold-free membrane from the kernel with the normals ``xi`` passed in."""
     n_t, n = xi.shape
     tau_a, sig = np.full(n, tau), np.full(n, sigma)
-    ring, h = np.zeros((0, n)), np.zeros(1)
+    ring, h = np.zeros((n, 0)), np.zeros(1)
     v = np.zeros(n)
     v_out = np.empty((n_t, n))
     if integrator == "exp_interp":

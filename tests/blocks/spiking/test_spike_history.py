@@ -67,7 +67,7 @@ def test_streaming_current_equals_convolution_whatever_the_chunking():
     h = history_table([-0.5, -0.3, 0.2, -0.1, -0.05], PEAKS, B, 1e-3)
     ref = history_reference(spikes, h)
     for sizes in ([3000], [1], [7, 500, 1, 64]):
-        ring, pos, start, parts = np.zeros((len(h) - 1, 6)), 0, 0, []
+        ring, pos, start, parts = np.zeros((6, len(h) - 1)), 0, 0, []
         i = 0
         while start < 3000:
             k = min(sizes[i % len(sizes)], 3000 - start)
@@ -76,9 +76,9 @@ def test_streaming_current_equals_convolution_whatever_the_chunking():
             start += k
             i += 1
         np.testing.assert_allclose(np.concatenate(parts), ref, rtol=0, atol=1e-12)
-    out_py, _ = history_stream_py(spikes, h, np.zeros((len(h) - 1, 6)), 0)
+    out_py, _ = history_stream_py(spikes, h, np.zeros((6, len(h) - 1)), 0)
     np.testing.assert_allclose(out_py, ref, rtol=0, atol=1e-12)
-    out_nb, _ = history_stream(spikes, h, np.zeros((len(h) - 1, 6)), 0)
+    out_nb, _ = history_stream(spikes, h, np.zeros((6, len(h) - 1)), 0)
     np.testing.assert_array_equal(out_nb, out_py)
 
 
