@@ -62,10 +62,11 @@ class BenchSource(Source):
 
     def step(self, now: float) -> dict[str, Chunk]:
         rate = self.config.rate_hz
-        k = self.i + np.arange(self.due(now, rate) - self.i)
-        self.i += len(k)
+        end = self.due(now, rate)
+        k = np.arange(self.i, end, dtype=np.float64)  # sample indices, exact in float64
+        self.i = max(self.i, end)
         if self.frame is None:
-            data = np.repeat(k.astype(np.float64)[:, None], 4, axis=1)
+            data = np.repeat(k[:, None], 4, axis=1)
         else:
             data = np.broadcast_to(self.frame, (len(k), *self.frame.shape))
         return {"y": Chunk(k / rate, data)}

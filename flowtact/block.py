@@ -7,6 +7,7 @@ graph, or in a worker process, unchanged. The runtime owns the loop and the cloc
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -362,7 +363,7 @@ class Source(Block):
     def due(now: float, rate_hz: float) -> int:
         """Number of samples with ``i / rate_hz < now`` (robust to float rounding of ``now``)."""
         x = now * rate_hz
-        n = int(np.ceil(x - 1e-9 * max(1.0, abs(x))))
+        n = math.ceil(x - 1e-9 * max(1.0, abs(x)))  # math, not numpy: 0.3 µs against 0.9 per tick
         return max(n, 0)
 
 
