@@ -136,3 +136,23 @@ def test_blocks_not_known_to_be_chunking_invariant_are_not_merged(tmp_path):
         "edges:\n  - src.y -> f.x\nrecord: [f.y]\n"
     )
     assert ticks_mergeable(load_plan(registered))
+
+
+def test_a_merged_step_takes_about_a_mebibyte_of_each_input():
+    """Frames merge a dozen at a time, small samples by the tens of thousands (bytes per tick measured)."""
+    from flowtact.chunk import StreamSpec
+    from flowtact.runtime.placement import spec_to_wire
+    from flowtact.runtime.worker import MERGE_MAX_BYTES, _Inbound
+
+    def inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:
+        d = {"id": 0, "stream": "s.y", "spec": spec_to_wire(spec), "policy": "block", "queue": 1000,
+             "dsts": [], "same_host": True}  # fmt: skip
+        ib = _Inbound(d)
+        ib.messages, ib.samples = messages, samples
+        return ib
+
+    frames = inbound(StreamSpec(dtype="uint8", shape=(240, 320)), 10, 10)
+    assert frames.merge_cap() == MERGE_MAX_BYTES // (240 * 320) == 13
+    small = inbound(StreamSpec(shape=(4,)), 100, 1000)  # 10 samples of 32 bytes per tick
+    assert small.merge_cap() == MERGE_MAX_BYTES // 320
+    assert inbound(StreamSpec(dtype="uint8", shape=(2000, 2000)), 1, 1).merge_cap() == 1  # 4 MB: never 0
