@@ -222,6 +222,13 @@ class AunpSensor(Source):
         noise_rng, temp_rng = self.rng.spawn(2)
         self.noise_rng = noise_rng
         self.temp_phase = float(temp_rng.uniform(0.0, 2.0 * np.pi))
+        # forces(): the time scale of each raised cosine, and the touch's constants
+        c = self.config
+        third, fourth = (c.shear_rise_s, c.shear_release_s) if c.scenario == "touch" else (c.drag_s, c.slip_s)
+        self._scales = np.array([[c.ramp_s], [c.unload_s], [third], [fourth]])
+        self._q_off = float(raised_cosine(np.array((c.ramp_s + c.hold_s) / c.shear_rise_s)))
+        theta = np.array([math.radians(c.shear_angle_deg)])
+        self._cos_theta, self._sin_theta = float(np.cos(theta)[0]), float(np.sin(theta)[0])
 
     # -- force profiles (pure functions of time) ------------------------------------------------
     def forces(self, t: np.ndarray) -> np.ndarray:
@@ -232,43 +239,36 @@ class AunpSensor(Source):
         if c.scenario == "rest" or len(t) == 0:
             return f
         k = np.floor((t - c.onset_s) / c.period_s)
-        k = np.clip(k, 0.0, (c.repeat - 1) if c.repeat else np.inf)
+        k = k.clip(0.0, (c.repeat - 1) if c.repeat else np.inf)
         u = t - c.onset_s - k * c.period_s
         d_fz = c.stiffness_n_per_mm * c.indentation_um * 1e-3
-        theta = math.radians(c.shear_angle_deg)
+        # the raised cosines of a trial in one call on a (4, n) array: elementwise, so each value is
+        # what a call of its own would give
         if c.scenario == "touch":
             u_off = c.ramp_s + c.hold_s
-            s = raised_cosine(u / c.ramp_s) - raised_cosine((u - u_off) / c.unload_s)
-            q_off = float(raised_cosine(np.array(u_off / c.shear_rise_s)))
-            q = np.where(
-                u < u_off,
-                raised_cosine(u / c.shear_rise_s),
-                q_off * (1.0 - raised_cosine((u - u_off) / c.shear_release_s)),
-            )
-            fz = c.baseline_n + d_fz * s
-            m = c.shear_ratio * d_fz * q
-            phi = np.full_like(u, theta)
+            v = u - u_off
+            rc = raised_cosine(np.array((u, v, u, v)) / self._scales)
+            fz = c.baseline_n + d_fz * (rc[0] - rc[1])
+            m = c.shear_ratio * d_fz * np.where(u < u_off, rc[2], self._q_off * (1.0 - rc[3]))
+            f[:, 0] = m * self._cos_theta
+            f[:, 1] = m * self._sin_theta
         else:
             u1 = c.ramp_s
             u2 = u1 + c.drag_s
             u3 = u2 + c.slip_s
             u_lift = u3 + c.hold_s
-            s = raised_cosine(u / c.ramp_s) - raised_cosine((u - u_lift) / c.unload_s)
-            fz = c.baseline_n + d_fz * s
+            rc = raised_cosine(np.array((u, u - u_lift, u - u1, u - u2)) / self._scales)
+            fz = c.baseline_n + d_fz * (rc[0] - rc[1])
             fz_top = c.baseline_n + d_fz
             mu_s, mu_k = c.friction_mu, c.friction_mu * c.kinetic_ratio
             m = np.where(
                 u < u2,
-                mu_s * fz_top * raised_cosine((u - u1) / c.drag_s),
-                np.where(
-                    u < u3,
-                    fz_top * (mu_s - (mu_s - mu_k) * raised_cosine((u - u2) / c.slip_s)),
-                    mu_k * fz_top * (1.0 - raised_cosine((u - u_lift) / c.unload_s)),
-                ),
+                mu_s * fz_top * rc[2],
+                np.where(u < u3, fz_top * (mu_s - (mu_s - mu_k) * rc[3]), mu_k * fz_top * (1.0 - rc[1])),
             )
-            phi = theta + math.radians(c.slip_turn_deg) * raised_cosine((u - u2) / c.slip_s)
-        f[:, 0] = m * np.cos(phi)
-        f[:, 1] = m * np.sin(phi)
+            phi = math.radians(c.shear_angle_deg) + math.radians(c.slip_turn_deg) * rc[3]
+            f[:, 0] = m * np.cos(phi)
+            f[:, 1] = m * np.sin(phi)
         f[:, 2] = fz
         return f
 
@@ -282,15 +282,9 @@ class AunpSensor(Source):
     def gauges(self, f: np.ndarray) -> np.ndarray:
         """Noise-free ΔR/R (n, 4) of the four gauges under force ``f`` (inverse of eq. 2)."""
         xs, ys, zs = self.config.sensitivity_per_n
-        r = np.empty((len(f), 4))
-        common = f[:, 2] * (zs / 4.0)
-        sx = f[:, 0] * (xs / 2.0)
-        sy = f[:, 1] * (ys / 2.0)
-        r[:, 0] = common - sx
-        r[:, 1] = common + sy
-        r[:, 2] = common + sx
-        r[:, 3] = common - sy
-        return r
+        # r1..r4 = common − sx, common + sy, common + sx, common − sy (a − b is a + (−b), bit for bit)
+        shear = f[:, [0, 1, 0, 1]] * np.array([-(xs / 2.0), ys / 2.0, xs / 2.0, -(ys / 2.0)])
+        return (f[:, 2] * (zs / 4.0))[:, None] + shear
 
     def step(self, now: float) -> dict[str, Chunk]:
         c = self.config

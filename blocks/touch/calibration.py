@@ -101,7 +101,8 @@ class GaugeForce(Block):
     Notes
     -----
     Reduced mode is computed as ``general`` with ``aunp.reduced_matrix`` (bit-identical). The
-    product is written out element by element (no BLAS), so chunking never changes a bit.
+    product is elementwise products summed over the gauges in a fixed order (no BLAS), so chunking
+    never changes a bit.
     ``tare_samples: k`` (off by default) subtracts the mean force of the first k samples — for a
     sensor that starts unloaded but with a gauge offset. Those k samples are held back until the
     offset is known, then emitted tared (a one-off start-up latency of k samples; no sample is
@@ -167,14 +168,11 @@ class GaugeForce(Block):
         r = data["r"]
         if "ref" in data:
             r = r - data["ref"][:, None]
-        a = self._a
-        f = np.empty((len(r), 3))
         with np.errstate(over="ignore", invalid="ignore"):  # counted below, never a warning or a crash
-            for i in range(3):
-                acc = a[i, 0] * r[:, 0]
-                for j in range(1, 4):
-                    acc = acc + a[i, j] * r[:, j]
-                f[:, i] = acc
+            prod = r[:, None, :] * self._a  # (n, 3, 4): every a[i, j]·r[:, j] in one call
+            f = prod[:, :, 0] + prod[:, :, 1]  # then summed over j in order, as written out
+            f += prod[:, :, 2]
+            f += prod[:, :, 3]
         if len(f) and not np.isfinite(f).all():
             self.count("overflow", int((~np.isfinite(f)).any(axis=1).sum()))
         return f
