@@ -75,6 +75,10 @@ LATENCY_WARMUP_S = 1.0
 """Latencies count for data that left its source this long after the start: loading JIT-compiled
 kernels and first allocations are start-up, not transport."""
 POLL_MS = 100
+"""Longest wait on a socket before the worker hears its supervisor (control, heartbeat)."""
+_EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
+"""As plain ints: ``getsockopt(_EVENTS) & _POLLIN`` is a C call and an int ``&``, where
+``get(zmq.EVENTS) & zmq.POLLIN`` builds two enum members (~1 µs more per check)."""
 LATEST_DRAIN_MS = 1
 """A ``latest`` input whose receive queue was full is drained again after waiting this long for
 what ZeroMQ still moves in from the kernel: what reaches the consumer is the newest, not the oldest."""
@@ -113,7 +117,6 @@ class _Inbound:
         self.dsts: list[tuple[str, str, bool]] = [tuple(x) for x in d["dsts"]]  # type: ignore[misc]
         self.same_host: bool = d["same_host"]
         self.sock: zmq.Socket | None = None
-        self.poller: zmq.Poller | None = None
         self.targets: list[tuple[deque[Any], bool]] = []  # input queues it feeds (queue, delayed)
         self.upto = 0  # highest tick received
         self.ended = False
@@ -233,7 +236,7 @@ class Worker:
 
     def _service(self) -> None:
         """Handle pending control messages (pings, stop, abort) without blocking; send statistics."""
-        while self.ctl.get(zmq.EVENTS) & zmq.POLLIN:
+        while self.ctl.getsockopt(_EVENTS) & _POLLIN:
             self._control(msgpack.unpackb(self.ctl.recv(), strict_map_key=False))
             self.last_ping = time.monotonic()
         self._check_orphan()
@@ -424,8 +427,7 @@ class Worker:
         for ib in self.inbound.values():
             endpoint = bind[ib.id]
             ib.sock = self._socket(zmq.PULL, endpoint, ib.queue)
-            ib.poller = zmq.Poller()
-            ib.poller.register(ib.sock, zmq.POLLIN)
+            ib.sock.setsockopt(zmq.RCVTIMEO, POLL_MS)  # _fetch's blocking recv hears control meanwhile
             if endpoint.startswith("tcp://") and endpoint.endswith(":0"):
                 ib.sock.bind_to_random_port(endpoint.rsplit(":", 1)[0])
             else:
@@ -548,7 +550,7 @@ class Worker:
         """Accept what block stream ``ib`` holds (at most its queue bound), without waiting."""
         sock = ib.sock
         budget = ib.queue
-        while budget and not ib.ended and sock.get(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[union-attr]
+        while budget and not ib.ended and sock.getsockopt(_EVENTS) & _POLLIN:  # type: ignore[union-attr]
             m = recv_message(sock, zmq.NOBLOCK)  # type: ignore[arg-type]
             self._accept(ib, m, m.tick)
             budget -= 1
@@ -688,9 +690,10 @@ class Worker:
     def _fetch(self, ib: _Inbound, tick: int) -> None:
         """Receive what stream ``ib`` holds for ticks up to ``tick`` (block) or what is there (latest).
 
-        A block stream is read without exceptions: the socket's events say whether a message is
-        queued; once one is, everything queued (up to the stream's bound) is taken in the same
-        wake-up, so the next ticks find their input already here.
+        A block stream waits as raw pyzmq does, in a blocking ``recv`` (its socket's receive
+        timeout is :data:`POLL_MS`, so ``zmq.Again`` is raised only by a stream idle that long, to
+        hear the supervisor); then everything queued (up to the stream's bound) is taken in the
+        same wake-up, so the next ticks find their input already here.
         """
         if ib.ended:
             return
@@ -699,10 +702,12 @@ class Worker:
             return
         sock = ib.sock
         while ib.upto < tick and not ib.ended:
-            if not sock.get(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[union-attr]
-                if not ib.poller.poll(POLL_MS):  # type: ignore[union-attr]
-                    self._service()
+            try:
+                m = recv_message(sock)  # type: ignore[arg-type]
+            except zmq.Again:
+                self._service()
                 continue
+            self._accept(ib, m, m.tick)
             self._drain(ib)
 
     def _fetch_latest(self, ib: _Inbound) -> None:
@@ -717,7 +722,7 @@ class Worker:
         sock = ib.sock
         while True:
             batch = 0
-            while sock.get(zmq.EVENTS) & zmq.POLLIN:  # type: ignore[union-attr]
+            while sock.getsockopt(_EVENTS) & _POLLIN:  # type: ignore[union-attr]
                 got.append(recv_message(sock, zmq.NOBLOCK))  # type: ignore[arg-type]
                 batch += 1
             received += batch
