@@ -156,3 +156,52 @@ def test_a_merged_step_takes_about_a_mebibyte_of_each_input():
     small = inbound(StreamSpec(shape=(4,)), 100, 1000)  # 10 samples of 32 bytes per tick
     assert small.merge_cap() == MERGE_MAX_BYTES // 320
     assert inbound(StreamSpec(dtype="uint8", shape=(2000, 2000)), 1, 1).merge_cap() == 1  # 4 MB: never 0
+
+
+class _Merging:
+    """The state ``Worker._merge_ahead`` reads, with one input whose queue grows as scripted."""
+
+    def __init__(self, arrivals: list[int], ended: bool = False) -> None:
+        from flowtact.chunk import StreamSpec
+        from flowtact.runtime.placement import spec_to_wire
+        from flowtact.runtime.worker import FOREVER, _Inbound
+
+        d = {"id": 0, "stream": "s.y", "spec": spec_to_wire(StreamSpec(shape=(4,))), "policy": "block",
+             "queue": 1000, "dsts": [], "same_host": True}  # fmt: skip
+        self.ib = _Inbound(d)
+        self.ib.messages = self.ib.samples = 1
+        self.block_inputs = [self.ib]
+        self.k, self.stop_k, self.n_ticks = 10, FOREVER, None
+        self.arrivals, self.ended = arrivals, ended
+
+    def _drain(self, ib) -> None:  # what each drain finds queued: ticks up to the next arrival
+        if self.arrivals:
+            ib.upto = self.arrivals.pop(0)
+        ib.ended = ib.ended or (self.ended and not self.arrivals)
+
+    def _consumed(self, ib) -> bool:
+        return ib.ended and ib.upto <= self.k
+
+    def merge(self) -> None:
+        from flowtact.runtime.worker import Worker
+
+        Worker._merge_ahead(self)  # type: ignore[arg-type]  # noqa: SLF001 — the method under test
+
+
+def test_a_fast_consumer_that_keeps_pace_waits_for_a_batch(monkeypatch):
+    """--fast: with fewer than COALESCE_TICKS ticks queued the worker waits once, then takes all
+    that came (one step, one message downstream); with a batch queued, or its producer ended, it
+    steps at once."""
+    from flowtact.runtime import worker
+
+    waits: list[float] = []
+    monkeypatch.setattr(worker.time, "sleep", waits.append)
+    few = _Merging([13, 60])  # 3 ticks queued, then 50 after the wait
+    few.merge()
+    assert waits == [worker.COALESCE_S] and few.k == 60
+    many = _Merging([10 + worker.COALESCE_TICKS])
+    many.merge()
+    assert waits == [worker.COALESCE_S] and many.k == 10 + worker.COALESCE_TICKS
+    last = _Merging([12], ended=True)  # the producer has ended: nothing more is coming
+    last.merge()
+    assert waits == [worker.COALESCE_S] and last.k == 12
