@@ -182,6 +182,8 @@ class GaugeForce(Block):
         if len(t):
             t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
         f = self._force(data)
+        if not self.config.tare_samples:
+            return {"f": Chunk(t, f)}  # no offset: f − 0 is f, bit for bit
         if self._offset is None:
             return {"f": self._tare(t, f)}
         return {"f": Chunk(t, f - self._offset)}
