@@ -590,7 +590,7 @@ def check_versus_peers(ctx: Context, peers: dict[str, Any]) -> None:
     for name in peers:
         ours_theirs = []
         for what, (ours, suffix) in FLOWTACT_VS_PEER.items():
-            theirs = next((k for k in ctx.figures if k.startswith(f"{name}") and k.endswith(suffix)), None)
+            theirs = next((k for k in ctx.figures if k.startswith(name) and k.endswith(suffix)), None)
             if ours in ctx.figures and theirs is not None:
                 f, p = ctx.figures[ours], ctx.figures[theirs]
                 ahead = f.median > p.median if f.better == "higher" else f.median < p.median

@@ -40,20 +40,22 @@ class Aligner:
         self._d = {p: np.empty((0, *specs[p].shape), np.float64) for p in self.ports}
 
     def push(self, chunks: Mapping[str, Chunk | None]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Add what arrived; return (t, {port: data}) of the newly aligned samples (maybe none)."""
-        even = self._even(chunks)
-        if even is not None:
-            return even
+        """Add what arrived; return (t, {port: data}) of the newly aligned samples (maybe none).
+
+        Chunks that came together with nothing held back (the common case) are handed on as they
+        are: no joining and no copies.
+        """
         ts, ds = {}, {}
         for p in self.ports:
             c = chunks.get(p)
-            if c is not None and len(c) and len(self._t[p]):
-                ts[p] = np.concatenate([self._t[p], c.t])
+            held = self._t[p]
+            if c is None or not len(c.t):
+                ts[p], ds[p] = held, self._d[p]
+            elif len(held):
+                ts[p] = np.concatenate([held, c.t])
                 ds[p] = np.concatenate([self._d[p], c.data])
-            elif c is not None and len(c):
-                ts[p], ds[p] = c.t, c.data
             else:
-                ts[p], ds[p] = self._t[p], self._d[p]
+                ts[p], ds[p] = c.t, c.data
         k = min(len(v) for v in ts.values())
         ref = self.ports[0]
         t = ts[ref][:k]
@@ -67,28 +69,10 @@ class Aligner:
                 )
         out = {p: ds[p][:k] for p in self.ports}
         for p in self.ports:  # keep only the unpaired rest, as owned copies
-            self._t[p] = ts[p][k:].copy()
-            self._d[p] = ds[p][k:].copy()
+            if len(ts[p]) > k or len(self._t[p]):
+                self._t[p] = ts[p][k:].copy()
+                self._d[p] = ds[p][k:].copy()
         return t, out
-
-    def _even(self, chunks: Mapping[str, Chunk | None]) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
-        """The common case, paired as it came: nothing held back and every port brought the same
-        number of samples with matching times (what :meth:`push` would return, without copies);
-        None for anything else."""
-        ref = chunks.get(self.ports[0])
-        if ref is None:
-            return None
-        n = len(ref.t)
-        for p in self.ports:
-            c = chunks.get(p)
-            if c is None or len(c.t) != n or len(self._t[p]):
-                return None
-        if n == 0:
-            return None
-        for p in self.ports[1:]:
-            if np.abs(chunks[p].t - ref.t).max() > self.tol_s:  # type: ignore[union-attr]
-                return None  # push names the misalignment
-        return ref.t, {p: chunks[p].data for p in self.ports}  # type: ignore[union-attr]
 
     def pending(self) -> dict[str, int]:
         """Samples held back per port (waiting for their partners)."""

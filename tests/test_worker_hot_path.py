@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 from runs import flowtact
 
+from flowtact.chunk import StreamSpec
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.runtime.placement import spec_to_wire
+from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound
 from flowtact.runtime.worker_plan import ticks_mergeable
 
 pytestmark = pytest.mark.slow
@@ -138,38 +141,29 @@ def test_blocks_not_known_to_be_chunking_invariant_are_not_merged(tmp_path):
     assert ticks_mergeable(load_plan(registered))
 
 
+def _inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:
+    """A block stream as a worker holds it, having received ``messages`` carrying ``samples``."""
+    d = {"id": 0, "stream": "s.y", "spec": spec_to_wire(spec), "policy": "block", "queue": 1000,
+         "dsts": [], "same_host": True}  # fmt: skip
+    ib = _Inbound(d)
+    ib.messages, ib.samples = messages, samples
+    return ib
+
+
 def test_a_merged_step_takes_about_a_mebibyte_of_each_input():
     """Frames merge a dozen at a time, small samples by the tens of thousands (bytes per tick measured)."""
-    from flowtact.chunk import StreamSpec
-    from flowtact.runtime.placement import spec_to_wire
-    from flowtact.runtime.worker import MERGE_MAX_BYTES, _Inbound
-
-    def inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:
-        d = {"id": 0, "stream": "s.y", "spec": spec_to_wire(spec), "policy": "block", "queue": 1000,
-             "dsts": [], "same_host": True}  # fmt: skip
-        ib = _Inbound(d)
-        ib.messages, ib.samples = messages, samples
-        return ib
-
-    frames = inbound(StreamSpec(dtype="uint8", shape=(240, 320)), 10, 10)
+    frames = _inbound(StreamSpec(dtype="uint8", shape=(240, 320)), 10, 10)
     assert frames.merge_cap() == MERGE_MAX_BYTES // (240 * 320) == 13
-    small = inbound(StreamSpec(shape=(4,)), 100, 1000)  # 10 samples of 32 bytes per tick
+    small = _inbound(StreamSpec(shape=(4,)), 100, 1000)  # 10 samples of 32 bytes per tick
     assert small.merge_cap() == MERGE_MAX_BYTES // 320
-    assert inbound(StreamSpec(dtype="uint8", shape=(2000, 2000)), 1, 1).merge_cap() == 1  # 4 MB: never 0
+    assert _inbound(StreamSpec(dtype="uint8", shape=(2000, 2000)), 1, 1).merge_cap() == 1  # 4 MB: never 0
 
 
 class _Merging:
     """The state ``Worker._merge_ahead`` reads, with one input whose queue grows as scripted."""
 
     def __init__(self, arrivals: list[int], ended: bool = False) -> None:
-        from flowtact.chunk import StreamSpec
-        from flowtact.runtime.placement import spec_to_wire
-        from flowtact.runtime.worker import FOREVER, _Inbound
-
-        d = {"id": 0, "stream": "s.y", "spec": spec_to_wire(StreamSpec(shape=(4,))), "policy": "block",
-             "queue": 1000, "dsts": [], "same_host": True}  # fmt: skip
-        self.ib = _Inbound(d)
-        self.ib.messages = self.ib.samples = 1
+        self.ib = _inbound(StreamSpec(shape=(4,)), 1, 1)
         self.block_inputs = [self.ib]
         self.k, self.stop_k, self.n_ticks = 10, FOREVER, None
         self.arrivals, self.ended = arrivals, ended
@@ -179,13 +173,9 @@ class _Merging:
             ib.upto = self.arrivals.pop(0)
         ib.ended = ib.ended or (self.ended and not self.arrivals)
 
-    def _consumed(self, ib) -> bool:
-        return ib.ended and ib.upto <= self.k
-
-    def merge(self) -> None:
-        from flowtact.runtime.worker import Worker
-
-        Worker._merge_ahead(self)  # type: ignore[arg-type]  # noqa: SLF001 — the method under test
+    # the worker's own methods, on this state
+    _consumed = Worker._consumed  # noqa: SLF001
+    merge = Worker._merge_ahead  # noqa: SLF001 — the method under test
 
 
 def test_a_fast_consumer_that_keeps_pace_waits_for_a_batch(monkeypatch):
