@@ -14,6 +14,7 @@ import numpy as np
 from flowtact.block import BadDataPolicy, Block, screen_nonfinite
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
+from flowtact.finite import all_finite
 
 __all__ = ["Aligner", "MisalignedError", "screen_aligned"]
 
@@ -91,7 +92,7 @@ def screen_aligned(
     ``raise`` names the first bad port; ``hold`` repeats each port's last good sample (``last``
     holds them and is updated). Counts ``nonfinite_<policy>`` like :func:`screen_nonfinite`.
     """
-    if all(np.isfinite(d).all() for d in data.values()):  # the cheap test of screen_nonfinite
+    if all(all_finite(d) for d in data.values()):  # the cheap test of screen_nonfinite
         if policy == "hold" and len(t):
             last.update({p: d[-1].copy() for p, d in data.items()})
         return t, data

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numba import njit
 
 from flowtact.block import (
     BadDataConfig,
@@ -32,6 +31,7 @@ from flowtact.blocks.spiking._lif_kernels import (
 )
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.finite import all_finite
 from flowtact.limits import NOMINAL_RATE_HZ
 from flowtact.params import param
 
@@ -159,14 +159,6 @@ def _row_buffer(n_rows: int, n: int) -> np.ndarray:
     raw = np.zeros(n_rows * stride * 8 + 4096, np.uint8)
     base = -raw.ctypes.data % 4096
     return raw[base : base + n_rows * stride * 8].view(np.float64).reshape(n_rows, stride)
-
-
-@njit(cache=True)
-def _all_finite(a: np.ndarray) -> bool:
-    for x in a.ravel():  # noqa: SIM110 (a loop numba compiles; stops at the first bad value)
-        if not math.isfinite(x):
-            return False
-    return True
 
 
 class Nlif(Block):
@@ -347,7 +339,7 @@ class Nlif(Block):
         u = x.data
         if u.dtype is not _F64 or not u.flags.c_contiguous:
             u = np.ascontiguousarray(u, dtype=np.float64)
-        if not _all_finite(u):
+        if not all_finite(u):
             x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
             if len(x) == 0:
                 return self._empty()

@@ -7,7 +7,6 @@ graph's force reconstruction and afferent models can be checked against the trut
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
@@ -15,12 +14,14 @@ from typing import Literal
 import numpy as np
 
 from flowtact.block import Example, Port, Source
-from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.limits import MAX_TICK_S
 from flowtact.params import Config, param
 
 from .aunp import SENSITIVITY_PER_N
+from .aunp_samples import SCENARIOS, sensor_samples, trial_constants
+
+_NO_NOISE = np.empty((0, 5))
 
 __all__ = ["AunpSensor", "AunpSensorConfig"]
 
@@ -222,94 +223,19 @@ class AunpSensor(Source):
         noise_rng, temp_rng = self.rng.spawn(2)
         self.noise_rng = noise_rng
         self.temp_phase = float(temp_rng.uniform(0.0, 2.0 * np.pi))
-        # forces(): the time scale of each raised cosine, and the touch's constants
-        c = self.config
-        third, fourth = (c.shear_rise_s, c.shear_release_s) if c.scenario == "touch" else (c.drag_s, c.slip_s)
-        self._scales = np.array([[c.ramp_s], [c.unload_s], [third], [fourth]])
-        self._q_off = float(raised_cosine(np.array((c.ramp_s + c.hold_s) / c.shear_rise_s)))
-        theta = np.array([math.radians(c.shear_angle_deg)])
-        self._cos_theta, self._sin_theta = float(np.cos(theta)[0]), float(np.sin(theta)[0])
-
-    # -- force profiles (pure functions of time) ------------------------------------------------
-    def forces(self, t: np.ndarray) -> np.ndarray:
-        """True [Fx, Fy, Fz] (n, 3) in N at times ``t`` (pure: no state)."""
-        c = self.config
-        f = np.zeros((len(t), 3))
-        f[:, 2] = c.baseline_n
-        if c.scenario == "rest" or len(t) == 0:
-            return f
-        k = np.floor((t - c.onset_s) / c.period_s)
-        k = k.clip(0.0, (c.repeat - 1) if c.repeat else np.inf)
-        u = t - c.onset_s - k * c.period_s
-        d_fz = c.stiffness_n_per_mm * c.indentation_um * 1e-3
-        # the raised cosines of a trial in one call on a (4, n) array: elementwise, so each value is
-        # what a call of its own would give
-        if c.scenario == "touch":
-            u_off = c.ramp_s + c.hold_s
-            v = u - u_off
-            rc = raised_cosine(np.array((u, v, u, v)) / self._scales)
-            fz = c.baseline_n + d_fz * (rc[0] - rc[1])
-            m = c.shear_ratio * d_fz * np.where(u < u_off, rc[2], self._q_off * (1.0 - rc[3]))
-            f[:, 0] = m * self._cos_theta
-            f[:, 1] = m * self._sin_theta
-        else:
-            u1 = c.ramp_s
-            u2 = u1 + c.drag_s
-            u3 = u2 + c.slip_s
-            u_lift = u3 + c.hold_s
-            rc = raised_cosine(np.array((u, u - u_lift, u - u1, u - u2)) / self._scales)
-            fz = c.baseline_n + d_fz * (rc[0] - rc[1])
-            fz_top = c.baseline_n + d_fz
-            mu_s, mu_k = c.friction_mu, c.friction_mu * c.kinetic_ratio
-            m = np.where(
-                u < u2,
-                mu_s * fz_top * rc[2],
-                np.where(u < u3, fz_top * (mu_s - (mu_s - mu_k) * rc[3]), mu_k * fz_top * (1.0 - rc[1])),
-            )
-            phi = math.radians(c.shear_angle_deg) + math.radians(c.slip_turn_deg) * rc[3]
-            f[:, 0] = m * np.cos(phi)
-            f[:, 1] = m * np.sin(phi)
-        f[:, 2] = fz
-        return f
-
-    def delta_temp(self, t: np.ndarray) -> np.ndarray:
-        """Temperature deviation ΔT (°C) from ``ambient_c`` at times ``t``."""
-        c = self.config
-        if c.temp_drift_c == 0.0:
-            return np.zeros(len(t))
-        return c.temp_drift_c * np.sin((2.0 * np.pi / c.temp_period_s) * t + self.temp_phase)
-
-    def gauges(self, f: np.ndarray) -> np.ndarray:
-        """Noise-free ΔR/R (n, 4) of the four gauges under force ``f`` (inverse of eq. 2)."""
-        xs, ys, zs = self.config.sensitivity_per_n
-        # r1..r4 = common − sx, common + sy, common + sx, common − sy (a − b is a + (−b), bit for bit)
-        shear = f[:, [0, 1, 0, 1]] * np.array([-(xs / 2.0), ys / 2.0, xs / 2.0, -(ys / 2.0)])
-        return (f[:, 2] * (zs / 4.0))[:, None] + shear
+        self._scenario = SCENARIOS[self.config.scenario]
+        self._p = trial_constants(self.config, self.temp_phase)
 
     def step(self, now: float) -> dict[str, Chunk]:
         c = self.config
-        n = self.due(now, c.rate_hz) - self.i
-        n = max(n, 0)
-        t = (self.i + np.arange(n)) / c.rate_hz
-        self.i += n
+        n = max(self.due(now, c.rate_hz) - self.i, 0)
         want = self.demanded
-        out: dict[str, Chunk] = {}
-        need_force = "force" in want or "r" in want
-        f = self.forces(t) if need_force else None
-        need_temp = bool(want & {"r", "ref", "temp_c"})
-        dtemp = self.delta_temp(t) if need_temp else None
-        if want & {"r", "ref"}:
-            noise = self.noise_rng.standard_normal((n, 5)) * c.noise_sd
-            drift = c.temp_coeff_per_c * dtemp
-            if "r" in want:
-                out["r"] = Chunk(t, self.gauges(f) + drift[:, None] + noise[:, :4])
-            if "ref" in want:
-                out["ref"] = Chunk(t, drift + noise[:, 4])
-        if "temp_c" in want:
-            out["temp_c"] = Chunk(t, c.ambient_c + dtemp)
-        if "force" in want:
-            out["force"] = Chunk(t, f)
-        return out
+        noisy = "r" in want or "ref" in want
+        noise = self.noise_rng.standard_normal((n, 5)) if noisy else _NO_NOISE
+        t, f, r, ref, temp = sensor_samples(self.i, n, c.rate_hz, self._scenario, self._p, noise)
+        self.i += n
+        made = {"r": r, "ref": ref, "temp_c": temp, "force": f}
+        return {k: Chunk(t, made[k]) for k in self.outputs if k in want}
 
     @classmethod
     def example(cls) -> Example:

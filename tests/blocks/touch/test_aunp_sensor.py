@@ -232,3 +232,75 @@ def test_specs_and_labels():
     assert specs["temp_c"].units == "degC" and specs["ref"].shape == ()
     assert all(s.rate_hz == 500.0 and not s.events for s in specs.values())
     assert len(block(0.1)["r"]) == 50
+
+
+def _numpy_samples(block, n):
+    """The samples of a freshly bound sensor from its profile's formulas as elementwise numpy
+    expressions: the oracle the compiled pass must match bit for bit (the same operations, in the
+    same order, on each value)."""
+    c = block.config
+
+    def rc(x):
+        return 0.5 - 0.5 * np.cos(np.pi * np.clip(x, 0.0, 1.0))
+
+    t = np.arange(n) / c.rate_hz
+    f = np.zeros((n, 3))
+    f[:, 2] = c.baseline_n
+    if c.scenario != "rest":
+        k = np.clip(np.floor((t - c.onset_s) / c.period_s), 0.0, (c.repeat - 1) if c.repeat else np.inf)
+        u = t - c.onset_s - k * c.period_s
+        d_fz = c.stiffness_n_per_mm * c.indentation_um * 1e-3
+        if c.scenario == "touch":
+            u_off = c.ramp_s + c.hold_s
+            v = u - u_off
+            q_off = rc(np.array(u_off / c.shear_rise_s))
+            fz = c.baseline_n + d_fz * (rc(u / c.ramp_s) - rc(v / c.unload_s))
+            shear = np.where(u < u_off, rc(u / c.shear_rise_s), q_off * (1.0 - rc(v / c.shear_release_s)))
+            m = c.shear_ratio * d_fz * shear
+            theta = np.radians(c.shear_angle_deg)
+            f[:, 0], f[:, 1] = m * np.cos(theta), m * np.sin(theta)
+        else:
+            u2 = c.ramp_s + c.drag_s
+            u3 = u2 + c.slip_s
+            rc1 = rc((u - (u3 + c.hold_s)) / c.unload_s)
+            rc3 = rc((u - u2) / c.slip_s)
+            fz = c.baseline_n + d_fz * (rc(u / c.ramp_s) - rc1)
+            top = c.baseline_n + d_fz
+            mu_s, mu_k = c.friction_mu, c.friction_mu * c.kinetic_ratio
+            m = np.where(
+                u < u2,
+                mu_s * top * rc((u - c.ramp_s) / c.drag_s),
+                np.where(u < u3, top * (mu_s - (mu_s - mu_k) * rc3), mu_k * top * (1.0 - rc1)),
+            )
+            phi = np.radians(c.shear_angle_deg) + np.radians(c.slip_turn_deg) * rc3
+            f[:, 0], f[:, 1] = m * np.cos(phi), m * np.sin(phi)
+        f[:, 2] = fz
+    dtemp = c.temp_drift_c * np.sin((2.0 * np.pi / c.temp_period_s) * t + block.temp_phase)
+    drift = c.temp_coeff_per_c * dtemp
+    xs, ys, zs = c.sensitivity_per_n
+    shear = f[:, [0, 1, 0, 1]] * np.array([-(xs / 2.0), ys / 2.0, xs / 2.0, -(ys / 2.0)])
+    noise = block.noise_rng.standard_normal((n, 5)) * c.noise_sd  # the block's own stream, from its start
+    return {
+        "force": f,
+        "r": (f[:, 2] * (zs / 4.0))[:, None] + shear + drift[:, None] + noise[:, :4],
+        "ref": drift + noise[:, 4],
+        "temp_c": c.ambient_c + dtemp,
+    }
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"scenario": "touch", "shear_angle_deg": 30.0, "repeat": 0, "period_s": 0.7},
+        {"scenario": "slip", "drag_s": 0.1, "repeat": 2, "period_s": 1.0},
+        {"scenario": "rest", "temp_drift_c": 0.0},
+    ],
+)
+def test_compiled_samples_are_the_profile_formulas_bit_for_bit(params):
+    n = 2500
+    oracle = AunpSensor(**params)
+    oracle.bind({}, seed=3)
+    want = _numpy_samples(oracle, n)
+    got = run_source(AunpSensor(**params), n / 1000.0, seed=3, tick_s=0.1)
+    for port, data in want.items():
+        assert np.array_equal(got[port].data, data), port
