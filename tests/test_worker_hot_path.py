@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from runs import flowtact
 
-from flowtact.chunk import StreamSpec
+from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
 from flowtact.runtime.placement import spec_to_wire
 from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound
-from flowtact.runtime.worker_plan import ticks_mergeable
+from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
 
 pytestmark = pytest.mark.slow
 
@@ -195,3 +195,26 @@ def test_a_fast_consumer_that_keeps_pace_waits_for_a_batch(monkeypatch):
     last = _Merging([12], ended=True)  # the producer has ended: nothing more is coming
     last.merge()
     assert waits == [worker.COALESCE_S] and last.k == 12
+
+
+def test_recorded_watermarks_fold_into_the_last_chunk_kept_and_join_to_the_same_chunk():
+    """An event stream ends every tick with a watermark: the record buffer grows with data only."""
+    spec = StreamSpec(dtype="int64", shape=(), units="1", n_units=4)
+    rng = np.random.default_rng(3)
+    chunks, t = [], 0.0
+    for _ in range(300):
+        t += 0.001
+        n = int(rng.integers(0, 3)) if rng.random() < 0.2 else 0
+        times = np.sort(rng.uniform(t - 0.001, t, n))
+        chunks.append(Chunk(times, rng.integers(0, 4, n), t if rng.random() < 0.9 else None))
+    port = OutPort("nlif", "spikes", spec)
+    for c in chunks:
+        if len(c) or c.end is not None:  # what the worker keeps for the recorder
+            port.keep_record(c)
+    assert len(port.rec_buf) <= 1 + sum(1 for c in chunks if len(c))
+    joined, want = (
+        concat(port.rec_buf, spec),
+        concat([c for c in chunks if len(c) or c.end is not None], spec),
+    )
+    assert np.array_equal(joined.t, want.t) and np.array_equal(joined.data, want.data)
+    assert joined.end == want.end == max(c.end for c in chunks if c.end is not None)

@@ -683,7 +683,7 @@ class Worker:
             for ob in o.outbound:
                 self._send_out(ob, k, chunk, origins)
             if o.record is not None and (n or chunk.end is not None):
-                o.rec_buf.append(chunk)
+                o.keep_record(chunk)
                 if len(o.rec_buf) >= RECORD_MAX_CHUNKS:
                     self._flush_records()
 

@@ -56,6 +56,20 @@ class OutPort:
         self.rec_buf: list[Chunk] = []  # recorded chunks not sent yet (coalesced)
         self.samples = 0
 
+    def keep_record(self, chunk: Chunk) -> None:
+        """Keep a chunk for the recorder. One without samples only moves the stream's end (an event
+        stream's watermark, every tick): it is folded into the last chunk kept, so the buffer grows
+        with data, not with ticks, and joining it (``concat``) gives the same chunk."""
+        buf = self.rec_buf
+        if len(chunk) or not buf:
+            buf.append(chunk)
+            return
+        last = buf[-1]
+        if chunk.end is None:
+            return
+        end = chunk.end if last.end is None else max(last.end, chunk.end)
+        buf[-1] = Chunk(last.t, last.data, end)
+
 
 class NodePlan:
     """Everything one node's step needs, resolved once."""
