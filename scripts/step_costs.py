@@ -6,7 +6,7 @@ mean and median, wall clock around the call; the timing adds ~0.3 µs a call).
 
 ``--wake S`` sleeps S seconds before the first node of each process in every tick, as a real-time
 worker sleeps until its clock or its input: the steps then run with the cold caches they meet in a
-real run (on a shared 2-core VM, 2-4x their cost in a hot loop; the whole-run CPU is not measured).
+real run (on this shared 2-core VM, 3-4x their cost in a hot loop; the whole-run CPU is not measured).
 
     python scripts/step_costs.py bench/graphs/chain.yaml               # 1 ms ticks, 10 graph seconds
     python scripts/step_costs.py bench/graphs/chain.yaml --wake 0.0003 --duration 3

@@ -21,9 +21,9 @@ from flowtact.params import Config, param
 from .aunp import SENSITIVITY_PER_N
 from .aunp_samples import SCENARIOS, sensor_samples, trial_constants
 
-_NO_NOISE = np.empty((0, 5))
-
 __all__ = ["AunpSensor", "AunpSensorConfig"]
+
+_NO_NOISE = np.empty((0, 5))  # r and ref not demanded: no normals drawn
 
 
 @dataclass(frozen=True)

@@ -63,12 +63,10 @@ class OutPort:
         buf = self.rec_buf
         if len(chunk) or not buf:
             buf.append(chunk)
-            return
-        last = buf[-1]
-        if chunk.end is None:
-            return
-        end = chunk.end if last.end is None else max(last.end, chunk.end)
-        buf[-1] = Chunk(last.t, last.data, end)
+        elif chunk.end is not None:
+            last = buf[-1]
+            end = chunk.end if last.end is None else max(last.end, chunk.end)
+            buf[-1] = Chunk(last.t, last.data, end)
 
 
 class NodePlan:
