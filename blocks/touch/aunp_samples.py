@@ -4,8 +4,9 @@ One kernel call per step instead of some thirty numpy calls: at one sample per 1
 source wakes from sleep for every step, and on a shared 2-core machine each distinct numpy call
 then runs with cold caches at 3-8x its warm cost (``python scripts/step_costs.py --wake``). Every
 value is computed with the same operations, in the same order, as the profile's elementwise numpy
-formulas (tests/blocks/touch/test_aunp_sensor.py holds them as the oracle, bit for bit), and
-depends only on its sample index: the samples do not depend on the chunking.
+formulas (tests/blocks/touch/test_aunp_sensor.py holds them as the oracle; where numba's sin/cos
+and numpy's are both libm's, as here, bit for bit), and depends only on its sample index: the
+samples do not depend on the chunking.
 """
 
 from __future__ import annotations

@@ -236,8 +236,7 @@ def test_specs_and_labels():
 
 def _numpy_samples(block, n):
     """The samples of a freshly bound sensor from its profile's formulas as elementwise numpy
-    expressions: the oracle the compiled pass must match bit for bit (the same operations, in the
-    same order, on each value)."""
+    expressions: the oracle of the compiled pass (the same operations, in the same order)."""
     c = block.config
 
     def rc(x):
@@ -292,15 +291,25 @@ def _numpy_samples(block, n):
     "params",
     [
         {"scenario": "touch", "shear_angle_deg": 30.0, "repeat": 0, "period_s": 0.7},
-        {"scenario": "slip", "drag_s": 0.1, "repeat": 2, "period_s": 1.0},
+        {
+            "scenario": "slip",
+            "drag_s": 0.1,
+            "repeat": 2,
+            "period_s": 1.0,
+            "sensitivity_per_n": (0.021, 0.018, 0.043),
+        },
         {"scenario": "rest", "temp_drift_c": 0.0},
     ],
 )
-def test_compiled_samples_are_the_profile_formulas_bit_for_bit(params):
+def test_compiled_samples_are_the_profile_formulas(params):
+    """To a few ulp of each stream's scale. On this machine they agree bit for bit (numba's cos is
+    libm's, as numpy's is here: scripts/graph_digests.py showed every recording unchanged); a
+    numpy or numba build with other sin/cos may differ in the last bits."""
     n = 2500
     oracle = AunpSensor(**params)
     oracle.bind({}, seed=3)
     want = _numpy_samples(oracle, n)
     got = run_source(AunpSensor(**params), n / 1000.0, seed=3, tick_s=0.1)
     for port, data in want.items():
-        assert np.array_equal(got[port].data, data), port
+        atol = 8 * np.finfo(np.float64).eps * np.abs(data).max()
+        np.testing.assert_allclose(got[port].data, data, rtol=0, atol=atol, err_msg=port)
