@@ -25,6 +25,7 @@ from typing import Any
 from flowtact.compile import compile_graph
 from flowtact.graph import load_graph
 from flowtact.runtime.inproc import InprocExecutor
+from flowtact.runtime.placement import place
 
 
 def _timed(step: Callable[..., Any], into: list[int], wake_s: float) -> Callable[..., Any]:
@@ -48,8 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--wake", type=float, default=0.0, metavar="S",
                     help="sleep S s before each process's first node in every tick (cold steps, as in a real run)")  # fmt: skip
     args = ap.parse_args(argv)
-    graph = load_graph(args.graph)
-    plan = compile_graph(graph)
+    plan = compile_graph(load_graph(args.graph))
     ticks = round(args.duration / args.tick)
 
     InprocExecutor(plan, fast=True, tick_s=args.tick).run(min(args.duration, 1.0))  # compile, warm caches
@@ -60,10 +60,8 @@ def main(argv: list[str] | None = None) -> int:
         cpu_us = (time.process_time() - cpu0) / ticks * 1e6
 
     ex = InprocExecutor(plan, fast=True, tick_s=args.tick)
-    first_of_process = {}
-    for name in plan.order:
-        first_of_process.setdefault(graph.nodes[name].process, name)
-    woken = set(first_of_process.values()) if args.wake else set()
+    groups = place(plan, fast=True).groups  # the processes a real run would start, nodes in order
+    woken = {nodes[0] for nodes in groups.values()} if args.wake else set()
     calls: dict[str, list[int]] = defaultdict(list)
     for name, block in ex.blocks.items():
         block.step = _timed(block.step, calls[name], args.wake if name in woken else 0.0)  # type: ignore[method-assign]
