@@ -106,7 +106,7 @@ def bench_overhead(ctx: Context, chunk: int, n_nodes: int, n_ticks: int) -> list
             for b in blocks:
                 c = b.step(x=c)["y"]
 
-    def called() -> None:  # the same through Block.__call__ (what tests and the worker use)
+    def called() -> None:  # the same through Block.__call__ (what tests and flowtact.testing use)
         src.restart()
         for k in range(1, n_ticks + 1):
             c = src(k * tick)["y"]

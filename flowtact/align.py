@@ -39,13 +39,18 @@ class Aligner:
         self.ports = list(ports)
         self._t = {p: np.empty(0) for p in self.ports}
         self._d = {p: np.empty((0, *specs[p].shape), np.float64) for p in self.ports}
+        self._solo = self.ports[0] if len(self.ports) == 1 else None  # aligned with itself
 
     def push(self, chunks: Mapping[str, Chunk | None]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Add what arrived; return (t, {port: data}) of the newly aligned samples (maybe none).
 
         Chunks that came together with nothing held back (the common case) are handed on as they
-        are: no joining and no copies.
+        are: no joining and no copies. One stream is aligned with itself: it passes straight through.
         """
+        p = self._solo
+        if p is not None:
+            c = chunks.get(p)
+            return (self._t[p], {p: self._d[p]}) if c is None else (c.t, {p: c.data})
         ts, ds = {}, {}
         for p in self.ports:
             c = chunks.get(p)
@@ -92,7 +97,10 @@ def screen_aligned(
     ``raise`` names the first bad port; ``hold`` repeats each port's last good sample (``last``
     holds them and is updated). Counts ``nonfinite_<policy>`` like :func:`screen_nonfinite`.
     """
-    if all(all_finite(d) for d in data.values()):  # the cheap test of screen_nonfinite
+    for d in data.values():  # the cheap test of screen_nonfinite
+        if not all_finite(d):
+            break
+    else:
         if policy == "hold" and len(t):
             last.update({p: d[-1].copy() for p, d in data.items()})
         return t, data

@@ -36,6 +36,17 @@ class Fresh(Source):
         return Example()
 
 
+class FreshFrames(Fresh):
+    """Fresh's samples as 96x96 float64 frames (72 KiB: sent as zero-copy frames between processes)."""
+
+    def specs(self, inputs):  # noqa: ARG002 - a source: its outputs come from its config
+        return {"y": StreamSpec(shape=(96, 96), rate_hz=1000.0)}
+
+    def step(self, now: float) -> dict[str, Chunk]:
+        c = super().step(now)["y"]
+        return {"y": Chunk(c.t, np.ones((len(c.t), 96, 96)))}
+
+
 class Reuses(Block):
     """Writes each step's result into the one buffer it keeps and returns that buffer."""
 

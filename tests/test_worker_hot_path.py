@@ -12,6 +12,7 @@ from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
 from flowtact.runtime.placement import spec_to_wire
+from flowtact.runtime.supervisor import WorkerFailed
 from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound
 from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
 
@@ -139,6 +140,33 @@ def test_blocks_not_known_to_be_chunking_invariant_are_not_merged(tmp_path):
         "edges:\n  - src.y -> f.x\nrecord: [f.y]\n"
     )
     assert ticks_mergeable(load_plan(registered))
+
+
+READ_ONLY = """
+name: read_only
+tick_s: 0.001
+nodes:
+  src: {{block: "sealblocks:{source}", process: a}}
+  w:   {{block: "sealblocks:Writes", process: {where}}}
+edges:
+  - src.y -> w.x
+record: [w.y]
+"""
+
+
+@pytest.mark.parametrize(
+    ("source", "where"),
+    [("Fresh", "a"), ("Fresh", "b"), ("FreshFrames", "b")],
+    ids=["same process", "another process", "zero-copy frames"],
+)
+def test_a_block_in_a_worker_cannot_write_what_it_receives(tmp_path, source, where):
+    """The worker calls ``step`` directly: what it passes must already be read-only, whether a
+    producer in the same process made it (sealed as it is delivered) or it came from another
+    (views of the received message, copied or zero-copy)."""
+    path = tmp_path / "g.yaml"
+    path.write_text(READ_ONLY.format(source=source, where=where))
+    with pytest.raises(WorkerFailed, match=r"node 'w' \(writes\).*read-only"):
+        run_plan(load_plan(path), duration_s=0.05, fast=True)
 
 
 def _inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:

@@ -178,6 +178,28 @@ def savgol_apply(coef: np.ndarray, tail: np.ndarray, x: np.ndarray) -> np.ndarra
     return y
 
 
+@njit(cache=True)
+def _finite_step(
+    coef: np.ndarray, tail: np.ndarray, x: np.ndarray, t: np.ndarray, prev: float, period: float, prime: bool
+) -> tuple[bool, np.ndarray, int, int]:
+    """A step on finite samples in one call (a real-time step pays per call, docs/writing-a-block.md).
+
+    When every value of ``x`` (n, C) is finite: count the timing faults of ``t`` after ``prev``
+    (:func:`_timing_faults`), fill the history with the first sample if ``prime`` (``padding:
+    hold``), filter (:func:`savgol_apply`) and return (True, y, gaps, irregular). Otherwise return
+    (False, an empty array, 0, 0) having changed nothing: the block screens the chunk first.
+    """
+    for i in range(x.shape[0]):
+        for c in range(x.shape[1]):
+            if not math.isfinite(x[i, c]):
+                return False, np.empty((0, x.shape[1])), 0, 0
+    gaps, irregular = _timing_faults(t, prev, period, DT_TOL)
+    if prime:
+        for i in range(tail.shape[0]):
+            tail[i, :] = x[0]
+    return True, savgol_apply(coef, tail, x), gaps, irregular
+
+
 def savgol_apply_numpy(coef: np.ndarray, tail: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Plain-numpy twin of :func:`savgol_apply` (same operations in the same order)."""
     m, n = tail.shape[0], x.shape[0]
@@ -327,33 +349,40 @@ class SavGol(Block):
         self._last: np.ndarray | None = None
         self._started = False  # has a sample arrived (padding: hold primes the history with it)
         self._period = 1.0 / float(spec.rate_hz)  # type: ignore[arg-type]
-        self._t_last: float | None = None  # time of the last sample filtered (timing checks)
-
-    def _check_timing(self, t: np.ndarray) -> None:
-        """Count gaps and irregular intervals (the fit assumes one nominal period between samples)."""
-        prev = math.nan if self._t_last is None else self._t_last
-        gaps, irregular = _timing_faults(t, prev, self._period, DT_TOL)
-        self._t_last = float(t[-1])
-        if gaps:
-            self.count("sample_gaps", gaps)
-        if irregular:
-            self.count("irregular_dt", irregular)
+        self._t_prev = math.nan  # time of the last sample filtered (timing checks; NaN: none yet)
+        self._hold = cfg.on_bad_data == "hold"  # keep the last good sample to repeat
 
     def step(self, x: Chunk) -> dict[str, Chunk]:
+        n = x.t.shape[0]
+        if n:  # the common case, finite samples: one compiled call
+            prime = not self._started and self.config.padding == "hold"
+            ok, y, gaps, irregular = _finite_step(
+                self._coef, self._tail, x.data.reshape(n, self._nc), x.t, self._t_prev, self._period, prime
+            )
+            if ok:
+                if self._hold:
+                    self._last = x.data[-1].copy()
+                return self._emit(x.t, y, gaps, irregular)
         x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
-        if len(x) == 0:
-            return {"y": Chunk.empty(shape=self._shape)}
-        d = x.data
         n = len(x)
-        self._check_timing(x.t)
-        if not self._started:
-            self._started = True
-            if self.config.padding == "hold":
-                self._tail[:] = d.reshape(n, self._nc)[0]
-        y = savgol_apply(self._coef, self._tail, d.reshape(n, self._nc))
+        if n == 0:
+            return {"y": Chunk.empty(shape=self._shape)}
+        d = x.data.reshape(n, self._nc)
+        gaps, irregular = _timing_faults(x.t, self._t_prev, self._period, DT_TOL)
+        if not self._started and self.config.padding == "hold":
+            self._tail[:] = d[0]
+        return self._emit(x.t, savgol_apply(self._coef, self._tail, d), gaps, irregular)
+
+    def _emit(self, t: np.ndarray, y: np.ndarray, gaps: int, irregular: int) -> dict[str, Chunk]:
+        """Count the timing faults, then stamp the filtered samples (centred: held back h samples)."""
+        self._started = True
+        self._t_prev = t[-1]
+        self.count("sample_gaps", gaps)
+        self.count("irregular_dt", irregular)
+        n = len(t)
         if self._h == 0:
-            return {"y": Chunk(x.t, y.reshape(n, *self._shape))}
-        t_all = np.concatenate([self._t_hist, x.t])
+            return {"y": Chunk(t, y.reshape(n, *self._shape))}
+        t_all = np.concatenate([self._t_hist, t])
         emit = len(t_all) - self._h
         self._t_hist = t_all[max(emit, 0) :].copy()
         if emit <= 0:

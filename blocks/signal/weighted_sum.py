@@ -20,7 +20,6 @@ from flowtact import (
     param,
 )
 from flowtact.align import Aligner, screen_aligned
-from flowtact.finite import all_finite
 
 __all__ = ["WeightedSum", "WeightedSumConfig"]
 
@@ -28,26 +27,31 @@ _INPUTS = ("x1", "x2", "x3", "x4")
 
 
 @njit(cache=True)
-def _weighted(x: np.ndarray, w: np.ndarray, bias: float) -> np.ndarray:
-    """``bias + Σ_c w[c] · x[:, c]`` per sample, over the non-zero weights in channel order."""
+def _weighted(x: np.ndarray, w: np.ndarray, bias: float) -> tuple[np.ndarray, int]:
+    """``bias + Σ_c w[c] · x[:, c]`` per sample, over the non-zero weights in channel order, and how
+    many of the sums are not finite."""
     y = np.empty(x.shape[0])
     y[:] = bias
-    _add_weighted(y, x, w)
-    return y
+    return y, _add_weighted(y, x, w)
 
 
 @njit(cache=True)
-def _add_weighted(y: np.ndarray, x: np.ndarray, w: np.ndarray) -> None:
+def _add_weighted(y: np.ndarray, x: np.ndarray, w: np.ndarray) -> int:
     """``y += w[c] · x[:, c]`` for every non-zero weight, channel by channel: the sum's fixed order.
 
-    Finite inputs whose sum overflows give ±inf or NaN (counted by the caller), never a warning.
+    Returns how many ``y`` are then not finite: with finite inputs, sums that overflowed (±inf or
+    NaN, never a warning). After the last input's pass, that is the block's ``overflow`` count.
     """
+    bad = 0
     for j in range(y.shape[0]):
         acc = y[j]
         for c in range(w.shape[0]):
             if w[c] != 0.0:
                 acc += w[c] * x[j, c]
         y[j] = acc
+        if not math.isfinite(acc):
+            bad += 1
+    return bad
 
 
 @dataclass(frozen=True)
@@ -195,11 +199,10 @@ class WeightedSum(Block):
             t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
             n = len(t)
         first, *rest = self._ports
-        y = _weighted(data[first].reshape(n, self._nc[first]), self._w[first], self.config.bias)
+        y, bad = _weighted(data[first].reshape(n, self._nc[first]), self._w[first], self.config.bias)
         for p in rest:
-            _add_weighted(y, data[p].reshape(n, self._nc[p]), self._w[p])
-        if n and not all_finite(y):
-            self.count("overflow", int((~np.isfinite(y)).sum()))
+            bad = _add_weighted(y, data[p].reshape(n, self._nc[p]), self._w[p])
+        self.count("overflow", bad)
         return {"y": Chunk(t, y)}
 
     def flush(self) -> dict[str, Chunk]:

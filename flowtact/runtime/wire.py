@@ -170,7 +170,8 @@ def _parse_header(
 def recv_message(sock: zmq.Socket, flags: int = 0) -> Message:
     """Receive one message (raises ``zmq.Again`` with ``flags=zmq.NOBLOCK`` when none is queued).
 
-    A frame that is not a well-formed stream message raises :class:`WireError`.
+    A frame that is not a well-formed stream message raises :class:`WireError`. The chunk's arrays
+    are read-only views of the frames: every consumer of the stream may share them.
     """
     buf = sock.recv(flags)
     stream, seq, tick, fl, end, origins, dt, shape, width, hlen = _parse_header(buf)
@@ -186,6 +187,7 @@ def recv_message(sock: zmq.Socket, flags: int = 0) -> Message:
             raise WireError(f"frames of {nt} and {nd} bytes do not hold whole samples of {dt}{list(shape)}")
         t = np.frombuffer(t_frame.buffer, np.float64) if count else _EMPTY_T
         data = np.frombuffer(d_frame.buffer, dt) if nd else np.empty(0, dt)
+        t.flags.writeable = data.flags.writeable = False  # as a copied frame's: consumers share it
     else:
         size = len(buf) - hlen
         per = 8 + width

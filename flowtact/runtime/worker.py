@@ -9,10 +9,11 @@ stream carries only data and the consumer takes whatever is newest. ``END`` mess
 node's end-of-stream output (its flush). Nodes wait for remote input just before they step, so
 chains that leave a process and come back within a tick do not deadlock.
 
-The hot path: every node's step plan (input queues, output routes) is resolved once
-(:mod:`flowtact.runtime.worker_plan`); a receive reads the socket's events instead of catching
-``zmq.Again`` and takes everything queued in one wake-up; control is read every
-:data:`CONTROL_NS`, not every tick; recorded chunks are coalesced for :data:`RECORD_FLUSH_NS`; a
+The hot path: every node's step plan (input queues, output routes, the block's ``step`` itself)
+is resolved once (:mod:`flowtact.runtime.worker_plan`); ``step`` is called directly on read-only
+inputs (received messages are read-only views, local outputs are sealed as they are delivered);
+a block stream is read by blocking ``recv`` calls, one message each, without catching
+``zmq.Again`` on the way; control is read every :data:`CONTROL_NS`, not every tick; recorded chunks are coalesced for :data:`RECORD_FLUSH_NS`; a
 source's data is stamped once its step has made it, so latency is transport, not the source's
 own work. In ``--fast`` runs a worker without sources that already holds ticks ``k+1..K`` on
 every input steps once at ``K`` when :func:`~flowtact.runtime.worker_plan.ticks_mergeable`
@@ -61,7 +62,7 @@ from flowtact.runtime.placement import spec_from_wire
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.warm_up import CompileWatch, settle_heap, warm_up
 from flowtact.runtime.wire import END, recv_message, send_message
-from flowtact.runtime.worker_plan import NodePlan, OutPort, merge_origins
+from flowtact.runtime.worker_plan import NO_ORIGINS, NodePlan, OutPort, merge_origins, take
 
 __all__ = ["BEAT_S", "ORPHAN_S", "Worker", "main"]
 
@@ -386,6 +387,7 @@ class Worker:
         self.next_service = 0
         self.next_record = 0
         self.warm_ns = 0  # data that left its source before this is start-up, not transport
+        self.ends_seen = 0  # END markers received (of any input)
 
     def _plan_nodes(self, plan: dict[str, Any]) -> None:
         """Resolve once what every node's step reads and where each output goes (see worker_plan)."""
@@ -483,17 +485,17 @@ class Worker:
             self.k = max(self.k, int((time.monotonic_ns() - self.t0_ns) / 1e9 / self.tick_s))
             for n in self.sources:
                 self.blocks[n](self.k * self.tick_s)
+        fed = 0 if sources else len(self.block_inputs)  # ends once every block input is consumed
+        only_latest = not sources and not self.block_inputs  # ends once every input has ended
         self.next_beat = time.monotonic() + HEARTBEAT_S
         while True:
             if self.n_ticks is not None and self.k >= self.n_ticks:
                 break
             if clocked and self.k >= self.stop_k:  # stopped: every worker ends on this tick
                 break
-            if not sources and not self.block_inputs and not self.latest_inputs:
+            if fed and self.ends_seen >= fed and all(self._consumed(ib) for ib in self.block_inputs):
                 break
-            if not sources and self.block_inputs and all(self._consumed(ib) for ib in self.block_inputs):
-                break
-            if not sources and not self.block_inputs and not self._wait_latest():
+            if only_latest and (not self.latest_inputs or not self._wait_latest()):
                 break
             self.k += 1
             if self.merge and self.block_inputs:
@@ -613,50 +615,70 @@ class Worker:
                 self._send_out(ob, k, ob.empty, {})
 
     def _step(self, nd: NodePlan, k: int, now: float, avail: float) -> None:
-        """Step node ``nd`` on what reached it up to tick ``avail`` (a source: every tick)."""
-        ins, origins, data = self._gather(nd, avail)
-        if not data and not nd.source:
-            return
-        block = nd.block
+        """Step node ``nd`` on what reached it up to tick ``avail`` (a source: every tick).
+
+        ``step`` is called directly (``NodePlan.call``) with every needed input, an empty chunk
+        where nothing came; a node other than a source steps only when something came (data or a
+        watermark). A node whose one input is ``step``'s first parameter gets it by position.
+        """
+        if nd.solo:
+            c, origins = take(nd.inputs[0], avail)
+            if c is None:
+                return
+            samples = c.t.shape[0] > 0
+            if not samples and c.end is None:
+                return
+        else:
+            ins, origins, came, samples = self._gather(nd, avail)
+            if not came and not nd.source:
+                return
         self.busy, self.busy_first = nd.name, not nd.warmed
         t0 = time.perf_counter_ns()
         try:
-            out = block(now, **ins) if nd.source else block(**ins)
+            if nd.solo:
+                out = nd.call(c)
+            elif nd.source:
+                out = nd.call(now, **ins)
+            else:
+                out = nd.call(**ins)
         except Exception as e:
-            raise _NodeFailure(nd.name, block, now, e) from e
+            raise _NodeFailure(nd.name, nd.block, now, e) from e
         nd.ns += time.perf_counter_ns() - t0
         self.busy = None
         self.steps += 1
-        if not nd.warmed and (nd.source or any(len(c) for c in ins.values())):
+        if not nd.warmed and (nd.source or samples):
             nd.warmed = True
         if nd.deadlines:
             self._deadlines(nd, origins)
         if nd.source:  # stamped once the source has made its data: its own step is not transport
-            origins = {nd.src_idx: time.monotonic_ns()} if nd.src_idx is not None else {}
+            origins = {nd.src_idx: time.monotonic_ns()} if nd.src_idx is not None else NO_ORIGINS
         self._deliver(nd, out, k, origins)
 
     @staticmethod
-    def _gather(nd: NodePlan, avail: float) -> tuple[dict[str, Chunk], dict[int, int], bool]:
-        """Node ``nd``'s inputs up to tick ``avail``, the oldest origin per source behind their
-        data, and whether anything came (data or a watermark)."""
+    def _gather(nd: NodePlan, avail: float) -> tuple[dict[str, Chunk], dict[int, int], bool, bool]:
+        """Node ``nd``'s inputs up to tick ``avail`` (see :func:`~flowtact.runtime.worker_plan.take`),
+        the oldest origin per source behind their data, whether anything came (data or a
+        watermark) and whether samples came."""
         ins: dict[str, Chunk] = {}
-        origins: dict[int, int] = {}
-        data = False
+        origins = NO_ORIGINS
+        came = samples = False
         for ip in nd.inputs:
-            q = ip.queue
-            if not q or q[0][0] > avail:
+            c, o = take(ip, avail)
+            if c is None:
                 ins[ip.name] = ip.empty
                 continue
-            parts = []
-            while q and q[0][0] <= avail:
-                _, c, o = q.popleft()
-                parts.append(c)
-                if len(c):  # a watermark alone carries no data whose latency counts
-                    merge_origins(origins, o)
-            c = parts[0] if len(parts) == 1 else concat(parts, ip.spec)
-            data = data or bool(len(c)) or c.end is not None
             ins[ip.name] = c
-        return ins, origins, data
+            if c.t.shape[0]:
+                came = samples = True
+            elif c.end is not None:
+                came = True
+            if o:
+                if origins:
+                    origins = dict(origins)  # never write a chunk's own (shared) origins
+                    merge_origins(origins, o)
+                else:
+                    origins = o
+        return ins, origins, came, samples
 
     def _deadlines(self, nd: NodePlan, origins: dict[int, int]) -> None:
         t = time.monotonic_ns()
@@ -669,17 +691,32 @@ class Worker:
                     d.worst_ns = max(d.worst_ns, lat)
 
     def _deliver(self, nd: NodePlan, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
+        """Hand each demanded output to its local consumers (sealed read-only), its remote streams
+        and the recorder, once it has passed the common case of :func:`check_chunk` (the full
+        check names a bug)."""
         outputs = nd.outputs
         for port, chunk in out.items():
             o = outputs.get(port)
             if o is None:  # not demanded
                 continue
-            check_chunk(nd.name, port, chunk, o.spec, self.now)
-            n = len(chunk)
+            t, d = chunk.t, chunk.data
+            shape = d.shape
+            if (
+                t.ndim != 1
+                or not shape
+                or shape[0] != t.shape[0]
+                or shape[1:] != o.tail
+                or (d.dtype is not o.dtype and d.dtype != o.dtype)
+            ):
+                check_chunk(nd.name, port, chunk, o.spec, self.now)
+            n = shape[0]
             if n:
                 o.samples += n
-            for q, delayed in o.local:
-                q.append((k + 1 if delayed else k, chunk, origins))
+            if o.local:
+                if t.flags.writeable or d.flags.writeable:
+                    chunk = chunk.readonly()
+                for q, delayed in o.local:
+                    q.append((k + 1 if delayed else k, chunk, origins))
             for ob in o.outbound:
                 self._send_out(ob, k, chunk, origins)
             if o.record is not None and (n or chunk.end is not None):
@@ -695,12 +732,12 @@ class Worker:
 
     def _send_out(self, ob: _Outbound, k: int, chunk: Chunk, origins: dict[int, int]) -> None:
         """Send a chunk; ``latest`` streams skip empty chunks and drop what the queue cannot hold."""
-        if not len(chunk) and chunk.end is None and (ob.policy == "latest" or ob.sent_tick == k):
+        if not chunk.t.shape[0] and chunk.end is None and (ob.policy == "latest" or ob.sent_tick == k):
             return
-        if ob.policy == "block":
-            self._send_lossless(ob.sock, ob.id, ob.seq, k, chunk, origins)  # type: ignore[arg-type]
+        if send_message(ob.sock, ob.id, ob.seq, k, chunk, origins, nowait=True):  # type: ignore[arg-type]
             ob.seq += 1
-        elif send_message(ob.sock, ob.id, ob.seq, k, chunk, origins, nowait=True):  # type: ignore[arg-type]
+        elif ob.policy == "block":  # the consumer's queue is full: wait for room
+            self._send_lossless(ob.sock, ob.id, ob.seq, k, chunk, origins)  # type: ignore[arg-type]
             ob.seq += 1
         else:
             ob.dropped += 1
@@ -711,8 +748,10 @@ class Worker:
 
         A block stream waits as raw pyzmq does, in a blocking ``recv`` (its socket's receive
         timeout is :data:`POLL_MS`, so ``zmq.Again`` is raised only by a stream idle that long, to
-        hear the supervisor); then everything queued (up to the stream's bound) is taken in the
-        same wake-up, so the next ticks find their input already here.
+        hear the supervisor), one message per ``recv`` until the tick is here. A message already
+        queued is one ``recv`` that returns at once; asking the socket whether more are queued
+        (``getsockopt(EVENTS)``, as ``_drain`` does for ``--fast`` merging) costs about five
+        times that, every tick, and in real time there is rarely more.
         """
         if ib.ended:
             return
@@ -727,7 +766,6 @@ class Worker:
                 self._service()
                 continue
             self._accept(ib, m, m.tick)
-            self._drain(ib)
 
     def _fetch_latest(self, ib: _Inbound) -> None:
         """Take the newest ``queue`` messages of a ``latest`` stream; count the older ones as dropped.
@@ -757,6 +795,7 @@ class Worker:
         ib.next_seq = m.seq + 1
         if m.flags & END:
             ib.ended = True
+            self.ends_seen += 1
             tick = INF
         elif m.tick > ib.upto:
             ib.upto = m.tick

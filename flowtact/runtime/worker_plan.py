@@ -11,10 +11,13 @@ from __future__ import annotations
 from collections import deque
 from typing import Any
 
-from flowtact.block import Block, Source
-from flowtact.chunk import Chunk, StreamSpec
+import numpy as np
 
-__all__ = ["InPort", "NodePlan", "OutPort", "Queued", "frozen_empty", "merge_origins"]
+from flowtact.block import Block, Source
+from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.runtime.step_plan import takes_first
+
+__all__ = ["NO_ORIGINS", "InPort", "NodePlan", "OutPort", "Queued", "frozen_empty", "merge_origins", "take"]
 
 Queued = deque[tuple[float, Chunk, dict[int, int]]]
 """A node input's queue: (available from tick, chunk, origins) in arrival order."""
@@ -43,12 +46,26 @@ class InPort:
 class OutPort:
     """One demanded output of a node: where its chunks go and how many samples it carried."""
 
-    __slots__ = ("empty", "key", "local", "name", "outbound", "rec_buf", "record", "samples", "spec")
+    __slots__ = (
+        "dtype",
+        "empty",
+        "key",
+        "local",
+        "name",
+        "outbound",
+        "rec_buf",
+        "record",
+        "samples",
+        "spec",
+        "tail",
+    )
 
     def __init__(self, node: str, name: str, spec: StreamSpec) -> None:
         self.name = name
         self.key = f"{node}.{name}"
         self.spec = spec
+        self.dtype = np.dtype(spec.dtype)
+        self.tail = tuple(spec.shape)  # the declared sample shape: a chunk's data.shape[1:]
         self.empty = frozen_empty(spec)
         self.local: list[tuple[Queued, bool]] = []  # consumers in this process (queue, delayed)
         self.outbound: list[Any] = []  # streams to other processes (worker._Outbound)
@@ -70,16 +87,24 @@ class OutPort:
 
 
 class NodePlan:
-    """Everything one node's step needs, resolved once."""
+    """Everything one node's step needs, resolved once.
+
+    ``call`` is the block's ``step``, called directly: the worker hands it every needed input,
+    read-only (received arrays are, local outputs are sealed as they are delivered), as
+    ``Block.__call__`` would. ``solo``: the node's one input is ``step``'s first parameter, so it
+    is passed by position (:func:`~flowtact.runtime.step_plan.takes_first`).
+    """
 
     __slots__ = (
         "block",
+        "call",
         "deadlines",
         "inputs",
         "name",
         "ns",
         "outputs",
         "remote",
+        "solo",
         "source",
         "src_idx",
         "warmed",
@@ -91,11 +116,40 @@ class NodePlan:
         self.source = isinstance(block, Source)
         self.src_idx = src_idx
         self.inputs = [InPort(p, block.input_specs[p]) for p in needed]
+        self.call = block.step
+        self.solo = not self.source and takes_first(self.call, [(p,) for p in needed])
         self.outputs: dict[str, OutPort] = {}
         self.remote: list[tuple[Any, bool]] = []  # streams from other processes (worker._Inbound, delayed)
         self.deadlines: list[Any] = []
         self.ns = 0  # wall time spent in this node's steps
         self.warmed = False  # past its first data-carrying step
+
+
+NO_ORIGINS: dict[int, int] = {}
+"""The origins of a chunk without data (shared: never written)."""
+
+
+def take(ip: InPort, avail: float) -> tuple[Chunk | None, dict[int, int]]:
+    """What input ``ip`` holds for ticks up to ``avail``, joined (None: nothing), and the oldest
+    origin per source behind its data: a watermark alone carries no data whose latency counts.
+
+    One queued chunk, the common case, is returned as it came, with its origins (shared with its
+    other consumers: read them, never write them); several are joined into a read-only chunk.
+    """
+    q = ip.queue
+    if not q or q[0][0] > avail:
+        return None, NO_ORIGINS
+    _, c, origins = q.popleft()
+    if not q or q[0][0] > avail:
+        return c, (origins if c.t.shape[0] else NO_ORIGINS)
+    parts = [c]
+    merged = dict(origins) if c.t.shape[0] else {}
+    while q and q[0][0] <= avail:
+        _, c, o = q.popleft()
+        parts.append(c)
+        if c.t.shape[0]:
+            merge_origins(merged, o)
+    return concat(parts, ip.spec).readonly(), merged
 
 
 def merge_origins(into: dict[int, int], more: dict[int, int]) -> None:
