@@ -52,6 +52,9 @@ from flowtact.runtime.wire import recv_message
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
 
 PING_S = 0.25
+WATCH_S = 0.02
+"""Exits and stalls of workers are looked for this often (the pump also wakes for every message)."""
+_EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
 WARMUP_S = 1.0
 """CPU is reported over the running phase after this warm-up (JIT compilation, first allocations)."""
 STOP_MARGIN_S = 0.25
@@ -173,6 +176,7 @@ class ProcessExecutor:
         self.late: list[str] = []  # the busiest nodes when the run fell behind real time
         self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
         self.t_run = self.next_ping = time.monotonic()
+        self.next_watch = 0.0
         self.t0_ns = 0
         self.wplans = {
             g: self.placement.worker_plan(g, fast=self.fast, tick_s=self.tick_s, duration_s=duration_s)
@@ -397,9 +401,11 @@ class ProcessExecutor:
     def _pump(self, timeout_ms: int) -> None:
         """Receive control messages and records, notice exits and stalls, ping, show progress."""
         self._poll(timeout_ms)
-        self._watch()
-        self._check_liveness()
         now = time.monotonic()
+        if now >= self.next_watch:  # the pump also wakes for every message: look every WATCH_S
+            self.next_watch = now + WATCH_S
+            self._watch()
+            self._check_liveness()
         if now >= self.next_ping:
             self.next_ping = now + PING_S
             for p in self.procs.values():
@@ -417,11 +423,8 @@ class ProcessExecutor:
     def _poll(self, timeout_ms: int) -> None:
         for sock, _ in self.poller.poll(timeout_ms):
             if sock is self.ctl or sock is self.ctl_tcp:
-                while True:
-                    try:
-                        ident, raw = sock.recv_multipart(zmq.NOBLOCK)
-                    except zmq.Again:
-                        break
+                while sock.getsockopt(_EVENTS) & _POLLIN:  # not zmq.Again: an exception per wake-up
+                    ident, raw = sock.recv_multipart(zmq.NOBLOCK)
                     self._on_control(sock, ident, msgpack.unpackb(raw, strict_map_key=False))
             else:
                 self._drain_records(sock)
@@ -429,10 +432,9 @@ class ProcessExecutor:
     def _drain_records(self, sock: zmq.Socket, budget: int = 10_000) -> None:
         """Write what arrived (at most ``budget`` messages: control keeps its turn)."""
         for _ in range(budget):
-            try:
-                m = recv_message(sock, zmq.NOBLOCK)
-            except zmq.Again:
+            if not sock.getsockopt(_EVENTS) & _POLLIN:
                 return
+            m = recv_message(sock, zmq.NOBLOCK)
             if m.is_end:  # a worker's last record message
                 self.rec_ends += 1
                 continue

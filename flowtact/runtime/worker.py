@@ -13,9 +13,9 @@ The hot path: every node's step plan (input queues, output routes, the block's `
 is resolved once (:mod:`flowtact.runtime.worker_plan`); ``step`` is called directly on read-only
 inputs (received messages are read-only views, local outputs are sealed as they are delivered);
 a block stream is read by blocking ``recv`` calls, one message each, without catching
-``zmq.Again`` on the way; control is read every :data:`CONTROL_NS`, not every tick; recorded chunks are coalesced for :data:`RECORD_FLUSH_NS`; a
-source's data is stamped once its step has made it, so latency is transport, not the source's
-own work. In ``--fast`` runs a worker without sources that already holds ticks ``k+1..K`` on
+``zmq.Again`` on the way; control is read every :data:`CONTROL_NS`, not every tick; recorded
+chunks are coalesced for :data:`RECORD_FLUSH_NS`; a source's data is stamped once its step has
+made it, so latency is transport, not the source's own work. In ``--fast`` runs a worker without sources that already holds ticks ``k+1..K`` on
 every input steps once at ``K`` when :func:`~flowtact.runtime.worker_plan.ticks_mergeable`
 says no result can depend on it.
 
@@ -750,8 +750,9 @@ class Worker:
         timeout is :data:`POLL_MS`, so ``zmq.Again`` is raised only by a stream idle that long, to
         hear the supervisor), one message per ``recv`` until the tick is here. A message already
         queued is one ``recv`` that returns at once; asking the socket whether more are queued
-        (``getsockopt(EVENTS)``, as ``_drain`` does for ``--fast`` merging) costs about five
-        times that, every tick, and in real time there is rarely more.
+        (``getsockopt(EVENTS)``, as ``_drain`` does for ``--fast`` merging: pyzmq builds an enum
+        member for every option it reads) costs several times that, every tick, and in real time
+        there is rarely more.
         """
         if ib.ended:
             return
