@@ -78,8 +78,9 @@ kernels and first allocations are start-up, not transport."""
 POLL_MS = 100
 """Longest wait on a socket before the worker hears its supervisor (control, heartbeat)."""
 _EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
-"""As plain ints: ``getsockopt(_EVENTS) & _POLLIN`` is a C call and an int ``&``, where
-``get(zmq.EVENTS) & zmq.POLLIN`` builds two enum members (~1 µs more per check)."""
+"""As plain ints: ``getsockopt(_EVENTS) & _POLLIN`` is an int ``&``, where ``get(zmq.EVENTS) &
+zmq.POLLIN`` builds enum members for the operands too. pyzmq still makes one for the option it
+reads, so an events check is never free: the tick path does without it (see ``_fetch``)."""
 LATEST_DRAIN_MS = 1
 """A ``latest`` input whose receive queue was full is drained again after waiting this long for
 what ZeroMQ still moves in from the kernel: what reaches the consumer is the newest, not the oldest."""
