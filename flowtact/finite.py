@@ -13,14 +13,15 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["all_finite"]
+__all__ = ["all_finite", "all_finite_kernel"]
 
 COMPILED_MAX = 4096
 """Up to this many values the compiled loop is faster; above, numpy's vectorised test is."""
 
 
 @njit(cache=True)
-def _all_finite(a: np.ndarray) -> bool:
+def all_finite_kernel(a: np.ndarray) -> bool:
+    """The compiled loop itself: for other kernels, which call it inside their own pass."""
     for x in a.ravel():  # noqa: SIM110 (a loop numba compiles; stops at the first bad value)
         if not math.isfinite(x):
             return False
@@ -30,5 +31,5 @@ def _all_finite(a: np.ndarray) -> bool:
 def all_finite(a: np.ndarray) -> bool:
     """True when no value of the float array ``a`` is NaN or ±inf (True for an empty array)."""
     if a.size <= COMPILED_MAX and a.dtype.char in "df":  # float64, float32: what numba compiles
-        return bool(_all_finite(a))
+        return bool(all_finite_kernel(a))
     return bool(np.isfinite(a).all())

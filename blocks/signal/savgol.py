@@ -29,6 +29,7 @@ from flowtact import (
     param,
     screen_nonfinite,
 )
+from flowtact.finite import all_finite_kernel
 
 __all__ = [
     "SavGol",
@@ -189,10 +190,8 @@ def _finite_step(
     hold``), filter (:func:`savgol_apply`) and return (True, y, gaps, irregular). Otherwise return
     (False, an empty array, 0, 0) having changed nothing: the block screens the chunk first.
     """
-    for i in range(x.shape[0]):
-        for c in range(x.shape[1]):
-            if not math.isfinite(x[i, c]):
-                return False, np.empty((0, x.shape[1])), 0, 0
+    if not all_finite_kernel(x):
+        return False, np.empty((0, x.shape[1])), 0, 0
     gaps, irregular = _timing_faults(t, prev, period, DT_TOL)
     if prime:
         for i in range(tail.shape[0]):
@@ -353,41 +352,35 @@ class SavGol(Block):
         self._hold = cfg.on_bad_data == "hold"  # keep the last good sample to repeat
 
     def step(self, x: Chunk) -> dict[str, Chunk]:
-        n = x.t.shape[0]
-        if n:  # the common case, finite samples: one compiled call
-            prime = not self._started and self.config.padding == "hold"
-            ok, y, gaps, irregular = _finite_step(
-                self._coef, self._tail, x.data.reshape(n, self._nc), x.t, self._t_prev, self._period, prime
-            )
-            if ok:
-                if self._hold:
-                    self._last = x.data[-1].copy()
-                return self._emit(x.t, y, gaps, irregular)
-        x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
-        n = len(x)
-        if n == 0:
+        if not len(x.t):
             return {"y": Chunk.empty(shape=self._shape)}
-        d = x.data.reshape(n, self._nc)
-        gaps, irregular = _timing_faults(x.t, self._t_prev, self._period, DT_TOL)
-        if not self._started and self.config.padding == "hold":
-            self._tail[:] = d[0]
-        return self._emit(x.t, savgol_apply(self._coef, self._tail, d), gaps, irregular)
-
-    def _emit(self, t: np.ndarray, y: np.ndarray, gaps: int, irregular: int) -> dict[str, Chunk]:
-        """Count the timing faults, then stamp the filtered samples (centred: held back h samples)."""
+        ok, y, gaps, irregular = self._filter(x)  # the common case, finite samples: one compiled call
+        if not ok:  # non-finite samples: the bad-data policy first, then the same call on what is left
+            x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
+            if not len(x.t):
+                return {"y": Chunk.empty(shape=self._shape)}
+            _, y, gaps, irregular = self._filter(x)
+        elif self._hold:
+            self._last = x.data[-1].copy()
         self._started = True
-        self._t_prev = t[-1]
+        self._t_prev = x.t[-1]
         self.count("sample_gaps", gaps)
         self.count("irregular_dt", irregular)
-        n = len(t)
+        n = len(x.t)
         if self._h == 0:
-            return {"y": Chunk(t, y.reshape(n, *self._shape))}
-        t_all = np.concatenate([self._t_hist, t])
+            return {"y": Chunk(x.t, y.reshape(n, *self._shape))}
+        t_all = np.concatenate([self._t_hist, x.t])
         emit = len(t_all) - self._h
         self._t_hist = t_all[max(emit, 0) :].copy()
         if emit <= 0:
             return {"y": Chunk.empty(shape=self._shape)}
         return {"y": Chunk(t_all[:emit], y[n - emit :].reshape(emit, *self._shape))}
+
+    def _filter(self, x: Chunk) -> tuple[bool, np.ndarray, int, int]:
+        """:func:`_finite_step` on ``x``: (all finite, estimates, gaps, irregular intervals)."""
+        prime = not self._started and self.config.padding == "hold"
+        d = x.data.reshape(len(x.t), self._nc)
+        return _finite_step(self._coef, self._tail, d, x.t, self._t_prev, self._period, prime)
 
     def flush(self) -> dict[str, Chunk]:
         k = len(self._t_hist) if self._h else 0

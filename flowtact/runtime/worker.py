@@ -15,9 +15,9 @@ inputs (received messages are read-only views, local outputs are sealed as they 
 a block stream is read by blocking ``recv`` calls, one message each, without catching
 ``zmq.Again`` on the way; control is read every :data:`CONTROL_NS`, not every tick; recorded
 chunks are coalesced for :data:`RECORD_FLUSH_NS`; a source's data is stamped once its step has
-made it, so latency is transport, not the source's own work. In ``--fast`` runs a worker without sources that already holds ticks ``k+1..K`` on
-every input steps once at ``K`` when :func:`~flowtact.runtime.worker_plan.ticks_mergeable`
-says no result can depend on it.
+made it, so latency is transport, not the source's own work. In ``--fast`` runs a worker without
+sources that already holds ticks ``k+1..K`` on every input steps once at ``K`` when
+:func:`~flowtact.runtime.worker_plan.ticks_mergeable` says no result can depend on it.
 
 Lifecycle, driven by the supervisor over the control socket (msgpack dicts): hello -> plan ->
 ready (bound endpoints) -> wire (connect) -> wired -> start -> stats -> done -> exit. A stop
