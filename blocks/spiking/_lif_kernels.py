@@ -37,8 +37,11 @@ plain-numpy twins, which step one sample at a time):
   ``TIME_BLOCK`` steps, the spikes of each block re-sorted by (step, neuron). The internal noise
   generator is sequential in (step, neuron) order, so noisy populations run as one tile.
 
-The threshold/reset loop lives in a separate (not inlined) function so that the spike buffers are
-plain arguments there: a buffer that may be reallocated inside the hot loop costs 3× in numba.
+In the tiled grid run, update → threshold → reset is one branch-free loop that vectorises: a spike
+sets a flag byte and the step's spikes are then collected from the flags by a separate (not
+inlined) function, so that the spike buffers are plain arguments there (a buffer that may be
+reallocated inside the hot loop costs 3× in numba). With a branch per neuron the update cost ~1.5 ns
+per neuron-step; without, ~0.7 (N = 1 000, noise-free).
 Both kernels share their buffers, execution order, noise and ring-slot helpers. Each kernel is a
 dispatcher over a by-neuron and a by-tile run, inlined into it (a call costs numba a reference-count
 pair per array argument, ~0.3 µs per kernel call). Inside the per-step loops only scalar helpers are
@@ -53,6 +56,7 @@ import math
 import numpy as np
 from numba import njit
 
+from flowtact.blocks.spiking._bitops import trailing_zeros
 from flowtact.blocks.spiking._spike_history import ring_add
 from flowtact.blocks.spiking.normal_draws import fill_normal, fill_normal_py, seed_state
 
@@ -263,21 +267,23 @@ def _draw_noise(noise_mode, rng, xi_ext, i, k0, out):  # type: ignore[no-untyped
 
 
 @njit(cache=True)
-def _grid_threshold(v, refc, n_clamp, k0, i, spk_step, spk_idx, n_spk):  # type: ignore[no-untyped-def]
-    """Threshold → reset → refractory count on one tile (``v``, ``refc`` are its views, ``k0`` its
-    first neuron) at step ``i``; returns the new spike count.
+def _collect_fired(fired_words, n_fired, k0, i, spk_step, spk_idx, n_spk):  # type: ignore[no-untyped-def]
+    """Append the ``n_fired`` spikes of step ``i`` to the buffers, in neuron order: the set bytes of a
+    tile's fired flags (one byte per neuron, read 8 at a time), the first neuron being ``k0``.
 
-    A separate function so that the spike buffers are fixed arrays inside the hot loop.
+    A separate function so that the spike buffers are fixed arrays inside its loop; the update loop
+    itself stays branch-free, so it vectorises (a branch per neuron there cost ~1.5 ns per step).
     """
-    for k in range(v.shape[0]):
-        if v[k] > 1.0:
-            v[k] = 0.0
-            refc[k] = n_clamp
+    w = 0
+    while n_fired > 0:
+        x = fired_words[w]
+        while x and n_fired > 0:  # bytes past the tile's end are stale: stop at the last spike
             spk_step[n_spk] = i
-            spk_idx[n_spk] = k0 + k
+            spk_idx[n_spk] = k0 + 8 * w + np.intp(trailing_zeros(x) >> np.uint64(3))
             n_spk += 1
-        elif refc[k] > 0:
-            refc[k] -= 1
+            n_fired -= 1
+            x &= x - np.uint64(1)
+        w += 1
     return n_spk
 
 
@@ -357,6 +363,8 @@ def _grid_tile_steps(
     a, b, s = coef[0, k0:k1], coef[1, k0:k1], coef[2, k0:k1]
     vl, g = coef[3, k0:k1], coef[4, k0:k1]
     drv, xr = work[0, k0:k1], work[1, k0:k1]
+    fired_words = work[2].view(np.uint64)  # the tile's flags from byte 0 (see _collect_fired)
+    fired = fired_words.view(np.uint8)
     for i in range(ib, ie):
         if n_in == 1:
             ui = u[i, 0]
@@ -374,22 +382,37 @@ def _grid_tile_steps(
             vo = v_out[i, k0:k1]
             for k in range(m):
                 vo[k] = vt[k]
+        if n_spk + m > spk_step.shape[0]:  # one call per buffer (see the module notes)
+            spk_step = _grow(spk_step, n_spk + m)
+            spk_idx = _grow(spk_idx, n_spk + m)
+        # update → threshold → reset → refractory count, with no branch (a spike is a flag byte)
+        n_fired = 0
         if noise_mode == NOISE_OFF:
             for k in range(m):
                 d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
+                r = rt[k]
                 vn = vt[k] * a[k] + d * b[k]
-                vt[k] = vn if rt[k] == 0 else 0.0
+                vn = vn if r == 0 else 0.0
+                spike = vn > 1.0
+                vt[k] = 0.0 if spike else vn
+                rt[k] = n_clamp if spike else max(r - 1, 0)
+                fired[k] = spike
+                n_fired += spike
         else:
             _draw_noise(noise_mode, rng, xi_ext, i, k0, xr)
             for k in range(m):
                 d = min(max(drv[k], -DRIVE_MAX), DRIVE_MAX)
+                r = rt[k]
                 vn = vt[k] * a[k] + d * b[k] + s[k] * xr[k]
-                vt[k] = vn if rt[k] == 0 else 0.0
-        if n_spk + m > spk_step.shape[0]:  # one call per buffer (see the module notes)
-            spk_step = _grow(spk_step, n_spk + m)
-            spk_idx = _grow(spk_idx, n_spk + m)
+                vn = vn if r == 0 else 0.0
+                spike = vn > 1.0
+                vt[k] = 0.0 if spike else vn
+                rt[k] = n_clamp if spike else max(r - 1, 0)
+                fired[k] = spike
+                n_fired += spike
         n0 = n_spk
-        n_spk = _grid_threshold(vt, rt, n_clamp, k0, i, spk_step, spk_idx, n_spk)
+        if n_fired > 0:
+            n_spk = _collect_fired(fired_words, n_fired, k0, i, spk_step, spk_idx, n_spk)
         if n_lags > 0 and n_spk > n0:
             _add_history(ring, p, h_table, spk_idx, spk_off, n0, n_spk, 1.0)
         p = _next_slot(p, n_lags)
@@ -431,7 +454,7 @@ def lif_grid(
     noise_mode: int,  # 0 off, 1 internal generator, 2 external normals
     rng: np.ndarray,  # (4,) uint64 xoshiro256++ state, in/out
     xi_ext: np.ndarray,  # (T, N) external normals (noise_mode 2) else (0, N)
-    work: np.ndarray,  # (2, N) scratch
+    work: np.ndarray,  # (3, N) scratch
     v_out: np.ndarray,  # (T, N) membrane at each step's start, or (0, N)
     tile: int,  # neurons per tile (0: no tiling)
     cap_hint: int,  # expected number of spikes (initial size of the spike buffers)

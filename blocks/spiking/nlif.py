@@ -290,7 +290,7 @@ class Nlif(Block):
             n_work = 4
         else:
             coef = np.vstack([grid_coefficients(self._method, p["tau_s"], p["sigma"], dt), vl, g])
-            n_work = 2
+            n_work = 3
         # every per-neuron row (coefficients, v, refractory state, scratch) in one buffer whose
         # row stride is 256 bytes past a multiple of 4 KiB: no two rows a hot loop touches are
         # 4K-aliased (that alone costs ~30 % at N = 1000)

@@ -9,11 +9,14 @@ exponential tail beyond r = 3.654 for the base strip, or a fresh draw), so the d
 exact normal, tails included — no truncated table.
 
 The stream is one flat sequence per state: :func:`fill_normal` continues it whatever the request
-sizes (values are made in batches of :data:`BATCH`; the unused rest of a batch is kept in the state),
-so T calls of N values equal one call of T·N — the kernels' chunking invariance rests on this.
+sizes, so T calls of N values equal one call of T·N — the kernels' chunking invariance rests on this.
+Values are made in whole rounds of :data:`QUANTUM` = ROUNDS·LANES words (word ``j`` of a round from
+lane ``j % LANES``), straight into the caller's array (at most :data:`BATCH` per pass); only the last,
+partial round of a request goes through a buffer in the state, whose unused rest the next request
+takes first. The words, and so the values, do not depend on how a request is cut into rounds.
 
-State (uint64, :data:`STATE_WORDS`): ``[4·LANES lane words | 4 fix-up words | cursor | BATCH buffered
-values (float64 bits) | 2·BATCH scratch words]``.
+State (uint64, :data:`STATE_WORDS`): ``[4·LANES lane words | 4 fix-up words | cursor | QUANTUM
+buffered values (float64 bits) | BATCH + BATCH/64 scratch words]``.
 """
 
 from __future__ import annotations
@@ -21,22 +24,35 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
 
-__all__ = ["BATCH", "LANES", "STATE_SCRATCH", "STATE_WORDS", "fill_normal", "fill_normal_py", "seed_state"]
+from flowtact.blocks.spiking._bitops import bits_to_f64, trailing_zeros
+
+__all__ = [
+    "BATCH",
+    "LANES",
+    "QUANTUM",
+    "STATE_SCRATCH",
+    "STATE_WORDS",
+    "fill_normal",
+    "fill_normal_py",
+    "seed_state",
+]
 
 LANES = 32
-#: Words per lane made per load of its state (BATCH is a multiple of ROUNDS·LANES).
+#: Words per lane made per load of its state.
 ROUNDS = 4
+#: Values made per round of the lanes: the unit of a request (the rest of a round is buffered).
+QUANTUM = ROUNDS * LANES
+#: Most values made per pass (the size of the scratch; a multiple of QUANTUM).
 BATCH = 512
 _FIX = 4 * LANES
 _CUR = _FIX + 4
 _BUF = _CUR + 1
-_RAW = _BUF + BATCH
+_RAW = _BUF + QUANTUM
 _REJ = _RAW + BATCH
-STATE_WORDS = _REJ + BATCH
+_GROUPS = BATCH // 64
+STATE_WORDS = _REJ + _GROUPS
 #: Words of the state that carry the stream (the rest is scratch).
 STATE_SCRATCH = _RAW
 
@@ -84,18 +100,8 @@ def seed_state(rng: np.random.Generator) -> np.ndarray:
         fix[0] = np.uint64(0x9E3779B97F4A7C15)
     s[: 4 * LANES] = lanes.ravel()
     s[_FIX:_CUR] = fix
-    s[_CUR] = BATCH  # the buffer is empty
+    s[_CUR] = QUANTUM  # the buffer is empty
     return s
-
-
-@intrinsic
-def _bits_to_f64(typingctx, x):  # type: ignore[no-untyped-def]  # noqa: ARG001 — numba intrinsic signature
-    """Reinterpret a uint64 as the float64 with the same bits."""
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]  # noqa: ARG001
-        return builder.bitcast(args[0], ir.DoubleType())
-
-    return types.float64(types.uint64), codegen
 
 
 @njit(cache=True, inline="always")
@@ -172,50 +178,65 @@ def _finish(fix: np.ndarray, idx: int, u: float, neg: bool) -> float:
         # rejected: a whole new draw on the fix-up stream
         r = _next_u64(fix)
         idx = np.intp(r & np.uint64(0xFF))
-        u = _bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
+        u = bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
         neg = (r >> np.uint64(8)) & np.uint64(1) != 0
         if u < ZIG_ACCEPT[idx]:
             return -u * ZIG_X[idx] if neg else u * ZIG_X[idx]
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _fast_group(raw: np.ndarray, dst: np.ndarray, o: int) -> np.uint64:
+    """Words ``o … o+63``: the fast ziggurat value into ``dst`` (branch-free, the sign a factor ±1),
+    and a mask of the rejected ones (bit ``q`` for word ``o+q``). The loop vectorises (two gathers)."""
+    rejected = np.uint64(0)
+    for q in range(64):
+        r = raw[o + q]
+        idx = np.intp(r & np.uint64(0xFF))
+        u = bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
+        sign = bits_to_f64((((r >> np.uint64(8)) & np.uint64(1)) << np.uint64(63)) | np.uint64(_ONE_BITS))
+        dst[o + q] = u * ZIG_X[idx] * sign
+        rejected |= np.uint64(u >= ZIG_ACCEPT[idx]) << np.uint64(q)
+    return rejected
+
+
 @njit(cache=True)
 def _batch(state: np.ndarray, dst: np.ndarray) -> None:
-    """The next BATCH normals of the stream into ``dst``: a branch-free fast pass over all words
-    (the sign as a factor ±1), then the rare rejected words finished in order."""
-    raw = state[_RAW : _RAW + BATCH]
+    """The next ``len(dst)`` normals of the stream (a multiple of QUANTUM, at most BATCH): the fast
+    pass over all words, 64 at a time, then the rare rejected words (~1.2 %) finished in order,
+    found bit by bit in the masks (a scan of flags with a branch per word cost 0.4 ns per draw)."""
+    n = dst.shape[0]
+    groups = n // 64
+    raw = state[_RAW : _RAW + n]
     _lane_words(state[:_FIX], raw)
-    rej = state[_REJ : _REJ + BATCH]
-    n_rej = 0
-    for j in range(BATCH):
-        r = raw[j]
-        idx = np.intp(r & np.uint64(0xFF))
-        u = _bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
-        sign = _bits_to_f64((((r >> np.uint64(8)) & np.uint64(1)) << np.uint64(63)) | np.uint64(_ONE_BITS))
-        dst[j] = u * ZIG_X[idx] * sign
-        rej[n_rej] = j  # kept only when rejected: branch-free compaction
-        n_rej += u >= ZIG_ACCEPT[idx]
+    masks = state[_REJ : _REJ + groups]
+    for g in range(groups):
+        masks[g] = _fast_group(raw, dst, 64 * g)
     fix = state[_FIX:_CUR]
-    for q in range(n_rej):
-        j = np.intp(rej[q])
-        r = raw[j]
-        idx = np.intp(r & np.uint64(0xFF))
-        u = _bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
-        dst[j] = _finish(fix, idx, u, (r >> np.uint64(8)) & np.uint64(1) != 0)
+    for g in range(groups):
+        rejected = masks[g]
+        while rejected:
+            j = 64 * g + np.intp(trailing_zeros(rejected))
+            rejected &= rejected - np.uint64(1)
+            r = raw[j]
+            idx = np.intp(r & np.uint64(0xFF))
+            u = bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
+            dst[j] = _finish(fix, idx, u, (r >> np.uint64(8)) & np.uint64(1) != 0)
 
 
 @njit(cache=True)
 def fill_normal(state: np.ndarray, out: np.ndarray) -> None:
     """Fill ``out`` (1-D float64) with the next standard normals of the stream in ``state``."""
     n = out.shape[0]
-    buf = state[_BUF : _BUF + BATCH].view(np.float64)
+    buf = state[_BUF : _BUF + QUANTUM].view(np.float64)
     cur = np.intp(state[_CUR])
-    k = min(BATCH - cur, n)
+    k = min(QUANTUM - cur, n)
     for j in range(k):
         out[j] = buf[cur + j]
     cur += k
-    while n - k >= BATCH:
-        _batch(state, out[k : k + BATCH])
-        k += BATCH
+    while n - k >= QUANTUM:
+        m = min(BATCH, (n - k) // QUANTUM * QUANTUM)
+        _batch(state, out[k : k + m])
+        k += m
     if k < n:
         _batch(state, buf)
         cur = n - k
@@ -270,11 +291,11 @@ def fill_normal_py(state: np.ndarray, out: np.ndarray) -> None:
     """Pure-Python twin of :func:`fill_normal`: lane by lane, word by word (same bits)."""
     lanes = [[int(state[w * LANES + lane]) for w in range(4)] for lane in range(LANES)]
     fix = [int(x) for x in state[_FIX:_CUR]]
-    buf = state[_BUF : _BUF + BATCH].view(np.float64)
+    buf = state[_BUF : _BUF + QUANTUM].view(np.float64)
     cur = int(state[_CUR])
     for i in range(out.shape[0]):
-        if cur == BATCH:
-            for j in range(BATCH):
+        if cur == QUANTUM:
+            for j in range(QUANTUM):
                 idx, u, neg = _word_py(_xoshiro_py(lanes[j % LANES]))
                 if u < ZIG_ACCEPT[idx]:
                     buf[j] = -u * float(ZIG_X[idx]) if neg else u * float(ZIG_X[idx])

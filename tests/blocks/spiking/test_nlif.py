@@ -163,7 +163,7 @@ def _run_kernel(method, impl, n, u, noise, h, ref_s, chunks, tile, xi=None, seed
                 u_first = uc[-1]
         else:
             args = (uc, coef, v, refc, n_clamp, ring, pos, h_tab, mode, state, xic)
-            s, k, pos = _call(impl, args, v_out, 2, tile)
+            s, k, pos = _call(impl, args, v_out, 3, tile)
         steps.append(np.asarray(s) + start)
         idx.append(np.asarray(k))
         vs.append(v_out)

@@ -186,7 +186,7 @@ def _kernel_membrane(integrator, dt, xi, sigma, tau=TAU, v_leak=0.0, u=0.0):
         np.vstack([grid_coefficients(integrator, tau_a, sig, dt), np.full(n, v_leak), np.ones(n)])
     )
     lif_grid(np.full((n_t, 1), u), coef, v, np.zeros(n, np.int64), 0, ring, 0, h, NOISE_EXTERNAL,
-             seed_state(np.random.default_rng(0)), xi, np.zeros((2, n)), v_out, 0, 16)  # fmt: skip
+             seed_state(np.random.default_rng(0)), xi, np.zeros((3, n)), v_out, 0, 16)  # fmt: skip
     return v_out
 
 

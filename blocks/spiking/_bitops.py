@@ -1,0 +1,35 @@
+"""Two LLVM one-liners the spiking kernels need and numba does not offer: a uint64's bits as a
+float64, and the count of trailing zero bits (to walk a word's set bits without a branch per bit)."""
+
+from __future__ import annotations
+
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+
+__all__ = ["bits_to_f64", "trailing_zeros"]
+
+
+@intrinsic
+def bits_to_f64(typingctx, x):  # type: ignore[no-untyped-def]  # noqa: ARG001 — numba intrinsic signature
+    """Reinterpret a uint64 as the float64 with the same bits."""
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]  # noqa: ARG001
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(types.uint64), codegen
+
+
+@intrinsic
+def trailing_zeros(typingctx, x):  # type: ignore[no-untyped-def]  # noqa: ARG001 — numba intrinsic signature
+    """The number of trailing zero bits of a nonzero uint64 (one ``tzcnt`` instruction)."""
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]  # noqa: ARG001
+        i64 = ir.IntType(64)
+        try:
+            fn = builder.module.get_global("llvm.cttz.i64")
+        except KeyError:
+            fn = ir.Function(builder.module, ir.FunctionType(i64, [i64, ir.IntType(1)]), "llvm.cttz.i64")
+        return builder.call(fn, [args[0], ir.Constant(ir.IntType(1), 1)])
+
+    return types.uint64(types.uint64), codegen
