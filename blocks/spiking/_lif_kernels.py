@@ -123,15 +123,14 @@ def _grow(a: np.ndarray, need: int) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _spike_buffers(n_t, n, cap_hint, with_offsets):  # type: ignore[no-untyped-def]
-    """Empty (steps, offsets, neurons) spike buffers for about ``cap_hint`` spikes.
-
-    The offsets buffer (crossing times inside a step) stays empty unless ``with_offsets``.
-    """
-    cap = max(16, min(n_t * n, cap_hint))
-    spk_step = np.empty(cap, np.int64)
-    spk_off = np.empty(cap if with_offsets else 0)
-    return spk_step, spk_off, np.empty_like(spk_step)
+def _given_buffers(spk_step, spk_off, spk_idx, with_offsets):  # type: ignore[no-untyped-def]
+    """The caller's spike buffers (steps, offsets, neurons) cut to a common length, the offsets
+    empty unless ``with_offsets``: the kernels write past no end they were not told of."""
+    cap = min(spk_step.shape[0], spk_idx.shape[0])
+    if with_offsets:
+        cap = min(cap, spk_off.shape[0])
+        return spk_step[:cap], spk_off[:cap], spk_idx[:cap]
+    return spk_step[:cap], spk_off[:0], spk_idx[:cap]
 
 
 @njit(cache=True)
@@ -167,10 +166,10 @@ def _sort_by_step(steps: np.ndarray, idx: np.ndarray, off: np.ndarray, i0: int, 
 
 @njit(cache=True, inline="always")
 def _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t):  # type: ignore[no-untyped-def]
-    """The ``n_spk`` spikes of a neuron-major run (neuron by neuron), sorted by step then neuron."""
-    spk_step, spk_off, spk_idx = spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]
+    """The buffers, their first ``n_spk`` spikes (of a neuron-major run, neuron by neuron) sorted
+    in place by step then neuron."""
     if n > 1:
-        _sort_by_step(spk_step, spk_idx, spk_off, 0, n_t)
+        _sort_by_step(spk_step[:n_spk], spk_idx[:n_spk], spk_off[:n_spk], 0, n_t)
     return spk_step, spk_off, spk_idx
 
 
@@ -340,7 +339,7 @@ def _grid_by_neuron(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, r
             u, k, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode != NOISE_OFF, xi, v_out,
             spk_step, spk_idx, n_spk,
         )  # fmt: skip
-    return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), pos_end
+    return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), n_spk, pos_end
 
 
 @njit(cache=True, inline="always")
@@ -438,7 +437,7 @@ def _grid_by_tile(
             )  # fmt: skip
         if tile < n:
             _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], spk_off[nb0:n_spk], ib, ie - ib)
-    return (spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]), pos_end
+    return (spk_step, spk_off, spk_idx), n_spk, pos_end
 
 
 @njit(cache=True)
@@ -457,23 +456,25 @@ def lif_grid(
     work: np.ndarray,  # (3, N) scratch
     v_out: np.ndarray,  # (T, N) membrane at each step's start, or (0, N)
     tile: int,  # neurons per tile (0: no tiling)
-    cap_hint: int,  # expected number of spikes (initial size of the spike buffers)
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """All ``T`` steps of a grid integrator; returns (spike steps, spike neurons, ring pos).
+    spk_step: np.ndarray,  # int64 buffer for the spikes' steps (any length; grown when too short)
+    spk_idx: np.ndarray,  # int64 buffer for the spikes' neurons, as long as spk_step
+) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """All ``T`` steps of a grid integrator; returns (step buffer, neuron buffer, spike count, ring
+    pos): the first ``count`` entries of the buffers are the spikes.
 
     Spikes come sorted by step, then neuron. Neurons are processed in tiles that stay in cache
     for the whole chunk; the internal noise generator is sequential, so it forces one tile.
     """
-    bufs = _spike_buffers(u.shape[0], v.shape[0], cap_hint, False)
+    bufs = _given_buffers(spk_step, np.empty(0), spk_idx, False)
     if _neuron_major(v.shape[0], noise_mode):
-        spikes, pos_end = _grid_by_neuron(
+        spikes, n_spk, pos_end = _grid_by_neuron(
             u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs
         )
     else:
-        spikes, pos_end = _grid_by_tile(
+        spikes, n_spk, pos_end = _grid_by_tile(
             u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile, bufs
         )
-    return spikes[0], spikes[2], pos_end
+    return spikes[0], spikes[2], n_spk, pos_end
 
 
 def _ring_add_py(ring: np.ndarray, pos: int, k: int, h_table: np.ndarray, frac: float) -> None:
@@ -488,7 +489,8 @@ def _ring_add_py(ring: np.ndarray, pos: int, k: int, h_table: np.ndarray, frac: 
 
 def lif_grid_py(u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, v_out):  # type: ignore[no-untyped-def]
     """Plain-numpy twin of :func:`lif_grid`: the same arguments but the scratch and tuning ones
-    (``work``, ``tile``, ``cap_hint``), the same results; one step at a time."""
+    (``work``, ``tile``, the spike buffers); returns (steps, neurons, ring pos), the spikes the
+    kernel's buffers hold; one step at a time."""
     n_t = u.shape[0]
     n_lags = ring.shape[1]
     a, b, s, vl, g = coef
@@ -645,7 +647,7 @@ def _interp_by_neuron(
             u_first, u, k, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode != NOISE_OFF, xi, v_out,
             spk_step, spk_off, spk_idx, n_spk,
         )  # fmt: skip
-    return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), pos_end
+    return _sorted_spikes(spk_step, spk_off, spk_idx, n_spk, n, n_t), n_spk, pos_end
 
 
 @njit(cache=True, inline="always")
@@ -741,7 +743,7 @@ def _interp_by_tile(
             )  # fmt: skip
         if tile < n:
             _sort_by_step(spk_step[nb0:n_spk], spk_idx[nb0:n_spk], spk_off[nb0:n_spk], ib, ie - ib)
-    return (spk_step[:n_spk], spk_off[:n_spk], spk_idx[:n_spk]), pos_end
+    return (spk_step, spk_off, spk_idx), n_spk, pos_end
 
 
 @njit(cache=True)
@@ -762,29 +764,33 @@ def lif_interp(
     work: np.ndarray,  # (4, N) scratch
     v_out: np.ndarray,  # (T, N) membrane at each step's END, or (0, N)
     tile: int,
-    cap_hint: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    spk_step: np.ndarray,  # int64 buffer for the spikes' steps (any length; grown when too short)
+    spk_off: np.ndarray,  # float64 buffer for their offsets, as long as spk_step
+    spk_idx: np.ndarray,  # int64 buffer for their neurons, as long as spk_step
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
     """All ``T`` steps of the interpolating integrator.
 
-    Returns (spike steps, offsets of the crossings inside their steps in s, neurons, ring pos),
-    sorted by step then neuron (not by crossing time inside a step).
+    Returns (step buffer, buffer of the crossings' offsets inside their steps in s, neuron buffer,
+    spike count, ring pos): the first ``count`` entries are the spikes, sorted by step then neuron
+    (not by crossing time inside a step).
     """
-    bufs = _spike_buffers(u.shape[0], v.shape[0], cap_hint, True)
+    bufs = _given_buffers(spk_step, spk_off, spk_idx, True)
     if _neuron_major(v.shape[0], noise_mode):
-        spikes, pos_end = _interp_by_neuron(
+        spikes, n_spk, pos_end = _interp_by_neuron(
             u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, v_out, bufs
         )
     else:
-        spikes, pos_end = _interp_by_tile(
+        spikes, n_spk, pos_end = _interp_by_tile(
             u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, work, v_out, tile,
             bufs,
         )  # fmt: skip
-    return spikes[0], spikes[1], spikes[2], pos_end
+    return spikes[0], spikes[1], spikes[2], n_spk, pos_end
 
 
 def lif_interp_py(u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, v_out):  # type: ignore[no-untyped-def]
     """Plain-numpy twin of :func:`lif_interp`: the same arguments but the scratch and tuning ones
-    (``work``, ``tile``, ``cap_hint``), the same results; one step at a time. Each neuron's
+    (``work``, ``tile``, the spike buffers); returns (steps, offsets, neurons, ring pos), the spikes
+    the kernel's buffers hold; one step at a time. Each neuron's
     crossing and restart is the kernel's own scalar code (``_interp_cross``) run as Python."""
     n_t = u.shape[0]
     n = v.shape[0]

@@ -127,10 +127,15 @@ def _coef(method, n, rng, dt, sigma):
 
 
 def _call(impl, args, v_out, n_work, tile):
-    """``impl(*args, …)``: the numpy twins take no scratch rows, tile size or capacity hint."""
+    """``impl(*args, …)``, its spikes as the twins return them: the numpy twins take no scratch
+    rows, tile size or spike buffers (short ones here, so that the kernels must grow them)."""
     if impl in (lif_grid_py, lif_interp_py):
         return impl(*args, v_out)
-    return impl(*args, np.zeros((n_work, v_out.shape[1])), v_out, tile, 64)
+    bufs = [np.empty(3, np.int64), np.empty(5), np.empty(4, np.int64)]
+    if impl is lif_grid:
+        del bufs[1]
+    *spikes, n, pos = impl(*args, np.zeros((n_work, v_out.shape[1])), v_out, tile, *bufs)
+    return (*(a[:n] for a in spikes), pos)
 
 
 def _run_kernel(method, impl, n, u, noise, h, ref_s, chunks, tile, xi=None, seed=0):

@@ -167,6 +167,11 @@ def test_threshold_free_membrane_error_and_order(integrator, bound_1ms, order):
 # -- noise (NUMERICS §5) -----------------------------------------------------------------------------
 
 
+def _spike_buffers():
+    """Empty (steps, offsets, neurons) spike buffers for a kernel call; it grows them as needed."""
+    return np.empty(16, np.int64), np.empty(16), np.empty(16, np.int64)
+
+
 def _kernel_membrane(integrator, dt, xi, sigma, tau=TAU, v_leak=0.0, u=0.0):
     """Threshold-free membrane from the kernel with the normals ``xi`` passed in."""
     n_t, n = xi.shape
@@ -180,13 +185,13 @@ def _kernel_membrane(integrator, dt, xi, sigma, tau=TAU, v_leak=0.0, u=0.0):
         )
         uu = np.full((n_t, 1), u)
         lif_interp(uu[0], uu, dt, coef, v, np.zeros(n), 0.0, ring, 0, h, NOISE_EXTERNAL, seed_state(np.random.default_rng(0)),
-                   xi, np.zeros((4, n)), v_out, 0, 16)  # fmt: skip
+                   xi, np.zeros((4, n)), v_out, 0, *_spike_buffers())  # fmt: skip
         return np.vstack([np.zeros(n), v_out[:-1]])  # v at each step's start, like the grid kernel
     coef = np.ascontiguousarray(
         np.vstack([grid_coefficients(integrator, tau_a, sig, dt), np.full(n, v_leak), np.ones(n)])
     )
     lif_grid(np.full((n_t, 1), u), coef, v, np.zeros(n, np.int64), 0, ring, 0, h, NOISE_EXTERNAL,
-             seed_state(np.random.default_rng(0)), xi, np.zeros((3, n)), v_out, 0, 16)  # fmt: skip
+             seed_state(np.random.default_rng(0)), xi, np.zeros((3, n)), v_out, 0, *_spike_buffers()[::2])  # fmt: skip
     return v_out
 
 
