@@ -20,6 +20,7 @@ from flowtact.block import (
     screen_nonfinite,
 )
 from flowtact.blocks.spiking._lif_kernels import (
+    NOISE_FILL,
     NOISE_INTERNAL,
     NOISE_OFF,
     grid_coefficients,
@@ -27,7 +28,7 @@ from flowtact.blocks.spiking._lif_kernels import (
     lif_grid,
     lif_interp,
     order_within_steps,
-    seed_state,
+    seed_streams,
 )
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.chunk import Chunk, StreamSpec
@@ -153,11 +154,13 @@ class NlifConfig(BadDataConfig):
                 raise self.error("h_offset_s", "must be > 0")
 
 
-def _row_buffer(n_rows: int, n: int) -> np.ndarray:
-    """Zeroed (n_rows, S) float64 rows, 4 KiB-aligned, S·8 bytes ≡ 256 (mod 4096), S ≥ n."""
+def _row_buffer(n_rows: int, n: int, first: int = 0) -> np.ndarray:
+    """Zeroed (n_rows, S) float64 rows, S·8 bytes ≡ 256 (mod 4096), S ≥ n; row ``r`` starts
+    ``256·(first + r)`` bytes past a 4 KiB boundary (rows of two such buffers with different
+    ``first`` rows are not 4K-aliased either)."""
     stride = -(-n // 512) * 512 + 32
-    raw = np.zeros(n_rows * stride * 8 + 4096, np.uint8)
-    base = -raw.ctypes.data % 4096
+    raw = np.zeros(n_rows * stride * 8 + 8192, np.uint8)
+    base = -raw.ctypes.data % 4096 + 256 * first % 4096
     return raw[base : base + n_rows * stride * 8].view(np.float64).reshape(n_rows, stride)
 
 
@@ -287,10 +290,10 @@ class Nlif(Block):
         vl, g = p["v_leak"], p["gain"]
         if self._method == "exp_interp":
             coef = np.vstack([interp_coefficients(p["tau_s"], p["sigma"], dt), vl, g])
-            n_work = 4
+            n_work = 3
         else:
             coef = np.vstack([grid_coefficients(self._method, p["tau_s"], p["sigma"], dt), vl, g])
-            n_work = 3
+            n_work = 2
         # every per-neuron row (coefficients, v, refractory state, scratch) in one buffer whose
         # row stride is 256 bytes past a multiple of 4 KiB: no two rows a hot loop touches are
         # 4K-aliased (that alone costs ~30 % at N = 1000)
@@ -301,6 +304,7 @@ class Nlif(Block):
         self._rl = rows[len(coef) + 1, :n]
         self._refc = rows[len(coef) + 2].view(np.int64)[:n]
         self._work = rows[len(coef) + 3 :]
+        self._xbuf = _row_buffer(1, max(NOISE_FILL, n), len(coef) + 3 + n_work)[0]
         w = p["h_weights"]
         if w and any(x != 0.0 for x in w):
             self._h = history_table(w, p["h_peaks_s"], p["h_offset_s"], dt)
@@ -310,7 +314,7 @@ class Nlif(Block):
             self._ring = np.zeros((n, 0))
         self._pos = 0
         self._noise = NOISE_INTERNAL if (p["sigma"] > 0).any() else NOISE_OFF
-        self._rng_state = seed_state(self.rng)
+        self._rng_state = seed_streams(self.rng, n)
         self._no_xi = np.zeros((0, n))
         self._no_v = np.zeros((0, n))
         self._last: np.ndarray | None = None
@@ -373,13 +377,13 @@ class Nlif(Block):
         if self._interp:
             steps, offs, idx, n, self._pos = lif_interp(
                 u_first, u, self._dt, self._coef, self._v, self._rl, self._ref_s, self._ring, self._pos,
-                self._h, self._noise, self._rng_state, self._no_xi, self._work, v_out, TILE, *self._spk,
+                self._h, self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
             )  # fmt: skip
             self._spk = (steps, offs, idx)
             return steps[:n], offs[:n], idx[:n]
         steps, idx, n, self._pos = lif_grid(
             u, self._coef, self._v, self._refc, self._n_clamp, self._ring, self._pos, self._h,
-            self._noise, self._rng_state, self._no_xi, self._work, v_out, TILE, *self._spk,
+            self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
         )  # fmt: skip
         self._spk = (steps, idx)
         return steps[:n], None, idx[:n]

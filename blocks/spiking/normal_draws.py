@@ -32,11 +32,11 @@ __all__ = [
     "BATCH",
     "LANES",
     "QUANTUM",
-    "STATE_SCRATCH",
     "STATE_WORDS",
     "fill_normal",
     "fill_normal_py",
     "seed_state",
+    "stream_words",
 ]
 
 LANES = 32
@@ -53,8 +53,6 @@ _RAW = _BUF + QUANTUM
 _REJ = _RAW + BATCH
 _GROUPS = BATCH // 64
 STATE_WORDS = _REJ + _GROUPS
-#: Words of the state that carry the stream (the rest is scratch).
-STATE_SCRATCH = _RAW
 
 _M64 = (1 << 64) - 1
 _ZIG_R = 3.6541528853610088
@@ -104,6 +102,13 @@ def seed_state(rng: np.random.Generator) -> np.ndarray:
     return s
 
 
+def stream_words(state: np.ndarray) -> np.ndarray:
+    """The words of a state that decide the rest of its stream: the lanes, the fix-up stream, the
+    cursor and the buffered values not yet handed out (consumed ones and scratch are left out)."""
+    cur = int(state[_CUR])
+    return np.concatenate([state[:_BUF], state[_BUF + cur : _BUF + QUANTUM]])
+
+
 @njit(cache=True, inline="always")
 def _rotl(x, k):  # type: ignore[no-untyped-def]
     return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
@@ -123,15 +128,10 @@ def _xoshiro(a0, a1, a2, a3):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
-def _next_u64(s: np.ndarray) -> np.uint64:
-    """One xoshiro256++ output of the scalar state ``s[0:4]``."""
-    r, s[0], s[1], s[2], s[3] = _xoshiro(s[0], s[1], s[2], s[3])
-    return r
-
-
-@njit(cache=True, inline="always")
-def _next_double(s: np.ndarray) -> float:
-    return float(_next_u64(s) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+def _next_double(a0, a1, a2, a3):  # type: ignore[no-untyped-def]
+    """A uniform double in [0, 1) from the scalar xoshiro256++ state: (value, new state words)."""
+    r, a0, a1, a2, a3 = _xoshiro(a0, a1, a2, a3)
+    return float(r >> np.uint64(11)) * (1.0 / 9007199254740992.0), a0, a1, a2, a3
 
 
 @njit(cache=True, error_model="numpy")
@@ -161,27 +161,38 @@ def _lane_words(lanes: np.ndarray, raw: np.ndarray) -> None:
             s0[lane], s1[lane], s2[lane], s3[lane] = a0, a1, a2, a3
 
 
-@njit(cache=True)
-def _finish(fix: np.ndarray, idx: int, u: float, neg: bool) -> float:
-    """The exact ziggurat after a failed fast test of word (layer ``idx``, uniform ``u``, sign):
-    the base strip's exponential tail, the wedge test, or a fresh draw from the ``fix`` stream."""
+@njit(cache=True, inline="always")
+def _finish(r, f0, f1, f2, f3):  # type: ignore[no-untyped-def]
+    """The exact ziggurat for word ``r`` after its failed fast test: the base strip's exponential
+    tail, the wedge test, or a fresh draw, on the fix-up stream ``f0 … f3`` (scalars, inlined:
+    an array argument cost a reference-count pair per rejected word). Returns (value, new state)."""
+    idx = np.intp(r & np.uint64(0xFF))
+    u = bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
+    neg = (r >> np.uint64(8)) & np.uint64(1) != 0
     while True:
         x = u * ZIG_X[idx]
         if idx == 0:  # beyond r: Marsaglia's tail algorithm
             while True:
-                xx = -_ZIG_INV_R * math.log1p(-_next_double(fix))
-                yy = -math.log1p(-_next_double(fix))
+                d1, f0, f1, f2, f3 = _next_double(f0, f1, f2, f3)
+                d2, f0, f1, f2, f3 = _next_double(f0, f1, f2, f3)
+                xx = -_ZIG_INV_R * math.log1p(-d1)
+                yy = -math.log1p(-d2)
                 if yy + yy > xx * xx:
-                    return -(_ZIG_R + xx) if neg else _ZIG_R + xx
-        if (ZIG_F[idx - 1] - ZIG_F[idx]) * _next_double(fix) + ZIG_F[idx] < math.exp(-0.5 * x * x):
-            return -x if neg else x
+                    x = _ZIG_R + xx
+                    break
+            break
+        d1, f0, f1, f2, f3 = _next_double(f0, f1, f2, f3)
+        if (ZIG_F[idx - 1] - ZIG_F[idx]) * d1 + ZIG_F[idx] < math.exp(-0.5 * x * x):
+            break
         # rejected: a whole new draw on the fix-up stream
-        r = _next_u64(fix)
+        r, f0, f1, f2, f3 = _xoshiro(f0, f1, f2, f3)
         idx = np.intp(r & np.uint64(0xFF))
         u = bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
         neg = (r >> np.uint64(8)) & np.uint64(1) != 0
         if u < ZIG_ACCEPT[idx]:
-            return -u * ZIG_X[idx] if neg else u * ZIG_X[idx]
+            x = u * ZIG_X[idx]
+            break
+    return (-x if neg else x), f0, f1, f2, f3
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -211,16 +222,14 @@ def _batch(state: np.ndarray, dst: np.ndarray) -> None:
     masks = state[_REJ : _REJ + groups]
     for g in range(groups):
         masks[g] = _fast_group(raw, dst, 64 * g)
-    fix = state[_FIX:_CUR]
+    f0, f1, f2, f3 = state[_FIX], state[_FIX + 1], state[_FIX + 2], state[_FIX + 3]
     for g in range(groups):
         rejected = masks[g]
         while rejected:
             j = 64 * g + np.intp(trailing_zeros(rejected))
             rejected &= rejected - np.uint64(1)
-            r = raw[j]
-            idx = np.intp(r & np.uint64(0xFF))
-            u = bits_to_f64((r >> np.uint64(12)) | np.uint64(_ONE_BITS)) - 1.0
-            dst[j] = _finish(fix, idx, u, (r >> np.uint64(8)) & np.uint64(1) != 0)
+            dst[j], f0, f1, f2, f3 = _finish(raw[j], f0, f1, f2, f3)
+    state[_FIX], state[_FIX + 1], state[_FIX + 2], state[_FIX + 3] = f0, f1, f2, f3
 
 
 @njit(cache=True)

@@ -9,6 +9,8 @@ import pytest
 from flowtact import BadDataError, ConfigError, SpecError, StreamSpec
 from flowtact.blocks.spiking._lif_kernels import (
     NOISE_EXTERNAL,
+    NOISE_FILL,
+    NOISE_GROUP,
     NOISE_INTERNAL,
     NOISE_OFF,
     fill_normal,
@@ -20,11 +22,13 @@ from flowtact.blocks.spiking._lif_kernels import (
     lif_interp,
     lif_interp_py,
     seed_state,
+    seed_streams,
 )
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.blocks.spiking.nlif import Nlif
-from flowtact.blocks.spiking.normal_draws import STATE_SCRATCH
+from flowtact.blocks.spiking.normal_draws import stream_words
 from flowtact.blocks.touch.presets import NEURON_PRESETS
+from flowtact.chunk import Chunk
 from flowtact.testing import assert_same, run_offline
 
 RATE = 1000.0
@@ -134,7 +138,8 @@ def _call(impl, args, v_out, n_work, tile):
     bufs = [np.empty(3, np.int64), np.empty(5), np.empty(4, np.int64)]
     if impl is lif_grid:
         del bufs[1]
-    *spikes, n, pos = impl(*args, np.zeros((n_work, v_out.shape[1])), v_out, tile, *bufs)
+    n = v_out.shape[1]
+    *spikes, n, pos = impl(*args, np.zeros((n_work, n)), np.zeros(max(NOISE_FILL, n)), v_out, tile, *bufs)
     return (*(a[:n] for a in spikes), pos)
 
 
@@ -145,7 +150,7 @@ def _run_kernel(method, impl, n, u, noise, h, ref_s, chunks, tile, xi=None, seed
     coef = _coef(method, n, rng, dt, 0.8 if noise else 0.0)
     h_tab = history_table((-0.4, -0.2, 0.1, -0.05), (0.002, 0.03), 0.004, dt) if h else np.zeros(1)
     ring = np.zeros((n, len(h_tab) - 1 if h else 0))
-    state = seed_state(np.random.default_rng(seed + 1))
+    state = seed_streams(np.random.default_rng(seed + 1), n)
     v = np.zeros(n)
     refc = np.zeros(n, np.int64)
     rl = np.zeros(n)
@@ -162,13 +167,13 @@ def _run_kernel(method, impl, n, u, noise, h, ref_s, chunks, tile, xi=None, seed
         v_out = np.empty((len(uc), n))
         if method == "exp_interp":
             args = (u_first, uc, dt, coef, v, rl, ref_s, ring, pos, h_tab, mode, state, xic)
-            s, o, k, pos = _call(impl, args, v_out, 4, tile)
+            s, o, k, pos = _call(impl, args, v_out, 3, tile)
             offs.append(np.asarray(o) + 0.0)
             if len(uc):
                 u_first = uc[-1]
         else:
             args = (uc, coef, v, refc, n_clamp, ring, pos, h_tab, mode, state, xic)
-            s, k, pos = _call(impl, args, v_out, 3, tile)
+            s, k, pos = _call(impl, args, v_out, 2, tile)
         steps.append(np.asarray(s) + start)
         idx.append(np.asarray(k))
         vs.append(v_out)
@@ -178,7 +183,7 @@ def _run_kernel(method, impl, n, u, noise, h, ref_s, chunks, tile, xi=None, seed
         "idx": np.concatenate(idx),
         "offs": np.concatenate(offs) if offs else None,
         "v": np.concatenate(vs),
-        "state": (v.copy(), refc.copy(), rl.copy(), ring.copy(), state[:STATE_SCRATCH].copy()),
+        "state": (v.copy(), refc.copy(), rl.copy(), ring.copy(), *(stream_words(row) for row in state)),
     }
 
 
@@ -194,11 +199,16 @@ def _split(total, sizes):
 
 
 @pytest.mark.parametrize("method", INTEGRATORS)
-@pytest.mark.parametrize("n", [1, 3, 20])
+@pytest.mark.parametrize("n", [1, 3, 12, 20])
 @pytest.mark.parametrize(
-    ("noise", "h", "ref_s"), [(False, False, 0.0), (True, True, 0.0035), (False, True, 0.002)]
-)
+    ("noise", "h", "ref_s"),
+    [(False, False, 0.0), (True, False, 0.0), (True, True, 0.0035), (False, True, 0.002), (True, True, 0.0),
+     (False, True, 0.0)],
+)  # fmt: skip
 def test_kernel_equals_numpy_twin(method, n, noise, h, ref_s):
+    """Every variant of the update loop (drive computed in it or read from a row, noise, refractory
+    counts, post-spike current), neuron-major (n ≤ 8) and tiled, shared (n = 12) and per-neuron
+    (n = 20) drive."""
     n_t = 400
     u = drive(n_t, n=n) if n == 20 else drive(n_t)[:, None]
     total = n_t - 1 if method == "exp_interp" else n_t
@@ -232,6 +242,35 @@ def test_kernel_tiling_and_chunking_do_not_change_results(method, n):
             np.testing.assert_array_equal(part[key], whole[key], err_msg=f"{key} tile={tile} sizes={sizes}")
 
 
+@pytest.mark.parametrize("method", INTEGRATORS)
+def test_noise_streams_of_large_populations(method):
+    """Beyond NOISE_GROUP neurons each group draws its own stream: the kernel (tiled by groups)
+    equals the twin, whatever the chunking, and the groups' noise is not the same numbers."""
+    n, n_t = NOISE_GROUP + 37, 24
+    u = drive(n_t)[:, None]
+    total = n_t - 1 if method == "exp_interp" else n_t
+    impl = lif_interp if method == "exp_interp" else lif_grid
+    twin = lif_interp_py if method == "exp_interp" else lif_grid_py
+    ref = _run_kernel(method, twin, n, u, True, False, 0.0, [total], tile=0)
+    for sizes in ([total], [1, 5, 9]):
+        fast = _run_kernel(method, impl, n, u, True, False, 0.0, _split(total, sizes), tile=0)
+        for key in ("steps", "idx", "v"):
+            np.testing.assert_array_equal(fast[key], ref[key], err_msg=f"{key} sizes={sizes}")
+        for a, b in zip(fast["state"], ref["state"], strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert len(ref["state"]) == 4 + 2  # two streams
+
+
+def test_noise_groups_are_independent_streams():
+    """Identical neurons in two noise groups do not share their noise (each group is seeded apart)."""
+    blk = Nlif(n=NOISE_GROUP + 4, sigma=1.0)
+    blk.bind({"x": StreamSpec(rate_hz=RATE)}, seed=2, demanded=frozenset({"v"}))
+    t = np.arange(50) / RATE
+    v = blk(x=Chunk(t, np.full(50, 0.5)))["v"].data
+    assert np.all(v[1:, :4] != v[1:, NOISE_GROUP:])
+    assert np.all(v[1:, :4] != v[1:, 4:8])
+
+
 def test_external_noise_equals_internal_stream():
     """Noise mode 'external' with the normals the internal generator would draw gives the same run."""
     n, n_t = 5, 300
@@ -256,7 +295,7 @@ def test_normal_generator_twin():
     for lo, hi in ((0, 1000), (1000, 5000)):
         fill_normal_py(st2, b[lo:hi])
     np.testing.assert_array_equal(a, b)
-    np.testing.assert_array_equal(st[:STATE_SCRATCH], st2[:STATE_SCRATCH])
+    np.testing.assert_array_equal(stream_words(st), stream_words(st2))
 
 
 # -- the block ----------------------------------------------------------------------------------

@@ -12,11 +12,12 @@ from scipy.optimize import brentq
 from flowtact import SpecError, StreamSpec
 from flowtact.blocks.spiking._lif_kernels import (
     NOISE_EXTERNAL,
+    NOISE_FILL,
     grid_coefficients,
     interp_coefficients,
     lif_grid,
     lif_interp,
-    seed_state,
+    seed_streams,
 )
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.chunk import Chunk
@@ -184,14 +185,15 @@ def _kernel_membrane(integrator, dt, xi, sigma, tau=TAU, v_leak=0.0, u=0.0):
             np.vstack([interp_coefficients(tau_a, sig, dt), np.full(n, v_leak), np.ones(n)])
         )
         uu = np.full((n_t, 1), u)
-        lif_interp(uu[0], uu, dt, coef, v, np.zeros(n), 0.0, ring, 0, h, NOISE_EXTERNAL, seed_state(np.random.default_rng(0)),
-                   xi, np.zeros((4, n)), v_out, 0, *_spike_buffers())  # fmt: skip
+        lif_interp(uu[0], uu, dt, coef, v, np.zeros(n), 0.0, ring, 0, h, NOISE_EXTERNAL, seed_streams(np.random.default_rng(0), n),
+                   xi, np.zeros((3, n)), np.zeros(max(NOISE_FILL, n)), v_out, 0, *_spike_buffers())  # fmt: skip
         return np.vstack([np.zeros(n), v_out[:-1]])  # v at each step's start, like the grid kernel
     coef = np.ascontiguousarray(
         np.vstack([grid_coefficients(integrator, tau_a, sig, dt), np.full(n, v_leak), np.ones(n)])
     )
     lif_grid(np.full((n_t, 1), u), coef, v, np.zeros(n, np.int64), 0, ring, 0, h, NOISE_EXTERNAL,
-             seed_state(np.random.default_rng(0)), xi, np.zeros((3, n)), v_out, 0, *_spike_buffers()[::2])  # fmt: skip
+             seed_streams(np.random.default_rng(0), n), xi, np.zeros((2, n)), np.zeros(max(NOISE_FILL, n)), v_out, 0,
+             *_spike_buffers()[::2])  # fmt: skip
     return v_out
 
 
