@@ -54,6 +54,13 @@ _PER_NEURON = ("tau_s", "v_leak", "gain", "sigma")
 _F64 = np.dtype(np.float64)
 #: Neurons per cache tile in the kernels (noise-free runs; see lif_kernels).
 TILE = 4096
+#: Spikes per neuron-step the spike buffers are sized for before the first call (62 per neuron and
+#: second at 1 kHz; later calls use the rate seen last, × 1.25). The kernels grow short buffers
+#: themselves, but in fresh 4 KiB pages at ~4 µs a fault on a virtual machine: from 4 096 entries,
+#: a first 1 s chunk at N = 100 000 cost 300 against 110 ms.
+SPIKE_RATE_GUESS = 1 / 16
+#: Most spike-buffer entries reserved ahead of a call (64 MiB a buffer); beyond it the kernels grow.
+SPIKE_RESERVE_MAX = 1 << 23
 
 
 @dataclass(frozen=True)
@@ -162,6 +169,14 @@ def _row_buffer(n_rows: int, n: int, first: int = 0) -> np.ndarray:
     raw = np.zeros(n_rows * stride * 8 + 8192, np.uint8)
     base = -raw.ctypes.data % 4096 + 256 * first % 4096
     return raw[base : base + n_rows * stride * 8].view(np.float64).reshape(n_rows, stride)
+
+
+def _spike_buffers(cap: int, offsets: bool) -> tuple[np.ndarray, ...]:
+    """Empty spike buffers (steps, [offsets,] neurons) of ``cap`` entries, allocated by numpy (which
+    asks for huge pages from 4 MiB on)."""
+    if offsets:
+        return np.empty(cap, np.int64), np.empty(cap), np.empty(cap, np.int64)
+    return np.empty(cap, np.int64), np.empty(cap, np.int64)
 
 
 class Nlif(Block):
@@ -323,11 +338,8 @@ class Nlif(Block):
         self._end: float | None = None
         # spike buffers the kernels fill and grow, kept across calls: a fresh 40 MB buffer per call
         # (N = 100 000, 1 s chunks) cost ~0.3 ns per neuron-step in page faults alone
-        cap = 4096
-        if self._method == "exp_interp":
-            self._spk = (np.empty(cap, np.int64), np.empty(cap), np.empty(cap, np.int64))
-        else:
-            self._spk = (np.empty(cap, np.int64), np.empty(cap, np.int64))
+        self._spk: tuple[np.ndarray, ...] = ()
+        self._spike_rate = SPIKE_RATE_GUESS
         self._hold = self.config.on_bad_data == "hold"
         self._interp = self._method == "exp_interp"
         self._want_v = "v" in self.demanded
@@ -374,18 +386,24 @@ class Nlif(Block):
         baseline of the nlif suite (`flowtact bench nlif`) use it.
         """
         v_out = self._no_v if v_out is None else v_out
+        steps_in = u.shape[0] * self._n
+        need = min(SPIKE_RESERVE_MAX, math.ceil(steps_in * self._spike_rate * 1.25))
+        if not self._spk or need > self._spk[0].shape[0]:
+            self._spk = _spike_buffers(max(4096, need), self._interp)
         if self._interp:
             steps, offs, idx, n, self._pos = lif_interp(
                 u_first, u, self._dt, self._coef, self._v, self._rl, self._ref_s, self._ring, self._pos,
                 self._h, self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
             )  # fmt: skip
             self._spk = (steps, offs, idx)
+            self._spike_rate = n / max(steps_in, 1)
             return steps[:n], offs[:n], idx[:n]
         steps, idx, n, self._pos = lif_grid(
             u, self._coef, self._v, self._refc, self._n_clamp, self._ring, self._pos, self._h,
             self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
         )  # fmt: skip
         self._spk = (steps, idx)
+        self._spike_rate = n / max(steps_in, 1)
         return steps[:n], None, idx[:n]
 
     def _step_grid(self, t: np.ndarray, u: np.ndarray) -> dict[str, Chunk]:
