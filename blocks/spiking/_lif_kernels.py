@@ -2,8 +2,8 @@
 
 Model (normalised, NUMERICS §3, §5): ``dv = (−(v − v_leak) + g·u(t) + I_hist(t))/τ dt + σ dW``,
 threshold 1 (``v > 1``), reset 0. All kernels process a chunk of ``T`` input samples for ``N``
-neurons, mutate the carried state arrays in place and may stop early at a step boundary when the
-spike buffers could overflow (they return the number of steps done; the caller resumes).
+neurons, mutate the carried state arrays in place and write the spikes into the caller's buffers,
+growing them when short (they return the buffers and the spike count).
 
 Grid kernel (``lif_grid``): one update per input sample, ``v ← v·a + D·b + s·ξ`` with the drive
 ``D = v_leak + g·u_i + I_hist[i]`` held over the step, then threshold → reset (Brian2's order).
@@ -24,8 +24,11 @@ drive of 1e100 fires at every allowed step anyway. Non-finite inputs never reach
 block applies its bad-data policy first).
 
 Noise: exact standard normals from :mod:`normal_draws` (32 SIMD xoshiro256++ lanes feeding a
-256-layer ziggurat with its exact tail; one flat stream per block), ``N`` draws per step in neuron
-order, so the stream is the same whatever the chunking; or from an external ``(T, N)`` array (tests).
+256-layer ziggurat with its exact tail). Each group of ``NOISE_GROUP`` (4 096) neurons draws from a
+stream of its own, seeded from the block's generator, one normal per neuron and step in (step,
+neuron) order, so the streams are the same whatever the chunking; a population of up to 4 096
+neurons is one stream. The normals of the next ``NOISE_FILL // m`` steps of a tile of ``m`` neurons
+come in one generator call. Or from an external ``(T, N)`` array (tests).
 
 Execution order (results are bit-identical whichever is used; the tests check it against the
 plain-numpy twins, which step one sample at a time):
@@ -34,14 +37,16 @@ plain-numpy twins, which step one sample at a time):
   (no per-step loop overhead; a single neuron is a ~4 ns/step dependency chain), spikes are then
   counting-sorted by step;
 * otherwise step-major over neuron tiles of ``tile`` neurons that stay in cache for a block of
-  ``TIME_BLOCK`` steps, the spikes of each block re-sorted by (step, neuron). The internal noise
-  generator is sequential in (step, neuron) order, so noisy populations run as one tile.
+  ``TIME_BLOCK`` steps; the tiles' spikes of each block are merged into (step, neuron) order by
+  whole runs. Noisy populations are tiled by their noise groups.
 
 In the tiled grid run, update → threshold → reset is one branch-free loop that vectorises: a spike
 sets a flag byte and the step's spikes are then collected from the flags by a separate (not
 inlined) function, so that the spike buffers are plain arguments there (a buffer that may be
-reallocated inside the hot loop costs 3× in numba). With a branch per neuron the update cost ~1.5 ns
-per neuron-step; without, ~0.7 (N = 1 000, noise-free).
+reallocated inside the hot loop costs 3× in numba). Its conditionals are :func:`select`, not
+``a if c else b``: numba lowers those to branches, and LLVM then vectorises the loop with masked
+loads and stores (``vmaskmovpd``), 3× slower on AMD Zen 3 (1.8 against 0.6 ns per neuron-step at
+N = 1 000, noise-free).
 Both kernels share their buffers, execution order, noise and ring-slot helpers. Each kernel is a
 dispatcher over a by-neuron and a by-tile run, inlined into it (a call costs numba a reference-count
 pair per array argument, ~0.3 µs per kernel call). Inside the per-step loops only scalar helpers are

@@ -61,6 +61,8 @@ TILE = 4096
 SPIKE_RATE_GUESS = 1 / 16
 #: Most spike-buffer entries reserved ahead of a call (64 MiB a buffer); beyond it the kernels grow.
 SPIKE_RESERVE_MAX = 1 << 23
+#: Spike-buffer entries at reset: a call of fewer neuron-steps needs no reservation (nor rate).
+SPIKE_BUFFER_MIN = 4096
 
 
 @dataclass(frozen=True)
@@ -171,6 +173,16 @@ def _row_buffer(n_rows: int, n: int, first: int = 0) -> np.ndarray:
     return raw[base : base + n_rows * stride * 8].view(np.float64).reshape(n_rows, stride)
 
 
+def _frozen_empty(dtype: type) -> np.ndarray:
+    a = np.empty(0, dtype)
+    a.flags.writeable = False
+    return a
+
+
+#: The arrays of a step without spikes, shared by every such chunk (read-only, as chunks' arrays are).
+_NO_T, _NO_IDX = _frozen_empty(np.float64), _frozen_empty(np.int64)
+
+
 def _spike_buffers(cap: int, offsets: bool) -> tuple[np.ndarray, ...]:
     """Empty spike buffers (steps, [offsets,] neurons) of ``cap`` entries, allocated by numpy (which
     asks for huge pages from 4 MiB on)."""
@@ -238,7 +250,8 @@ class Nlif(Block):
       state (the neuron then fires at its maximum rate and recovers); non-finite inputs are
       handled by ``on_bad_data`` before the kernel, so v is finite forever. State is float64.
     * Noise: one standard normal per neuron and step from a xoshiro256++/ziggurat stream seeded
-      from the block's random generator at reset — identical whatever the chunking.
+      from the block's random generator at reset (one stream per 4 096 neurons, so that large
+      populations run in cache-sized tiles) — identical whatever the chunking.
     * Presets: ``touch.SA1`` / ``touch.FA1`` (``flowtact.blocks.touch.presets``) are the Rager
       afferents; that module justifies each value (the paper does not print τ, V_leak, σ or h).
 
@@ -338,13 +351,12 @@ class Nlif(Block):
         self._end: float | None = None
         # spike buffers the kernels fill and grow, kept across calls: a fresh 40 MB buffer per call
         # (N = 100 000, 1 s chunks) cost ~0.3 ns per neuron-step in page faults alone
-        self._spk: tuple[np.ndarray, ...] = ()
+        self._spk = _spike_buffers(SPIKE_BUFFER_MIN, self._method == "exp_interp")
         self._spike_rate = SPIKE_RATE_GUESS
         self._hold = self.config.on_bad_data == "hold"
         self._interp = self._method == "exp_interp"
         self._want_v = "v" in self.demanded
         self._want_spikes = "spikes" in self.demanded
-        self._no_t = np.empty(0)
 
     # -- stepping ----------------------------------------------------------------------------
     def _empty(self) -> dict[str, Chunk]:
@@ -387,23 +399,26 @@ class Nlif(Block):
         """
         v_out = self._no_v if v_out is None else v_out
         steps_in = u.shape[0] * self._n
-        need = min(SPIKE_RESERVE_MAX, math.ceil(steps_in * self._spike_rate * 1.25))
-        if not self._spk or need > self._spk[0].shape[0]:
-            self._spk = _spike_buffers(max(4096, need), self._interp)
+        if steps_in > self._spk[0].shape[0]:  # a spike per neuron-step would not fit: reserve
+            need = min(SPIKE_RESERVE_MAX, math.ceil(steps_in * self._spike_rate * 1.25))
+            if need > self._spk[0].shape[0]:
+                self._spk = _spike_buffers(need, self._interp)
         if self._interp:
             steps, offs, idx, n, self._pos = lif_interp(
                 u_first, u, self._dt, self._coef, self._v, self._rl, self._ref_s, self._ring, self._pos,
                 self._h, self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
             )  # fmt: skip
             self._spk = (steps, offs, idx)
-            self._spike_rate = n / max(steps_in, 1)
+            if steps_in > SPIKE_BUFFER_MIN:
+                self._spike_rate = n / steps_in
             return steps[:n], offs[:n], idx[:n]
         steps, idx, n, self._pos = lif_grid(
             u, self._coef, self._v, self._refc, self._n_clamp, self._ring, self._pos, self._h,
             self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
         )  # fmt: skip
         self._spk = (steps, idx)
-        self._spike_rate = n / max(steps_in, 1)
+        if steps_in > SPIKE_BUFFER_MIN:
+            self._spike_rate = n / steps_in
         return steps[:n], None, idx[:n]
 
     def _step_grid(self, t: np.ndarray, u: np.ndarray) -> dict[str, Chunk]:
@@ -414,7 +429,9 @@ class Nlif(Block):
         self._end = t[-1].item() + self._dt
         out = {}
         if self._want_spikes:
-            out["spikes"] = Chunk(t[steps] if n_spk else self._no_t, idx.copy(), self._end)
+            out["spikes"] = (
+                Chunk(t[steps], idx.copy(), self._end) if n_spk else Chunk(_NO_T, _NO_IDX, self._end)
+            )
         if want_v:
             out["v"] = Chunk(t, v_out)
         return out
