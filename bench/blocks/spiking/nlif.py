@@ -6,8 +6,9 @@ Measures, in one run (one core, NUMBA_NUM_THREADS=1, median of repeats):
      the same chunks is the baseline (ratio = block / kernel). Bars (``exp``; every row is printed):
      ≥ 5e8 for N ≥ 1000 at σ = 0 and ≥ 1e8 for N = 1; with σ = 0.5 (issue 14) ≥ 5e8 at N = 1000
      and ≥ 3e8 at N = 100 000 (full runs only);
-     1b. the cost of the post-spike current (N = 1000, exp, 4 basis columns, ~140 taps), checked
-     against ≤ 2× the plain update; 1c. the exact normal generator's draws/s against NumPy's;
+     1b. the cost of the post-spike current (N = 1000, exp, 4 basis columns, 212 taps), checked
+     against ≤ 2× the plain update; 1c. the exact normal generator's draws/s against NumPy's (over
+     memory, and in the kernels' 4 096-value requests);
   2. throughput vs chunk size (N = 1000, exp, σ = 0);
   3. accuracy vs cost: mean |spike-time error| against the analytic solution (NUMERICS §3.2,
      179 spikes) and µs of CPU per neuron per simulated second, per integrator and dt; the
@@ -33,6 +34,7 @@ import numpy as np
 from flowtact.bench.peers.venv import VENVS, venv_python
 from flowtact.benchmark import Context, Suite
 from flowtact.benchmark.timing import spread, time_call
+from flowtact.blocks.spiking._lif_kernels import NOISE_FILL
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state
 from flowtact.chunk import Chunk, StreamSpec
@@ -341,24 +343,31 @@ def check_rate(ctx: Context, label: str, sigma: float, n: int) -> None:
 
 def normal_draw_rate(ctx: Context) -> None:
     """The kernels' exact normal generator (normal_draws) against NumPy's Generator.standard_normal,
-    both filling a preallocated 1e6 buffer 10 times."""
+    both filling a preallocated buffer: 1e6 values 10 times (the rate over memory), and NOISE_FILL
+    (4 096) values at a time, the kernels' own request, in cache."""
     ctx.step("normal draws")
-    out = np.empty(1_000_000)
+    _draw_pair(ctx, 1_000_000, 10, "")
+    _draw_pair(ctx, NOISE_FILL, 10_000_000 // NOISE_FILL, f", {NOISE_FILL} per call")
+
+
+def _draw_pair(ctx: Context, size: int, calls: int, tag: str) -> None:
+    """NumPy's and the kernels' generator, each filling one buffer of ``size`` ``calls`` times."""
+    out = np.empty(size)
     gen = np.random.default_rng(1)
     state = seed_state(np.random.default_rng(1))
 
     def numpy_draws(_: None) -> None:
-        for _ in range(10):
+        for _ in range(calls):
             gen.standard_normal(out=out)
 
     def flowtact_draws(_: None) -> None:
-        for _ in range(10):
+        for _ in range(calls):
             fill_normal(state, out)
 
-    ctx.speed("normal draws, numpy Generator.standard_normal", numpy_draws, 1e7, "draws/s", is_baseline=True,
-              setup=lambda: None, warmup=1)  # fmt: skip
-    ctx.speed("normal draws, nlif kernel (normal_draws.fill_normal)", flowtact_draws, 1e7, "draws/s",
-              baseline="normal draws, numpy Generator.standard_normal", setup=lambda: None, warmup=1)  # fmt: skip
+    base = f"normal draws, numpy Generator.standard_normal{tag}"
+    ctx.speed(base, numpy_draws, size * calls, "draws/s", is_baseline=True, setup=lambda: None, warmup=1)
+    ctx.speed(f"normal draws, nlif kernel (normal_draws.fill_normal){tag}", flowtact_draws, size * calls,
+              "draws/s", baseline=base, setup=lambda: None, warmup=1)  # fmt: skip
 
 
 def run_accuracy(ctx: Context) -> None:
