@@ -56,8 +56,8 @@ _F64 = np.dtype(np.float64)
 TILE = 4096
 #: Spikes per neuron-step the spike buffers are sized for before the first call (62 per neuron and
 #: second at 1 kHz; later calls use the rate seen last, × 1.25). The kernels grow short buffers
-#: themselves, but in fresh 4 KiB pages at ~4 µs a fault on a virtual machine: from 4 096 entries,
-#: a first 1 s chunk at N = 100 000 cost 300 against 110 ms.
+#: themselves, but doubling by doubling in numba's allocations, which get no huge pages: a large
+#: first chunk spent more time faulting pages in than integrating.
 SPIKE_RATE_GUESS = 1 / 16
 #: Most spike-buffer entries reserved ahead of a call (64 MiB a buffer); beyond it the kernels grow.
 SPIKE_RESERVE_MAX = 1 << 23
