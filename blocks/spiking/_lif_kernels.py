@@ -595,23 +595,8 @@ def lif_grid(
         )
     else:
         spikes, n_spk, pos_end = _grid_by_tile(
-            u,
-            coef,
-            v,
-            refc,
-            n_clamp,
-            ring,
-            pos,
-            h_table,
-            noise_mode,
-            rng,
-            xi_ext,
-            work,
-            xbuf,
-            v_out,
-            tile,
-            bufs,
-        )
+            u, coef, v, refc, n_clamp, ring, pos, h_table, noise_mode, rng, xi_ext, work, xbuf, v_out, tile, bufs
+        )  # fmt: skip
     return spikes[0], spikes[2], n_spk, pos_end
 
 
@@ -875,25 +860,8 @@ def _interp_tile_steps(  # noqa: C901 — one hot loop; see the docstring
 
 @njit(cache=True, inline="always")
 def _interp_by_tile(
-    u_first,
-    u,
-    dt,
-    coef,
-    v,
-    rl,
-    ref_s,
-    ring,
-    pos,
-    h_table,
-    noise_mode,
-    rng,
-    xi_ext,
-    work,
-    xbuf,
-    v_out,
-    tile,
-    bufs,
-):  # type: ignore[no-untyped-def]
+    u_first, u, dt, coef, v, rl, ref_s, ring, pos, h_table, noise_mode, rng, xi_ext, work, xbuf, v_out, tile, bufs
+):  # fmt: skip  # type: ignore[no-untyped-def]
     """The step-major interpolating run over neuron tiles that stay in cache for a block of steps."""
     n_t, n = u.shape[0], v.shape[0]
     spk_step, spk_off, spk_idx = bufs
