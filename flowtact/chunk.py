@@ -48,8 +48,8 @@ class Chunk:
         if not (self.t.flags.writeable or self.data.flags.writeable):
             return self
         t, d = self.t.view(), self.data.view()
-        t.flags.writeable = False
-        d.flags.writeable = False
+        t.setflags(write=False)
+        d.setflags(write=False)
         return Chunk(t, d, self.end)
 
 

@@ -31,8 +31,8 @@ class OutPlan:
     tail: tuple[int, ...]
     """The declared sample shape (``data.shape[1:]``)."""
     kind: tuple[np.dtype, tuple[int, ...]]
-    """(dtype, tail), one shared object per distinct kind in the plan: what a chunk admitted to
-    one stream is known to fit (compared by identity)."""
+    """(dtype, tail), one shared object per distinct kind in the plan (inputs' streams included):
+    what a chunk admitted to one stream is known to fit (compared by identity)."""
     now: tuple[list[Chunk], ...]
     """Inboxes of the consumers that get it this tick."""
     later: tuple[list[Chunk], ...]
@@ -57,13 +57,17 @@ class NodePlan:
     source: bool
     inputs: tuple[tuple[str | None, list[Chunk], Chunk, StreamSpec], ...]
     """(port passed to ``step`` or None when only drained, inbox, its empty chunk, its spec)."""
-    outs: dict[str, OutPlan] = field(default_factory=dict)
+    outs: tuple[OutPlan, ...] = ()
+    """Its demanded outputs, by port name."""
     kw: dict[str, Chunk] = field(default_factory=dict)
     """The keywords ``step`` is called with, refilled every step."""
     call: Callable[..., dict[str, Chunk]] | None = None
     """The block's ``step``, looked up when a run starts."""
     solo: bool = False
     """``call`` takes the node's one input as its first parameter (see :func:`takes_first`)."""
+    in_kind: tuple[np.dtype, tuple[int, ...]] | None = None
+    """The :attr:`OutPlan.kind` of its first input's stream: a chunk it hands on from there
+    unchanged to an output of this kind is already checked and sealed."""
 
 
 def build_plans(
@@ -72,6 +76,12 @@ def build_plans(
     """Node plans in execution order, and the (inbox, next-tick inbox) pairs of delay ports."""
     nodes: dict[str, NodePlan] = {}
     boxes: dict[tuple[str, str], list[Chunk]] = {}
+    kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
+
+    def kind_of(spec: StreamSpec) -> tuple[np.dtype, tuple[int, ...]]:
+        kind = (np.dtype(spec.dtype), tuple(spec.shape))
+        return kinds.setdefault(kind, kind)
+
     for n in plan.order:
         block = blocks[n]
         drained, passed = plan.needed[n], block.needed
@@ -82,6 +92,8 @@ def build_plans(
             spec = block.input_specs[p]
             inputs.append((p if p in passed else None, box, Chunk.empty(spec).readonly(), spec))
         nodes[n] = NodePlan(n, block, isinstance(block, Source), tuple(inputs))
+        if inputs:
+            nodes[n].in_kind = kind_of(inputs[0][3])
     later: dict[tuple[str, str], list[Chunk]] = {}
     routes: dict[tuple[str, str], list[tuple[str, str, bool]]] = {}
     for e in plan.active_edges:
@@ -90,26 +102,29 @@ def build_plans(
         if delayed:
             later.setdefault((e.dst, e.dst_port), [])
     recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in blocks}
-    kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
     for n, nd in nodes.items():
+        outs = []
         for p in sorted(plan.demanded[n]):
             spec = plan.specs[(n, p)]
             dst = routes.get((n, p), [])
             name = recorded.get((n, p))
-            kind = (np.dtype(spec.dtype), tuple(spec.shape))
-            nd.outs[p] = OutPlan(
-                port=p,
-                spec=spec,
-                dtype=kind[0],
-                tail=kind[1],
-                kind=kinds.setdefault(kind, kind),
-                now=tuple(boxes[(d, dp)] for d, dp, delayed in dst if not delayed),
-                later=tuple(later[(d, dp)] for d, dp, delayed in dst if delayed),
-                delayed_into=tuple(boxes[(d, dp)] for d, dp, delayed in dst if delayed),
-                record=name,
-                tally=name if name is not None else (f"{n}.{p}" if spec.events else None),
-                events=spec.events,
+            kind = kind_of(spec)
+            outs.append(
+                OutPlan(
+                    port=p,
+                    spec=spec,
+                    dtype=kind[0],
+                    tail=kind[1],
+                    kind=kind,
+                    now=tuple(boxes[(d, dp)] for d, dp, delayed in dst if not delayed),
+                    later=tuple(later[(d, dp)] for d, dp, delayed in dst if delayed),
+                    delayed_into=tuple(boxes[(d, dp)] for d, dp, delayed in dst if delayed),
+                    record=name,
+                    tally=name if name is not None else (f"{n}.{p}" if spec.events else None),
+                    events=spec.events,
+                )
             )
+        nd.outs = tuple(outs)
     return list(nodes.values()), [(boxes[k], v) for k, v in later.items()]
 
 
