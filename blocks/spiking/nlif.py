@@ -173,14 +173,8 @@ def _row_buffer(n_rows: int, n: int, first: int = 0) -> np.ndarray:
     return raw[base : base + n_rows * stride * 8].view(np.float64).reshape(n_rows, stride)
 
 
-def _frozen_empty(dtype: type) -> np.ndarray:
-    a = np.empty(0, dtype)
-    a.flags.writeable = False
-    return a
-
-
 #: The arrays of a step without spikes, shared by every such chunk (read-only, as chunks' arrays are).
-_NO_T, _NO_IDX = _frozen_empty(np.float64), _frozen_empty(np.int64)
+_NO_SPIKES = Chunk.empty(dtype="int64").readonly()
 
 
 def _spike_buffers(cap: int, offsets: bool) -> tuple[np.ndarray, ...]:
@@ -409,17 +403,15 @@ class Nlif(Block):
                 self._h, self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
             )  # fmt: skip
             self._spk = (steps, offs, idx)
-            if steps_in > SPIKE_BUFFER_MIN:
-                self._spike_rate = n / steps_in
-            return steps[:n], offs[:n], idx[:n]
-        steps, idx, n, self._pos = lif_grid(
-            u, self._coef, self._v, self._refc, self._n_clamp, self._ring, self._pos, self._h,
-            self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
-        )  # fmt: skip
-        self._spk = (steps, idx)
+        else:
+            steps, idx, n, self._pos = lif_grid(
+                u, self._coef, self._v, self._refc, self._n_clamp, self._ring, self._pos, self._h,
+                self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
+            )  # fmt: skip
+            self._spk, offs = (steps, idx), None
         if steps_in > SPIKE_BUFFER_MIN:
             self._spike_rate = n / steps_in
-        return steps[:n], None, idx[:n]
+        return steps[:n], None if offs is None else offs[:n], idx[:n]
 
     def _step_grid(self, t: np.ndarray, u: np.ndarray) -> dict[str, Chunk]:
         want_v = self._want_v
@@ -430,7 +422,9 @@ class Nlif(Block):
         out = {}
         if self._want_spikes:
             out["spikes"] = (
-                Chunk(t[steps], idx.copy(), self._end) if n_spk else Chunk(_NO_T, _NO_IDX, self._end)
+                Chunk(t[steps], idx.copy(), self._end)
+                if n_spk
+                else Chunk(_NO_SPIKES.t, _NO_SPIKES.data, self._end)
             )
         if want_v:
             out["v"] = Chunk(t, v_out)

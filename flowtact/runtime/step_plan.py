@@ -91,9 +91,8 @@ def build_plans(
             boxes[(n, p)] = box
             spec = block.input_specs[p]
             inputs.append((p if p in passed else None, box, Chunk.empty(spec).readonly(), spec))
-        nodes[n] = NodePlan(n, block, isinstance(block, Source), tuple(inputs))
-        if inputs:
-            nodes[n].in_kind = kind_of(inputs[0][3])
+        in_kind = kind_of(inputs[0][3]) if inputs else None
+        nodes[n] = NodePlan(n, block, isinstance(block, Source), tuple(inputs), in_kind=in_kind)
     later: dict[tuple[str, str], list[Chunk]] = {}
     routes: dict[tuple[str, str], list[tuple[str, str, bool]]] = {}
     for e in plan.active_edges:
