@@ -282,6 +282,8 @@ def test_deadlines_report_p50_p99_and_warn_on_violations(tmp_path, budget, misse
     assert path_stats["n"] > 100 and 0 < path_stats["p50_us"] <= path_stats["p99_us"]
     # the supervisor's own CPU, over the same after-warm-up window as the workers' (it is no worker)
     assert 0 <= summary["supervisor"]["cpu_pct"] <= 100 * os.cpu_count()
+    # running: tick 0 to the last worker's end, paced in real time; wall_s adds the start-up
+    assert 2.5 - 0.002 <= summary["running_s"] < summary["wall_s"]
     assert (path_stats["violations"] > 0) is missed
     assert ("deadline src -> gain" in stderr) is missed
 

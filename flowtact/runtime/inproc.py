@@ -53,6 +53,9 @@ class RunSummary:
     duration_s: float
     wall_s: float
     stopped_by: str
+    running_s: float | None = None
+    """Multi-process runs: seconds from tick 0 to the last worker's end, without the start-up
+    (spawning, compiling, wiring) that ``wall_s`` includes. None in process."""
     samples: dict[str, int] = field(default_factory=dict)
     events: dict[str, int] = field(default_factory=dict)
     event_units: dict[str, int] = field(default_factory=dict)
@@ -89,6 +92,7 @@ class RunSummary:
             "graph": self.graph,
             "duration_s": self.duration_s,
             "wall_s": self.wall_s,
+            "running_s": self.running_s,
             "realtime_factor": self.realtime_factor,
             "stopped_by": self.stopped_by,
             "realtime": self.realtime,

@@ -178,6 +178,8 @@ class ProcessExecutor:
         self.t_run = self.next_ping = time.monotonic()
         self.next_watch = 0.0
         self.t0_ns = 0
+        self.last_done_ns = 0
+        """When the last worker said it was done (monotonic ns): with t0_ns, the running span."""
         self.wplans = {
             g: self.placement.worker_plan(g, fast=self.fast, tick_s=self.tick_s, duration_s=duration_s)
             for g in self.placement.groups
@@ -485,6 +487,7 @@ class ProcessExecutor:
             self._on_stats(proc, msg)
             proc.counters = msg.get("counters", {})
             proc.done = True
+            self.last_done_ns = time.monotonic_ns()
             proc.state = "done"
         elif op == "error":
             raise _Failure(proc, msg)
@@ -848,6 +851,7 @@ class ProcessExecutor:
             graph=plan.graph.name,
             duration_s=now,
             wall_s=time.monotonic() - self.t_start,
+            running_s=(self.last_done_ns - self.t0_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
             stopped_by=stopped_by,
             samples=samples,
             events=events,
