@@ -7,7 +7,8 @@ Measures, in one run (one core, NUMBA_NUM_THREADS=1, median of repeats):
      ≥ 5e8 for N ≥ 1000 at σ = 0 and ≥ 1e8 for N = 1; with σ = 0.5 (issue 14) ≥ 5e8 at N = 1000
      and ≥ 3e8 at N = 100 000 (full runs only);
      1b. the cost of the post-spike current (N = 1000, exp, 4 basis columns, 212 taps), checked
-     against ≤ 2× the plain update; 1c. the exact normal generator's draws/s against NumPy's (over
+     against ≤ 2× the plain update, and its two parts: a spike's lags added to the ring, a slot
+     read per neuron-step; 1c. the exact normal generator's draws/s against NumPy's (over
      memory, and in the kernels' 4 096-value requests);
   2. throughput vs chunk size (N = 1000, exp, σ = 0);
   3. accuracy vs cost: mean |spike-time error| against the analytic solution (NUMERICS §3.2,
@@ -30,17 +31,22 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from flowtact.bench.peers.venv import VENVS, venv_python
 from flowtact.benchmark import Context, Suite
 from flowtact.benchmark.timing import spread, time_call
 from flowtact.blocks.spiking._lif_kernels import NOISE_FILL
-from flowtact.blocks.spiking.nlif import Nlif
+from flowtact.blocks.spiking._spike_history import history_table, ring_add
+from flowtact.blocks.spiking.nlif import NLIF_DEFAULTS, Nlif
 from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state
 from flowtact.chunk import Chunk, StreamSpec
 
 INTEGRATORS = ("exp", "euler", "exp_interp")
 TAU = 0.01
+RATE_HZ = 1000.0
+#: The post-spike current's weights in 1b (4 raised-cosine columns, inhibitory: 212 taps at 1 kHz).
+H_WEIGHTS = (-0.3, -0.2, -0.1, -0.05)
 
 
 def drive(n_t: int, rate: float) -> np.ndarray:
@@ -78,7 +84,7 @@ def throughput(
 ) -> float:
     """Neuron-steps/s of the block (figure ``label``) against the bare kernel on the same chunks
     (figure ``label (kernel)``, its baseline); returns spikes per neuron-second."""
-    rate = 1000.0
+    rate = RATE_HZ
     n_t = round(duration_s * rate)
     t = np.arange(n_t) / rate
     u = drive(n_t, rate)
@@ -320,12 +326,13 @@ def run_throughput(ctx: Context) -> None:
                     check_rate(ctx, label, sigma, n)
     ctx.table("Throughput, 1000-sample chunks at 1 kHz", ["integrator", "σ", "N", "neuron-steps/s (block)",
               "block / kernel", "spikes per neuron-s"], rows)  # fmt: skip
-    for h in ((), (-0.3, -0.2, -0.1, -0.05)):
-        throughput(ctx, f"post-spike current {'on' if h else 'off'}, exp, N=1000", 1000, "exp", 0.0,
-                   2.0 if ctx.quick else 10.0, 1000, h=h)  # fmt: skip
+    for h in ((), H_WEIGHTS):
+        spike_rate = throughput(ctx, f"post-spike current {'on' if h else 'off'}, exp, N=1000", 1000, "exp",
+                                0.0, 2.0 if ctx.quick else 10.0, 1000, h=h)  # fmt: skip
     on, off = (ctx.figures[f"post-spike current {w}, exp, N=1000"].median for w in ("on", "off"))
     ctx.check("post-spike current costs <= 2x the plain update (exp, N=1000)", off / on <= 2.0,
               f"{off / on:.2f}x ({on:.3g} on, {off:.3g} off neuron-steps/s)")  # fmt: skip
+    history_parts(ctx, spike_rate / RATE_HZ, off)
     normal_draw_rate(ctx)
     for chunk in (1, 10, 100, 1000) if ctx.quick else (1, 10, 100, 1000, 10_000):
         dur = 1.0 if chunk < 100 else (2.0 if ctx.quick else 10.0)
@@ -333,6 +340,55 @@ def run_throughput(ctx: Context) -> None:
 
 
 # issue 14: sigma = 0 at >= 5e8 for N >= 1000 (1e8 at N = 1); sigma > 0 at >= 5e8 (N = 1000), >= 3e8 (N = 100000)
+@njit(cache=True)
+def _ring_adds(ring: np.ndarray, h_table: np.ndarray, rows: np.ndarray) -> None:
+    """One spike per entry of ``rows`` into the ring, each at the next slot (the kernels' helper)."""
+    p = 0
+    for k in rows:
+        ring_add(ring, p, k, h_table, 0.0)
+        p = p + 1 if p + 1 < ring.shape[1] else 0
+
+
+@njit(cache=True)
+def _ring_reads(ring: np.ndarray, drive: np.ndarray, n_steps: int) -> None:
+    """The kernels' per-step read: every neuron's slot into its drive, then cleared."""
+    p = 0
+    for _ in range(n_steps):
+        column = ring[:, p]
+        for k in range(drive.shape[0]):
+            drive[k] += column[k]
+            column[k] = 0.0
+        p = p + 1 if p + 1 < ring.shape[1] else 0
+
+
+def history_parts(ctx: Context, spikes_per_step: float, plain_rate: float) -> None:
+    """1b's post-spike cost split into the ring's two parts (the kernels' own ``ring_add`` and read
+    loop), to show what the <= 2x bar leaves: adding a spike's lags, with the 1 000-neuron ring and
+    with an 8-neuron one that stays in L1, and reading and clearing one slot per neuron-step."""
+    h_table = history_table(H_WEIGHTS, NLIF_DEFAULTS["h_peaks_s"], NLIF_DEFAULTS["h_offset_s"], 1 / RATE_HZ)
+    n_lags = len(h_table) - 1
+    rows = np.random.default_rng(1).integers(0, 1000, 200_000)
+    add_ns = {}
+    for n in (1000, 8):
+        ring = np.zeros((n, n_lags))
+        label = f"post-spike ring, one spike's {n_lags} lags added, {n}-neuron ring"
+        fig = ctx.speed(label, lambda r, rows=rows % n: _ring_adds(r, h_table, rows), len(rows), "spikes/s",
+                        setup=lambda ring=ring: ring, warmup=1)  # fmt: skip
+        add_ns[n] = 1e9 / fig.median
+    ring, drive = np.zeros((1000, n_lags)), np.zeros(1000)
+    fig = ctx.speed("post-spike ring, a slot read and cleared per neuron-step, 1000-neuron ring",
+                    lambda r: _ring_reads(r, drive, 2000), 1000 * 2000, "neuron-steps/s", setup=lambda: ring,
+                    warmup=1)  # fmt: skip
+    read_ns, budget_ns = 1e9 / fig.median, 1e9 / plain_rate
+    parts = read_ns + spikes_per_step * add_ns[1000]
+    ctx.note(
+        f"Post-spike current, its parts: {spikes_per_step:.4f} spikes per neuron-step x {add_ns[1000]:.0f} ns "
+        f"per spike + {read_ns:.2f} ns per read = {parts:.2f} ns per neuron-step; the <= 2x bar leaves "
+        f"{budget_ns:.2f} ns (the plain update's cost). The spikes' adds alone, with the ring in L1 "
+        f"({add_ns[8]:.0f} ns per spike), cost {spikes_per_step * add_ns[8]:.2f} ns."
+    )
+
+
 def check_rate(ctx: Context, label: str, sigma: float, n: int) -> None:
     bar = (5e8 if n >= 1000 else 1e8) if sigma == 0.0 else (5e8 if n <= 1000 else 3e8)
     fig = ctx.figures[label]
