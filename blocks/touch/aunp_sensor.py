@@ -24,6 +24,9 @@ from .aunp_samples import SCENARIOS, sensor_samples, trial_constants
 __all__ = ["AunpSensor", "AunpSensorConfig"]
 
 _NO_NOISE = np.empty((0, 5))  # r and ref not demanded: no normals drawn
+#: Rows of normals drawn ahead: one generator call per this many one-sample steps, not one per step
+#: (numpy's generator makes the same values whatever the sizes of the requests).
+NOISE_AHEAD = 1024
 
 
 @dataclass(frozen=True)
@@ -225,13 +228,23 @@ class AunpSensor(Source):
         self.temp_phase = float(temp_rng.uniform(0.0, 2.0 * np.pi))
         self._scenario = SCENARIOS[self.config.scenario]
         self._p = trial_constants(self.config, self.temp_phase)
+        self._noise, self._noise_i = _NO_NOISE, 0
+
+    def _normals(self, n: int) -> np.ndarray:
+        """The next ``n`` rows of the noise stream (gauges 1..4, reference), from rows drawn ahead."""
+        i = self._noise_i
+        if i + n > self._noise.shape[0]:
+            fresh = self.noise_rng.standard_normal((max(n, NOISE_AHEAD), 5))
+            self._noise, i = np.concatenate([self._noise[i:], fresh]), 0
+        self._noise_i = i + n
+        return self._noise[i : i + n]
 
     def step(self, now: float) -> dict[str, Chunk]:
         c = self.config
         n = max(self.due(now, c.rate_hz) - self.i, 0)
         want = self.demanded
         noisy = "r" in want or "ref" in want
-        noise = self.noise_rng.standard_normal((n, 5)) if noisy else _NO_NOISE
+        noise = self._normals(n) if noisy else _NO_NOISE
         t, f, r, ref, temp = sensor_samples(self.i, n, c.rate_hz, self._scenario, self._p, noise)
         self.i += n
         made = {"r": r, "ref": ref, "temp_c": temp, "force": f}
