@@ -339,7 +339,6 @@ def run_throughput(ctx: Context) -> None:
         throughput(ctx, f"chunk {chunk}, exp, N=1000", 1000, "exp", 0.0, dur, chunk)
 
 
-# issue 14: sigma = 0 at >= 5e8 for N >= 1000 (1e8 at N = 1); sigma > 0 at >= 5e8 (N = 1000), >= 3e8 (N = 100000)
 @njit(cache=True)
 def _ring_adds(ring: np.ndarray, h_table: np.ndarray, rows: np.ndarray) -> None:
     """One spike per entry of ``rows`` into the ring, each at the next slot (the kernels' helper)."""
@@ -389,6 +388,7 @@ def history_parts(ctx: Context, spikes_per_step: float, plain_rate: float) -> No
     )
 
 
+# issue 14: sigma = 0 at >= 5e8 for N >= 1000 (1e8 at N = 1); sigma > 0 at >= 5e8 (N = 1000), >= 3e8 (N = 100000)
 def check_rate(ctx: Context, label: str, sigma: float, n: int) -> None:
     bar = (5e8 if n >= 1000 else 1e8) if sigma == 0.0 else (5e8 if n <= 1000 else 3e8)
     fig = ctx.figures[label]
