@@ -158,6 +158,62 @@ def test_targets_compare_with_the_right_baselines():
     assert rt["ratios"]["frame_bytes_s_flowtact_over_raw"] == pytest.approx(0.7)
 
 
+def test_issue_14_targets_are_ratios_to_raws_round_with_the_supervisor_counted():
+    lat = {"p50": 100.0, "p99": 300.0, "max": 900.0, "n": 10}
+    res = {
+        "raw": {
+            "small_1khz": {"latency_us": lat, "cpu_pct": {"source": 10.0, "stage": 10.0, "sink": 10.0}},
+            "floor_small_1khz": {"latency_us": lat},
+            "small_flat": {"throughput": {"delivered_msg_s": 20_000.0}},
+            "image_flat": {"throughput": {"bytes_s": 1e8}},
+        },
+        "chain": {
+            "latency_us": {**lat, "p50": 130.0, "p99": 391.0},
+            "cpu_max_pct": 15.0,
+            "cpu_pct": {"source": 14.0, "filter": 15.0, "sink": 15.0},
+            "supervisor_cpu_pct": 1.5,
+        },
+        "fast": {"small": {"samples_s": 14_000.0}, "image": {"bytes_s": 1e8}},
+    }
+    rt = transport.ratios_and_targets(res)
+    t = rt["targets"]
+    assert t["p50 latency <= 1.3 x raw's (issue 14)"]["pass"]  # 1.3 exactly is within the bar
+    assert not t["p99 latency <= 1.3 x raw's (issue 14)"]["pass"]  # 391 / 300 = 1.303
+    cpu = t["CPU per message, supervisor included, <= 1.5 x raw's (issue 14)"]
+    # 45.5 % against 30 % of a core at 1 kHz: without the supervisor it would be 1.47 and pass
+    assert (cpu["value_us"], cpu["raw_us"]) == pytest.approx((455.0, 300.0))
+    assert cpu["flowtact_over_raw"] == pytest.approx(455 / 300) and not cpu["pass"]
+    assert t["--fast small >= 0.7 x raw's msg/s (issue 14)"]["pass"]
+    assert t["<= 10 % of a core per process at 1 kHz"]["raw_busiest_pct"] == 10.0
+    assert t[">= 50 k small msg/s end to end"]["raw_msg_s"] == 20_000.0
+    res["fast"]["small"]["samples_s"] = 13_900.0
+    assert not transport.ratios_and_targets(res)["targets"]["--fast small >= 0.7 x raw's msg/s (issue 14)"][
+        "pass"
+    ]
+    del res["chain"]["supervisor_cpu_pct"]  # not measured: no CPU target rather than a flattering one
+    assert not any(k.startswith("CPU per message") for k in transport.ratios_and_targets(res)["targets"])
+
+
+def test_round_by_round_pairs_each_round_with_raws_own_round():
+    def rnd(raw_p99: float, ours_p99: float, cpu: float | None) -> dict:
+        lat = {"p50": 100.0, "max": 4000.0}
+        return {
+            "raw": {"small_1khz": {"latency_us": {**lat, "p99": raw_p99}, "cpu_pct": {"a": 10.0, "b": 10.0}}},
+            "chain": {
+                "latency_us": {**lat, "p50": 120.0, "p99": ours_p99, "max": 9000.0},
+                "cpu_pct": {"a": cpu, "b": 10.0},
+                "cpu_max_pct": 14.0,
+                "supervisor_cpu_pct": 1.0,
+            },
+        }
+
+    first = rnd(500.0, 600.0, 14.0)
+    first["raw"]["floor_small_1khz"] = {"latency_us": {"p99": 100.0}}  # measured in round 1 only
+    text = transport.round_by_round([first, rnd(800.0, 400.0, None)])
+    assert "round 1: p50 1.20, p99 1.20, CPU per message 1.25; worst latency 9.0 ms (raw 4.0)" in text
+    assert "round 2: p50 1.20, p99 0.50, CPU per message not measured" in text
+
+
 # -- bench-only blocks and graphs ------------------------------------------------------------------
 
 
