@@ -464,7 +464,7 @@ def round_by_round(rounds: list[dict[str, Any]]) -> str:
     on this machine (the checks judge the median round only)."""
     parts = []
     for i, r in enumerate(rounds, 1):
-        rt = ratios_and_targets({"raw": {**rounds[0]["raw"], **r["raw"]}, "chain": r["chain"]})["ratios"]
+        rt = ratios_and_targets(judged_round(rounds, r))["ratios"]
         cpu = rt.get("cpu_per_message_flowtact_over_raw")
         parts.append(
             f"round {i}: p50 {rt['p50_latency_flowtact_over_raw']:.2f}, p99 {rt['p99_latency_flowtact_over_raw']:.2f}, "
@@ -587,9 +587,13 @@ def median_round(rounds: list[dict[str, Any]]) -> dict[str, Any]:
     """The round whose flowtact chain p99 is the median one: the figures the targets are judged on
     come from one coherent run of each pipeline, not a mix of rounds."""
     order = sorted(range(len(rounds)), key=lambda i: rounds[i]["chain"]["latency_us"]["p99"] or 0.0)
-    mid = rounds[order[len(order) // 2]]
-    first = rounds[0]["raw"]
-    return {"raw": {**first, **mid["raw"]}, "chain": mid["chain"], "fast": mid["fast"]}
+    return judged_round(rounds, rounds[order[len(order) // 2]])
+
+
+def judged_round(rounds: list[dict[str, Any]], r: dict[str, Any]) -> dict[str, Any]:
+    """Round ``r`` as the targets read it: raw's figures measured in the first round only (the paced
+    image pipeline, the one-way floor) joined to its own."""
+    return {"raw": {**rounds[0]["raw"], **r["raw"]}, "chain": r["chain"], "fast": r.get("fast")}
 
 
 def record_peers(ctx: Context, peers: dict[str, Any]) -> None:
