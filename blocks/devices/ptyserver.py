@@ -20,7 +20,9 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import secrets
 import select
+import stat
 import time
 import tty
 from collections import deque
@@ -28,7 +30,7 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["LineDevice", "PtyServer"]
+__all__ = ["LineDevice", "LinkError", "PtyServer", "link_problem"]
 
 
 class LineDevice(Protocol):
@@ -55,6 +57,65 @@ class LineDevice(Protocol):
 MAX_OUT_BYTES = 16384
 #: Longest line accepted from the host.
 MAX_LINE = 1024
+
+
+class LinkError(ValueError):
+    """The ``link`` path is something a pty link may not replace (a file, a folder, another link)."""
+
+
+def link_problem(path: str) -> str | None:
+    """Why a pty symlink may not be made at ``path``, or None.
+
+    Allowed: a path that does not exist (the folder must), or a symlink to a character device, or a
+    dangling symlink into ``/dev/`` (a stale link of an earlier emulator run, whose pty is gone).
+    Anything else — a regular file, a folder, a FIFO, a link to a file — belongs to someone else.
+    """
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        parent = os.path.dirname(path) or "."
+        return None if os.path.isdir(parent) else f"its folder {parent} does not exist"
+    except OSError as e:
+        return f"cannot be inspected ({e.strerror})"
+    if not stat.S_ISLNK(st.st_mode):
+        return (
+            f"exists and is {_kind(st.st_mode)}; it is never replaced (give a new path, or a stale pty link)"
+        )
+    target = os.readlink(path)
+    try:
+        if stat.S_ISCHR(os.stat(path).st_mode):
+            return None
+    except FileNotFoundError:
+        if os.path.isabs(target) and target.startswith("/dev/"):
+            return None
+    except OSError:
+        pass
+    return f"is a symlink to {target!r}, not to a pty; it is never replaced"
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISREG(mode):
+        return "a regular file"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "not a symlink"
+
+
+def _new_symlink(target: str, beside: str) -> str:
+    """A new symlink to ``target`` in the folder of ``beside``, at a fresh name (nothing is overwritten)."""
+    while True:
+        tmp = f"{beside}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+        try:
+            os.symlink(target, tmp)
+        except FileExistsError:
+            continue
+        return tmp
 
 
 class PtyServer:
@@ -87,6 +148,7 @@ class PtyServer:
         self.dropped = 0
         self.replugs = 0
         self.lines_in = 0
+        self._target: str | None = None  # the pty the link points to, while this server owns it
 
     # -- control (signal-handler safe: they only set flags) -------------------------------
     def stop(self) -> None:
@@ -97,33 +159,38 @@ class PtyServer:
 
     # -- pty ---------------------------------------------------------------------------------
     def open(self) -> None:
-        """Create the pty and point ``link`` at it."""
+        """Create the pty and point ``link`` at it (refusing a path that is not a pty link)."""
+        problem = link_problem(self.link)
+        if problem:
+            raise LinkError(problem)
         master, slave = os.openpty()
         tty.setraw(slave)  # no echo, no line editing, no CR/LF translation
         os.set_blocking(master, False)
         self.master, self.slave = master, slave
-        tmp = f"{self.link}.{os.getpid()}.tmp"
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
-        os.symlink(os.ttyname(slave), tmp)
+        target = os.ttyname(slave)
+        tmp = _new_symlink(target, self.link)
         os.replace(tmp, self.link)  # atomic: the host never sees a missing link during a replug
+        self._target = target
         self._in.clear()
         self._out.clear()
         self._queue.clear()
 
     def close(self, *, remove_link: bool = True) -> None:
-        """Close the pty (the host sees a vanished device) and, by default, remove the link."""
+        """Close the pty (the host sees a vanished device) and, by default, remove the link.
+
+        The link is removed only while it is still the symlink this server made (to its pty):
+        whatever replaced it since is not ours.
+        """
         for fd in (self.master, self.slave):
             if fd is not None:
                 with contextlib.suppress(OSError):
                     os.close(fd)
         self.master = self.slave = None
-        if remove_link:
-            try:
-                if os.path.islink(self.link):
+        if remove_link and self._target is not None:
+            with contextlib.suppress(OSError):
+                if os.readlink(self.link) == self._target:
                     os.unlink(self.link)
-            except OSError:
-                pass
+            self._target = None
 
     # -- the loop ----------------------------------------------------------------------------
     def serve(self, duration_s: float | None = None, parent_pid: int | None = None) -> None:

@@ -4,23 +4,24 @@ pseudo-terminal, so the host side (``serial_io``) runs over a real tty with no h
 from __future__ import annotations
 
 import argparse
-import contextlib
+import math
 import os
 import signal
 import sys
-import tempfile
 import time
-from typing import TextIO
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn, TextIO
 
 from flowtact.blocks.teleop.exo_device import ExoDevice, ExoParams
 from flowtact.blocks.teleop.exo_protocol import (
     N_FINGERS,
 )
+from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 # -- the emulator process -----------------------------------------------------------------------
 
 
-__all__ = ["main"]
+__all__ = ["MAX_RATE_HZ", "OWN_FLAGS", "PATH_FLAGS", "graph_args_problem", "main"]
 
 
 class _ExoLine:
@@ -69,34 +70,124 @@ class _ExoLine:
         return [self.dev.hello()]
 
 
-def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+#: Highest packet rate the emulator serves (a real board sends 100 Hz; a pty carries a few kHz of lines).
+MAX_RATE_HZ = 10_000.0
+#: Longest time flag (period, replug gap, initial clock) in s, and longest latency or jitter in ms.
+MAX_TIME_S = 3600.0
+
+
+def _number(lo: float, hi: float, *, above: bool = False, integer: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number in [lo, hi] (``above``: > lo), as an int with ``integer``."""
+    show = (lambda v: str(int(v))) if integer else (lambda v: f"{v:g}")
+    rule = f"{'>' if above else '>='} {show(lo)} and <= {show(hi)}"
+
+    def parse(text: str) -> float:
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if integer else 'a number'}, got {text!r}"
+            ) from None
+        if not (math.isfinite(value) and (value > lo if above else value >= lo) and value <= hi):
+            raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"
+    return parse
+
+
+#: Flags that name a file: refused in a graph's ``serial_io.emulator_args`` (a graph writes no files).
+PATH_FLAGS = ("--link", "--log")
+#: Flags ``serial_io`` sets itself: refused in ``emulator_args`` (with the parameter to use instead).
+OWN_FLAGS = {"--rate-hz": "set rate_hz", "--exit-with-parent": "always given", "--help": "", "-h": ""}
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line (the flag, the rule, the value), exit status 2; keeps its flags."""
+
+    def __init__(self, **kw: Any) -> None:
+        self.flags: dict[str, argparse.Action] = {}
+        super().__init__(**kw)
+
+    def add_argument(self, *args: Any, **kw: Any) -> argparse.Action:
+        action = super().add_argument(*args, **kw)
+        self.flags.update(dict.fromkeys(action.option_strings, action))
+        return action
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message} (see --help)\n")
+
+
+def _parser() -> _Parser:
+    ap = _Parser(
+        allow_abbrev=False,  # a flag is spelled in full: emulator_args are checked flag by flag
         prog="flowtact sim exo",
         description="Emulate the Remote Feelings exoskeleton (3 fingers) on a pseudo-terminal. Prints "
         "'PORT <path>' first, then serves until SIGTERM/SIGINT; SIGUSR1 simulates an unplug/replug.",
     )
-    ap.add_argument("--link", help="stable symlink to the pty (default: a temporary path, printed)")
-    ap.add_argument("--rate-hz", type=float, default=100.0, help="packets per second (default 100)")
-    ap.add_argument("--drift-ppm", type=float, default=50.0, help="device clock error in ppm (default 50)")
-    ap.add_argument("--offset-s", type=float, default=None, help="initial device clock in s (default random)")
-    ap.add_argument("--latency-ms", type=float, default=0.0, help="fixed delay before each write (ms)")
-    ap.add_argument("--jitter-ms", type=float, default=0.0, help="extra uniform random write delay (ms)")
-    ap.add_argument("--seed", type=int, default=0, help="random seed (noise, preload, clock start)")
+    ap.add_argument(
+        "--link",
+        metavar="PATH",
+        help="stable symlink to the pty (default: in a private temporary folder, printed); PATH must not "
+        "exist, or be a stale pty link of an earlier run: a file or folder there is never replaced",
+    )
+    ap.add_argument(
+        "--rate-hz",
+        type=_number(0, MAX_RATE_HZ, above=True),
+        default=100.0,
+        help="packets per second (default 100)",
+    )
+    ap.add_argument(
+        "--drift-ppm", type=_number(-5000, 5000), default=50.0, help="device clock error in ppm (default 50)"
+    )
+    ap.add_argument(
+        "--offset-s",
+        type=_number(0, MAX_TIME_S),
+        default=None,
+        help="initial device clock in s (default random)",
+    )
+    ap.add_argument(
+        "--latency-ms", type=_number(0, MAX_TIME_S), default=0.0, help="fixed delay before each write (ms)"
+    )
+    ap.add_argument(
+        "--jitter-ms", type=_number(0, MAX_TIME_S), default=0.0, help="extra uniform random write delay (ms)"
+    )
+    ap.add_argument(
+        "--seed",
+        type=_number(0, 2**32 - 1, integer=True),
+        default=0,
+        help="random seed (noise, preload, clock start)",
+    )
     ap.add_argument(
         "--user", nargs="+", choices=("grasp", "idle"), default=["grasp"], help="user per finger (1 or 3)"
     )
-    ap.add_argument("--period-s", type=float, default=5.0, help="grasp cycle period (default 5 s)")
-    ap.add_argument("--max-push-n", type=float, default=3.0, help="the user's largest push (default 3 N)")
+    ap.add_argument(
+        "--period-s",
+        type=_number(0, MAX_TIME_S, above=True),
+        default=5.0,
+        help="grasp cycle period (default 5 s)",
+    )
+    ap.add_argument(
+        "--max-push-n",
+        type=_number(0, 1000, above=True),
+        default=3.0,
+        help="the user's largest push (default 3 N)",
+    )
     ap.add_argument(
         "--object-stiffness",
-        type=float,
+        type=_number(0, 1e9, above=True),
         default=None,
         help="standalone mode: a virtual object of this stiffness (N per unit closure) stops the fingers",
     )
     ap.add_argument(
-        "--object-closure", type=float, default=0.6, help="closure (0 open, 1 closed) where the object starts"
+        "--object-closure",
+        type=_number(0, 1),
+        default=0.6,
+        help="closure (0 open, 1 closed) where the object starts",
     )
-    ap.add_argument("--replug-s", type=float, default=0.3, help="gap between unplug and replug (SIGUSR1)")
+    ap.add_argument(
+        "--replug-s", type=_number(0, MAX_TIME_S), default=0.3, help="gap between unplug and replug (SIGUSR1)"
+    )
     ap.add_argument("--no-reset-on-replug", action="store_true", help="keep the device clock across a replug")
     ap.add_argument("--no-noise", action="store_true", help="no sensor noise")
     ap.add_argument(
@@ -106,39 +197,37 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--log",
         metavar="FILE",
-        help="append each applied command and watchdog trip (host monotonic s) to FILE",
+        help="write each applied command and watchdog trip (host monotonic s) to FILE, a new file: an "
+        "existing one is never appended to or replaced",
     )
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
     """``flowtact sim exo``: serve an emulated exoskeleton on a pty until SIGTERM/SIGINT."""
-    from flowtact.blocks.devices.ptyserver import PtyServer
+    from flowtact.blocks.devices.ptyserver import LinkError, PtyServer
 
     args = _parser().parse_args(argv)
     if len(args.user) not in (1, N_FINGERS):
-        print("--user takes 1 or 3 values", file=sys.stderr)
+        print("flowtact sim exo: --user takes 1 or 3 values", file=sys.stderr)
         return 2
     users = tuple(args.user * N_FINGERS if len(args.user) == 1 else args.user)
-    params = ExoParams(
-        rate_hz=args.rate_hz,
-        user=users,  # type: ignore[arg-type]
-        period_s=args.period_s,
-        max_push_n=args.max_push_n,
-        drift_ppm=args.drift_ppm,
-        object_stiffness_n=args.object_stiffness,
-        object_closure=args.object_closure,
-        encoder_noise_rad=0.0 if args.no_noise else ExoParams.encoder_noise_rad,
-        fsr_noise_adc=0.0 if args.no_noise else ExoParams.fsr_noise_adc,
-    )
+    try:
+        params = _params(args, users)
+    except ValueError as e:  # rules across flags (a grasp cycle longer than the period)
+        print(f"flowtact sim exo: {e}", file=sys.stderr)
+        return 2
     tick0 = None if args.offset_s is None else round(args.offset_s * 1e6)
     dev = ExoDevice(params, seed=args.seed, tick0_us=tick0)
-    tmp = None
-    link = args.link
-    if link is None:
-        tmp = tempfile.mkdtemp(prefix="flowtact-exo-")
-        link = os.path.join(tmp, "tty")
-    log = open(args.log, "a", buffering=1) if args.log else None  # noqa: SIM115 (closed below)
+    folder = None
+    try:
+        link, folder = _link(args.link)
+        log = _open_log(args.log)
+    except _UsageError as e:
+        if folder is not None:
+            folder.close()
+        print(f"flowtact sim exo: {e}", file=sys.stderr)
+        return 2
     server = PtyServer(
         _ExoLine(dev, args.truth, not args.no_reset_on_replug, log),
         link,
@@ -154,14 +243,113 @@ def main(argv: list[str] | None = None) -> int:
         server.open()
         print(f"PORT {link}", flush=True)
         server.serve(parent_pid=os.getppid() if args.exit_with_parent else None)
+    except LinkError as e:  # the link was swapped for something else since it was checked
+        print(f"flowtact sim exo: --link {link}: {e}", file=sys.stderr)
+        return 2
     finally:
         server.close()
         if log is not None:
             log.close()
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                os.rmdir(tmp)
+        if folder is not None:
+            folder.close()
     return 0
+
+
+def _params(args: argparse.Namespace, users: tuple[str, ...]) -> ExoParams:
+    """The device model's parameters from the flags (``ValueError`` for a rule across flags)."""
+    return ExoParams(
+        rate_hz=args.rate_hz,
+        user=users,  # type: ignore[arg-type]
+        period_s=args.period_s,
+        max_push_n=args.max_push_n,
+        drift_ppm=args.drift_ppm,
+        object_stiffness_n=args.object_stiffness,
+        object_closure=args.object_closure,
+        encoder_noise_rad=0.0 if args.no_noise else ExoParams.encoder_noise_rad,
+        fsr_noise_adc=0.0 if args.no_noise else ExoParams.fsr_noise_adc,
+    )
+
+
+def graph_args_problem(argv: Sequence[str]) -> str | None:
+    """Why ``argv`` may not be passed to the emulator from a graph (``serial_io.emulator_args``), or None.
+
+    Only this parser's flags, spelled in full, with values its own checks accept; never a flag that
+    names a file (:data:`PATH_FLAGS`) nor one ``serial_io`` sets (:data:`OWN_FLAGS`).
+    """
+    actions = _parser().flags
+    i = 0
+    while i < len(argv):
+        token = str(argv[i])
+        flag, eq, inline = token.partition("=")
+        i += 1
+        if flag in PATH_FLAGS:
+            return (
+                f"{flag} names a file, and a graph never chooses files the emulator writes; run "
+                f"`flowtact sim exo {flag} PATH` yourself and set port: to its link"
+            )
+        if flag in OWN_FLAGS:
+            return f"{flag} is set by serial_io itself" + (f" ({OWN_FLAGS[flag]})" if OWN_FLAGS[flag] else "")
+        action = actions.get(flag) if flag.startswith("--") else None
+        if action is None:
+            return f"{token!r} is not a flag of `flowtact sim exo` (see flowtact sim exo --help)"
+        if action.nargs == 0:
+            if eq:
+                return f"{flag} takes no value; got {token!r}"
+            continue
+        values = [inline] if eq else []
+        while i < len(argv) and not str(argv[i]).startswith("--") and (action.nargs == "+" or not values):
+            values.append(str(argv[i]))
+            i += 1
+        if not values:
+            return f"{flag} needs a value"
+        if flag == "--user" and len(values) not in (1, N_FINGERS):
+            return f"--user takes 1 or {N_FINGERS} values; got {len(values)}"
+        for v in values:
+            problem = _value_problem(action, v)
+            if problem:
+                return f"{flag}: {problem}"
+    return None
+
+
+def _value_problem(action: argparse.Action, text: str) -> str | None:
+    try:
+        value = action.type(text) if callable(action.type) else text
+    except (argparse.ArgumentTypeError, ValueError) as e:
+        return str(e)
+    if action.choices is not None and value not in action.choices:
+        return f"must be one of {', '.join(map(str, action.choices))}; got {text!r}"
+    return None
+
+
+class _UsageError(Exception):
+    """A flag names a path the emulator may not use (the message names the flag and the path)."""
+
+
+def _link(path: str | None) -> tuple[str, RunFolder | None]:
+    """The pty link to make: ``path`` if a link may go there, else a fresh one in a private folder."""
+    from flowtact.blocks.devices.ptyserver import link_problem
+
+    if path is None:
+        folder = make_run_folder("exo")
+        return os.path.join(folder.path, "tty"), folder
+    problem = link_problem(os.path.abspath(path))
+    if problem:
+        raise _UsageError(f"--link {path}: {problem}")
+    return path, None
+
+
+def _open_log(path: str | None) -> TextIO | None:
+    """``path`` created for writing, exclusively: an existing file (or a symlink) is refused."""
+    if path is None:
+        return None
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
+    except FileExistsError:
+        what = "a folder" if os.path.isdir(path) else "an existing file"
+        raise _UsageError(f"--log {path}: is {what}; the log is only ever written to a new file") from None
+    except OSError as e:
+        raise _UsageError(f"--log {path}: cannot create it ({e.strerror})") from None
+    return os.fdopen(fd, "w", buffering=1)
 
 
 if __name__ == "__main__":

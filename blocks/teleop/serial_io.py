@@ -7,9 +7,9 @@ import logging
 import math
 import os
 import select
+import stat
 import subprocess
 import sys
-import tempfile
 import time
 from collections import OrderedDict, deque
 from collections.abc import Mapping
@@ -34,6 +34,7 @@ from flowtact.blocks.teleop.exo_protocol import (
 from flowtact.blocks.teleop.hand import FINGERS, N_FINGERS
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
+from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 __all__ = ["SerialIo", "SerialIoConfig"]
 
@@ -81,7 +82,11 @@ class SerialIoConfig(Config):
     poll_bracket: bool = param(
         True, doc="give the clock estimator the previous read time too (halves tick-locked polling bias)"
     )
-    emulator_args: tuple[str, ...] = param((), doc="extra arguments for `flowtact sim exo` (port: emulator)")
+    emulator_args: tuple[str, ...] = param(
+        (),
+        doc="extra flags for `flowtact sim exo` (port: emulator), e.g. [--truth, --drift-ppm, 120]; never "
+        "--link or --log (a graph names no files: run the emulator yourself for those)",
+    )
     startup_timeout_s: float = param(10.0, gt=0, doc="port: emulator — how long to wait for it to start")
     sim_latency_s: float = param(
         0.002, ge=0, doc="port: sim — mean transport delay of a packet (exponential, capped at 5×)"
@@ -90,6 +95,11 @@ class SerialIoConfig(Config):
     sim_user: Literal["grasp", "idle"] = param("grasp", doc="port: sim — what the simulated hand does")
 
     def check(self) -> None:
+        problem = port_problem(self.port)
+        if problem:
+            raise self.error("port", problem)
+        if self.emulator_args or self.port == "emulator":
+            self._check_emulator()
         if not self.min_us < self.max_us:
             raise self.error("max_us", f"must be > min_us ({self.min_us:g}); got {self.max_us:g}")
         if self.sim_latency_s * 5 >= self.max_latency_s:
@@ -97,6 +107,36 @@ class SerialIoConfig(Config):
                 "sim_latency_s",
                 f"must be < max_latency_s / 5 ({self.max_latency_s / 5:g}); got {self.sim_latency_s:g}",
             )
+
+    def _check_emulator(self) -> None:
+        """Only the emulator's own flags, none naming a file, and a rate it serves."""
+        from flowtact.blocks.teleop.exo_emulator import MAX_RATE_HZ, graph_args_problem
+
+        problem = graph_args_problem(self.emulator_args)
+        if problem:
+            raise self.error("emulator_args", problem)
+        if self.port == "emulator" and self.rate_hz > MAX_RATE_HZ:
+            raise self.error(
+                "rate_hz", f"must be <= {MAX_RATE_HZ:g} with port: emulator; got {self.rate_hz:g}"
+            )
+
+
+def port_problem(port: str) -> str | None:
+    """Why ``port`` names no serial port, or None: 'sim', 'emulator', or a path that is a character
+    device or does not exist yet (a device plugged in later). An existing file, folder, FIFO or
+    socket is refused: the block would write its commands into it.
+    """
+    if port in ("sim", "emulator"):
+        return None
+    if not port:
+        return "must be 'sim', 'emulator' or a serial device such as /dev/ttyACM0; got ''"
+    try:
+        mode = os.stat(port).st_mode
+    except OSError:  # absent (unplugged) or unreachable: the block keeps retrying, as for an unplug
+        return None
+    if stat.S_ISCHR(mode):
+        return None
+    return f"must be 'sim', 'emulator' or a serial device; {port} is not a character device"
 
 
 @dataclass
@@ -250,7 +290,7 @@ class SerialIo(Source):
         self._ser: Any = None  # the open serial.Serial
         self._path: str | None = None  # what to (re)open
         self._proc: subprocess.Popen[bytes] | None = None
-        self._tmpdir: str | None = None
+        self._folder: RunFolder | None = None  # port: emulator — the private folder of its link
         self._opened = False
         self._logged: set[str] = set()
 
@@ -337,20 +377,15 @@ class SerialIo(Source):
                 self._proc.kill()
                 self._proc.wait()
             self._proc = None
-        if self._tmpdir is not None:
-            try:
-                for name in os.listdir(self._tmpdir):
-                    os.unlink(os.path.join(self._tmpdir, name))
-                os.rmdir(self._tmpdir)
-            except OSError:
-                pass
-            self._tmpdir = None
+        if self._folder is not None:
+            self._folder.close()
+            self._folder = None
         self._opened = False
 
     def _start_emulator(self) -> str:
         c = self.config
-        self._tmpdir = tempfile.mkdtemp(prefix="flowtact-serial-")
-        link = os.path.join(self._tmpdir, "exo")
+        self._folder = make_run_folder("serial")  # private; swept after a kill
+        link = os.path.join(self._folder.path, "exo")
         argv = [
             sys.executable,
             "-m",
@@ -436,6 +471,11 @@ class SerialIo(Source):
     def _connect(self, mono: float) -> bool:
         import serial
 
+        problem = port_problem(self._path or "")
+        if problem:  # the path became a file since the graph was checked: never write into it
+            self._say("not_a_device", logging.ERROR, f"{self.node}: port {problem}; not opened")
+            self._next_retry = mono + self.config.reconnect_s
+            return False
         try:
             ser = serial.Serial(self._path, self.config.baudrate, timeout=0, write_timeout=0, exclusive=True)
             ser.reset_input_buffer()

@@ -25,11 +25,9 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -46,6 +44,7 @@ from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
+from flowtact.runtime.rundir import make_run_folder
 from flowtact.runtime.stats import LatencyHistogram, format_factor
 from flowtact.runtime.wire import recv_message
 
@@ -158,7 +157,8 @@ class ProcessExecutor:
             raise ValueError("a --fast run needs a duration (--duration or the graph's duration_s)")
         self.duration_s = duration_s
         self.ctx = zmq.Context()
-        self.rundir = tempfile.mkdtemp(prefix="flowtact-")
+        self.run_folder = make_run_folder("run")  # ipc sockets; also sweeps folders of killed runs
+        self.rundir = self.run_folder.path
         self.procs: dict[str, _Proc] = {}
         self.auth = None
         self.by_ident: dict[bytes, _Proc] = {}
@@ -731,7 +731,7 @@ class ProcessExecutor:
             self.ctl_watch.close()
             self.auth.stop()
         self.ctx.destroy(linger=0)
-        shutil.rmtree(self.rundir, ignore_errors=True)
+        self.run_folder.close()
 
     # -- reporting --------------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
