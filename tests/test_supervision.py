@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import time
 from pathlib import Path
@@ -96,6 +97,21 @@ def _commands(log: Path) -> list[tuple[float, str]]:
 def test_a_stopped_teleop_controller_leaves_the_exoskeleton_safe(tmp_path):
     """The controller's process stops: the device watchdog releases every servo, nothing else is sent."""
     log = tmp_path / "device.log"
+    # the device log is a file, which a graph may not name: the emulator runs here, told on its command line
+    emulator = flowtact("sim", "exo", "--link", str(tmp_path / "exo"), "--log", str(log))
+    try:
+        _stopped_controller(emulator, log)
+    finally:
+        emulator.terminate()
+        _, err = emulator.communicate(timeout=30)
+        assert emulator.returncode == 0, err
+    assert not (tmp_path / "exo").exists()
+
+
+def _stopped_controller(emulator, log: Path) -> None:
+    ready, _, _ = select.select([emulator.stdout], [], [], 30.0)
+    assert ready, "the emulator did not start"
+    link = emulator.stdout.readline().strip().removeprefix("PORT ")
     proc = flowtact(
         "run",
         str(ROOT / "graphs" / "teleop.yaml"),
@@ -103,7 +119,7 @@ def test_a_stopped_teleop_controller_leaves_the_exoskeleton_safe(tmp_path):
         "120",
         "--quiet",
         "--set",
-        f"exo.emulator_args=[--log, {log}]",
+        f"exo.port={link}",
     )
     kids = wait_children(proc.pid, 3)
     wait_for_line(log, "engage=1", timeout=120)  # the controller is driving a servo

@@ -284,14 +284,16 @@ def graph_args_problem(argv: Sequence[str]) -> str | None:
         i += 1
         if flag in PATH_FLAGS:
             return (
-                f"{flag} names a file, and a graph never chooses files the emulator writes; run "
-                f"`flowtact sim exo {flag} PATH` yourself and set port: to its link"
+                f"must not hold {flag}: a graph never names files the emulator writes (run `flowtact sim "
+                f"exo {flag} PATH` yourself and set port: to its link)"
             )
         if flag in OWN_FLAGS:
-            return f"{flag} is set by serial_io itself" + (f" ({OWN_FLAGS[flag]})" if OWN_FLAGS[flag] else "")
+            return f"must not hold {flag}: serial_io sets it" + (
+                f" ({OWN_FLAGS[flag]})" if OWN_FLAGS[flag] else ""
+            )
         action = actions.get(flag) if flag.startswith("--") else None
         if action is None:
-            return f"{token!r} is not a flag of `flowtact sim exo` (see flowtact sim exo --help)"
+            return f"must hold flags of `flowtact sim exo` only; got {token!r} (see flowtact sim exo --help)"
         if action.nargs == 0:
             if eq:
                 return f"{flag} takes no value; got {token!r}"

@@ -1,19 +1,21 @@
 """Private run folders in the temp directory, and the safe removal of those a killed run left behind.
 
 Every temporary folder flowtact makes for a run (the supervisor's ipc sockets, ``serial_io``'s
-emulator link, ``flowtact sim exo``'s default link) is made here, 0700, named
-``flowtact-<kind>-<pid>-<start>-<random>``: the owning process's id and its start time (clock ticks
-after boot, from ``/proc/<pid>/stat``; 0 where there is no ``/proc``). The owner also holds an
-exclusive ``flock`` on the folder's ``lock`` file for as long as the folder lives; the kernel drops
-it when the process dies, even by SIGKILL.
+emulator link, ``flowtact sim exo``'s default link) is made here: 0700, named
+``flowtact-<kind>-<random>`` (short: ipc socket paths inside it are limited to 107 bytes). Its
+``lock`` file records the owning process's id and start time (clock ticks after boot, from
+``/proc/<pid>/stat``; 0 where there is no ``/proc``), and the owner holds an exclusive ``flock`` on
+it for as long as the folder lives; the kernel drops the lock when the process dies, even by SIGKILL.
+The lock file appears already locked and filled (written under another name, then renamed).
 
 A ``kill -9`` skips the owner's clean-up, so each new run folder first sweeps the temp directory
 (:func:`clean_stale`). A folder is removed only when all of these hold: its name is exactly
 flowtact's pattern; ``os.lstat`` shows a real directory (never a symlink) owned by this user with no
-group or other permissions; its ``lock`` is not held by anyone; and the process its name records is
-gone (no such pid, or a pid reused by a process with another start time). Anything else — another
-user's folder, a symlink named like a run folder, a live run's folder, folders of older releases
-without a pid — is left alone. Removal uses :func:`shutil.rmtree`, which does not follow symlinks.
+group or other permissions; its ``lock`` is a regular file (not followed if a symlink) naming a pid
+and start time; nobody holds the lock; and that process is gone (no such pid, or a pid reused by a
+process with another start time). Anything else — another user's folder, a symlink named like a run
+folder, a live run's folder, a folder without a readable lock (older releases, or a run killed while
+making it) — is left alone. Removal uses :func:`shutil.rmtree`, which does not follow symlinks.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ MAX_STALE_PER_SWEEP = 64
 """Most stale folders one sweep removes: a start after many killed runs stays quick; the next
 starts remove the rest."""
 
-_NAME = re.compile(r"flowtact-(?P<kind>[a-z]+)-(?P<pid>[0-9]{1,10})-(?P<start>[0-9]{1,20})-[a-z0-9_]{8}")
+_NAME = re.compile(r"flowtact-[a-z]+-[a-z0-9_]{8}")
+_OWNER = re.compile(rb"([0-9]{1,10}) ([0-9]{1,20})\n")
 _KIND = re.compile(r"[a-z]+")
 
 
@@ -95,17 +98,19 @@ def make_run_folder(kind: str, *, root: str | None = None) -> RunFolder:
         raise ValueError(f"run folder kind must be lowercase letters; got {kind!r}")
     root = root or tempfile.gettempdir()
     clean_stale(root)
-    pid = os.getpid()
-    path = tempfile.mkdtemp(prefix=f"flowtact-{kind}-{pid}-{process_start(pid) or 0}-", dir=root)
-    fd = os.open(os.path.join(path, LOCK_NAME), os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
+    path = tempfile.mkdtemp(prefix=f"flowtact-{kind}-", dir=root)
+    tmp = os.path.join(path, f".{LOCK_NAME}.tmp")
+    fd = os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
     fcntl.flock(fd, fcntl.LOCK_EX)  # a new file nobody else has opened: never blocks
+    pid = os.getpid()
+    os.write(fd, f"{pid} {process_start(pid) or 0}\n".encode())
+    os.rename(tmp, os.path.join(path, LOCK_NAME))  # appears locked and filled
     return RunFolder(path, fd)
 
 
 def is_stale(path: str) -> bool:
     """Whether ``path`` is a run folder of this user whose owner is gone (see the module notes)."""
-    m = _NAME.fullmatch(os.path.basename(path))
-    if m is None:
+    if _NAME.fullmatch(os.path.basename(path)) is None:
         return False
     try:
         st = os.lstat(path)
@@ -113,32 +118,34 @@ def is_stale(path: str) -> bool:
         return False
     if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid() or st.st_mode & 0o077:
         return False
-    pid, start = int(m["pid"]), int(m["start"])
-    now = process_start(pid)
-    if now is not None and (now == start or 0 in (now, start)):
-        return False  # the owner still runs (or a pid reuse cannot be told apart here)
-    return not _lock_held(path)
-
-
-def _lock_held(path: str) -> bool:
-    """Whether some process holds the folder's lock (a missing lock file is not held)."""
     try:
         fd = os.open(
             os.path.join(path, LOCK_NAME), os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
         )
-    except FileNotFoundError:
+    except OSError:  # no lock file (an older release's folder, or one being made), or a symlink
         return False
-    except OSError:  # a symlink or something odd: not ours to judge
-        return True
     try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return True
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
+        return _owner_gone(fd)
     finally:
         os.close(fd)
-    return False
+
+
+def _owner_gone(fd: int) -> bool:
+    """Whether the lock file open at ``fd`` names a process that is gone and nobody holds the lock."""
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        return False
+    m = _OWNER.fullmatch(os.read(fd, 64))
+    if m is None:
+        return False
+    pid, start = int(m[1]), int(m[2])
+    now = process_start(pid)
+    if now is not None and (now == start or 0 in (now, start)):
+        return False  # the owner still runs (or a reused pid cannot be told apart here)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:  # held: e.g. an owner in another pid namespace
+        return False
+    return True
 
 
 def clean_stale(root: str | None = None) -> list[str]:
