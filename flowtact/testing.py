@@ -8,7 +8,6 @@ transport, process or clock is involved.
 from __future__ import annotations
 
 import itertools
-import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -213,10 +212,12 @@ def run_graph(
     from flowtact.graph import load_graph, resolve_graph_path
     from flowtact.params import did_you_mean
     from flowtact.runtime.inproc import InprocExecutor
+    from flowtact.runtime.rundir import make_run_folder
     from flowtact.source_ends import default_duration
 
     replays: dict[str, str] = {}
-    with tempfile.TemporaryDirectory(prefix="flowtact-feed-") as tmp:
+    with make_run_folder("feed") as folder:  # swept by a later start if this process is killed
+        tmp = folder.path
         if feed:
             from flowtact.record import Recorder
 

@@ -18,11 +18,12 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from flowtact.runtime.rundir import make_run_folder
 
 __all__ = ["STEP_MARK", "Prior", "measure_children", "share"]
 
@@ -46,8 +47,8 @@ def measure_children(
     prior: Prior = {}
     failures: list[str] = []
     for part in range(parts - 1):
-        with tempfile.TemporaryDirectory(prefix="flowtact-bench-") as tmp:
-            out = Path(tmp) / "figures.json"
+        with make_run_folder("bench") as folder:  # swept by a later start if this process is killed
+            out = Path(folder.path) / "figures.json"
             cmd = [sys.executable, "-m", __name__, name, "--part", str(part), "--parts", str(parts), "--out",
                    str(out), *(["--quick"] if quick else []), *(["--peers"] if peers else [])]  # fmt: skip
             tail = _run_child(cmd, lambda text, p=part: on_step(f"process {p + 1}/{parts}: {text}"))
