@@ -4,7 +4,9 @@ An emulator process (``flowtact sim exo``) builds a :class:`LineDevice` and hand
 :class:`PtyServer`, which owns the wall clock: it calls ``tick`` when the device is due, feeds each
 line the host writes to ``receive``, and writes the device's lines to the pty (optionally after a
 fixed + random latency, in order). The pty's slave side is reached through a stable symlink
-(``link``), re-pointed atomically on every replug, so the host always opens the same path.
+(``link``), re-pointed atomically on every replug, so the host always opens the same path. The link
+never replaces what it does not own: ``link`` must be new or a stale pty link (:func:`link_problem`),
+and ``close`` removes it only while it still points to this server's pty.
 
 Unplug (``unplug()``, e.g. from a SIGUSR1 handler): the pty is closed — the host's reads and
 writes fail as with a pulled USB cable — and after ``replug_s`` a new pty is opened, the symlink
