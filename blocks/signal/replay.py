@@ -332,7 +332,7 @@ class Replay(Source):
                     raise SpecError(
                         "y", f"{self._where()}: time {text}{shifted} {why}", where=(display(path), line, col)
                     )
-                raise self._refused(path, f"t[{i}] = {t[i]:.9g} s in {path}{shifted} {why}")
+                raise self._refused(path, f"t[{i}] = {t[i]:.9g} s{shifted} {why}")
 
     def _rate(self, t: np.ndarray, path: Path) -> float:
         c = self.config
