@@ -5,7 +5,10 @@ Accepted: UTF-8 text (a byte-order mark is fine), columns separated by commas, s
 spaces (whichever the header uses), ``#`` comments and blank lines, ``nan``/``inf`` in data columns.
 Refused, each with ``file:line:col``: a binary or non-UTF-8 file, a header without ``t``, duplicate
 or empty column names, a row with too few or too many values, a cell that is not a number, a time
-that is not finite or that goes back.
+that is not finite or that goes back; and, before they are read (:mod:`.replay_limits`), anything
+but a regular file, a file over ``MAX_TEXT_BYTES``, a line over ``MAX_LINE_BYTES``, a header of
+more than ``MAX_COLUMNS`` columns. The text is streamed: checked a block at a time, then parsed
+by numpy line by line, so memory is the table plus a block.
 """
 
 from __future__ import annotations

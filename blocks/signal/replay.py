@@ -138,6 +138,12 @@ class Replay(Source):
     at the first ``reset``: .npz / .csv wholly, .h5 times wholly and the data slice by slice
     from the open file (camera recordings need not fit in memory). Latency: none beyond the tick.
 
+    Every file is bounded before anything is allocated (:mod:`.replay_limits`): a regular file
+    only; what is read wholly at most ``REPLAY_BUDGET_BYTES`` (1 GiB), as the .npz headers (which
+    must match the bytes stored) or the .h5 shapes (each sample stored) declare it; time stamps
+    plus ``time_offset_s`` within ±``MAX_TIME_S`` (1e6 s); a rate within [1e-6, 1e6] Hz; at most
+    ``MAX_STREAMS`` streams or arrays. A file beyond a bound is refused naming it.
+
     Example
     -------
     >>> import os, tempfile
