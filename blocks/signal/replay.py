@@ -38,6 +38,7 @@ from flowtact.blocks.signal.replay_limits import (
     time_problem,
 )
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.limits import MAX_TICK_S, format_bytes
 from flowtact.params import Config, did_you_mean, param
 
 __all__ = ["Replay", "ReplayConfig"]
@@ -200,6 +201,7 @@ class Replay(Source):
                 src = self._inspect_npz(path) if suffix == ".npz" else self._inspect_csv(path)
                 self._check_times(src.t, path, src.csv)
                 src.spec = src.spec.with_(rate_hz=self._rate(src.t, path))
+                self._check_density(src, src.t, path)
         except ReplayFileError as e:
             raise self._refused(path, str(e)) from None
         return src
@@ -340,6 +342,29 @@ class Replay(Source):
                     )
                 raise self._refused(path, f"t[{i}] = {t[i]:.9g} s{shifted} {why}")
 
+    def _check_density(self, src: _Source, t: np.ndarray, path: Path) -> None:
+        """Bound what one tick may emit: the samples in the densest ``MAX_TICK_S`` of the file
+        (times the repeats a loop fits in a tick) must fit the budget, or a file of equal time
+        stamps, or a short loop, would have one tick read everything at once (or for ever)."""
+        n = len(t)
+        if not n:
+            return
+        most = 0
+        for lo in range(0, n, _DENSITY_BLOCK):  # a block at a time: no n-sized temporaries
+            hi = min(n, lo + _DENSITY_BLOCK)
+            ends = np.searchsorted(t, t[lo:hi] + MAX_TICK_S, side="left")
+            most = max(most, int(np.max(ends - np.arange(lo, hi))))
+        if self.config.loop and (period := _period(src, t)) > 0:
+            most = max(most, n * (math.ceil(MAX_TICK_S / period) + 1))
+        row = math.prod(src.spec.shape) * np.dtype(src.spec.dtype).itemsize + 8  # and its time
+        if most * row > REPLAY_BUDGET_BYTES:
+            looped = " (looped)" if self.config.loop else ""
+            raise self._refused(
+                path,
+                f"up to {most} samples ({format_bytes(most * row)}) fall within {MAX_TICK_S:g} s{looped}, "
+                f"the longest tick; a replay may emit at most {format_bytes(REPLAY_BUDGET_BYTES)} in one tick",
+            )
+
     def _rate(self, t: np.ndarray, path: Path) -> float:
         c = self.config
         steps = np.diff(t)
@@ -419,9 +444,10 @@ class Replay(Source):
                 raise self._refused(path, str(e)) from None
             f, h = open_stream(path, src.h5_stream)  # every checksum verified: damage refused up front
             t = np.asarray(f.read(h.t, slice(0, h.n)), np.float64)
-            self._check_times(t, path)
             end = float(h.attrs.get("end_s", math.nan))
             src.h5_file, src.t, src.data, src.end_s = f, t, h.data, (end if math.isfinite(end) else None)
+            self._check_times(t, path)
+            self._check_density(src, t, path)
         elif isinstance(src.data, tuple):  # npz, not read yet: its header checked again, then read
             try:
                 with open_npz(src.data[0]) as z:
@@ -448,10 +474,7 @@ class Replay(Source):
         if not self.config.loop or self._n == 0:
             return math.inf
         assert src.t is not None
-        if src.spec.events:
-            period = max(src.end_s or 0.0, float(src.t[-1]))
-        else:
-            period = float(src.t[-1] - src.t[0]) + 1.0 / float(src.spec.rate_hz or math.inf)
+        period = _period(src, src.t)
         if not period > 0:
             raise SpecError(
                 "y", f"{self._where()}: cannot loop {self.config.path}: its length is {period:g} s"
@@ -505,6 +528,13 @@ class Replay(Source):
         )
 
 
+def _period(src: _Source, t: np.ndarray) -> float:
+    """A loop's period: an event stream's recorded length, a sample stream's span plus a step."""
+    if src.spec.events:
+        return max(src.end_s or 0.0, float(t[-1]))
+    return float(t[-1] - t[0]) + 1.0 / float(src.spec.rate_hz or math.inf)
+
+
 def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
     """The last time stamp of a recorded stream and its recorded end watermark (None if absent)."""
     from flowtact.record import open_recording, stream_header
@@ -518,6 +548,7 @@ def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
 
 # -- .npz: every size a member declares is checked before its data is read --------------------
 
+_DENSITY_BLOCK = 1 << 20  # time stamps searched at a time by Replay._check_density
 _PIECE = 16 << 20  # bytes inflated at a time while reading a .npz member
 _EOCD = b"PK\x05\x06"  # a zip's end-of-central-directory record
 _EOCD64_LOCATOR = b"PK\x06\x07"

@@ -305,3 +305,19 @@ def test_open_regular_refuses_devices():
 def test_long_name_lists_are_cut():
     assert listing(["a", "b"]) == "a, b" and listing([]) == "none"
     assert listing([f"c{i}" for i in range(100)], most=3) == "c0, c1, c2, ... (100 in all)"
+
+
+def test_what_one_tick_may_emit_is_bounded(tmp_path, monkeypatch):
+    short = tmp_path / "short.npz"  # 2 samples looped every 2 us: 5 million repeats a tick
+    np.savez(short, data=np.ones((2, 100)), t=np.array([0.0, 1e-6]))
+    Replay(path=str(short)).bind({})
+    e = _refusal(Replay(path=str(short), loop=True))
+    assert "up to 10000002 samples (7.5 GiB) fall within 10 s (looped), the longest tick" in str(e)
+    rec = _forged(tmp_path / "same.h5", 64, stored=64)
+    with h5py.File(rec, "r+") as f:
+        f["streams/s.y/t"][:] = 0.0  # every sample at once
+    Replay(path=rec).bind({})
+    monkeypatch.setattr(replay, "REPLAY_BUDGET_BYTES", 64 * 24 - 1)  # 64 samples of 16 bytes + t
+    e = _refusal(Replay(path=rec))  # .h5 times are read when the block starts
+    assert "up to 64 samples (1.5 KiB) fall within 10 s, the longest tick" in str(e)
+    assert e.where == (rec, 1, 1)
