@@ -288,7 +288,7 @@ def replay_csv_rate(folder: Path) -> tuple[list[str], str]:
         TOUCH,
         "--replay",
         f"sensor={path}",
-    ], "step at 1e+09 Hz (median); a replayed rate must be"
+    ], f"{path}:1:1: node 'sensor' (replay): port 'r': sensor (replay): its time stamps step at 1e+09 Hz"
 
 
 def _h5_stream(g: Any, samples: int, shape: tuple[int, ...]) -> None:

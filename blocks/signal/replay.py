@@ -25,6 +25,7 @@ import numpy as np
 from flowtact.block import Example, Port, Source, SpecError
 from flowtact.blocks.signal.csv_log import CsvError, CsvLog, display, read_csv_log, row_place
 from flowtact.blocks.signal.replay_limits import (
+    MAX_CHUNK_BYTES,
     MAX_NPY_HEADER_BYTES,
     MAX_RATE_HZ,
     MAX_STREAMS,
@@ -375,7 +376,7 @@ class Replay(Source):
                 inferred = float(round(inferred))
             if why := rate_problem(inferred):
                 raise self._refused(
-                    path, f"the time stamps of {path} step at {inferred:g} Hz (median); a replayed rate {why}"
+                    path, f"its time stamps step at {inferred:g} Hz (median); a replayed rate {why}"
                 )
         if c.rate_hz is None:
             if inferred is None:
@@ -741,7 +742,7 @@ def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> 
             )
         for ds in (t, data):
             if (why := _unstored(ds)) is not None:
-                raise ReplayFileError(f"{what}: {ds.name} declares shape {ds.shape} but {why}")
+                raise ReplayFileError(f"{what}: {ds.name} of shape {ds.shape} {why}")
         end = float(h.attrs.get("end_s", math.nan))
         firsts = [f.read(t, i) for i in ((0, h.n - 1) if h.n else ())]
         for i, value in zip((0, h.n - 1), firsts, strict=False):
@@ -752,8 +753,9 @@ def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> 
 
 
 def _unstored(ds: Any) -> str | None:
-    """Why a dataset's declared shape is not backed by stored data (a chunk index with too few
-    chunks, contiguous storage smaller than the shape), or None: a recording stores what it declares."""
+    """Why a dataset cannot be read as declared (a chunk index with too few chunks, contiguous
+    storage smaller than the shape, chunks too large to inflate), or None: a recording stores
+    what it declares, in small chunks."""
     shape = ds.shape
     if not shape or 0 in shape:
         return None
@@ -761,6 +763,9 @@ def _unstored(ds: Any) -> str | None:
         stored = ds.id.get_storage_size()
         need = math.prod(shape) * ds.dtype.itemsize
         return None if stored >= need or ds.compression else f"stores only {stored} of its {need} bytes"
+    chunk = math.prod(ds.chunks) * ds.dtype.itemsize
+    if chunk > MAX_CHUNK_BYTES and ds.chunks[0] > 1:  # HDF5 inflates a whole chunk to read a value
+        return f"is stored in chunks of {format_bytes(chunk)}; a replay reads chunks of at most {format_bytes(MAX_CHUNK_BYTES)}"
     need = math.prod(-(-n // c) for n, c in zip(shape, ds.chunks, strict=True))
     stored = ds.id.get_num_chunks()
     return None if stored >= need else f"stores only {stored} of its {need} chunks (not written, or cut)"

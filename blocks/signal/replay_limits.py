@@ -21,6 +21,7 @@ from flowtact.limits import STATE_BUDGET_BYTES, format_bytes
 
 __all__ = [
     "HDF5_SIGNATURE",
+    "MAX_CHUNK_BYTES",
     "MAX_COLUMNS",
     "MAX_LINE_BYTES",
     "MAX_NPY_HEADER_BYTES",
@@ -57,6 +58,10 @@ MAX_COLUMNS = 10_000
 
 MAX_STREAMS = 10_000
 """Most streams (or .npz arrays) a replayed file may hold: every one is listed and looked up."""
+
+MAX_CHUNK_BYTES = 64 << 20
+"""Largest HDF5 chunk of a replayed stream (64 MiB; flowtact writes 64 kB, or one sample when a
+sample is larger): HDF5 inflates a whole chunk to read one value from it."""
 
 MAX_NPY_HEADER_BYTES = 10_000
 """Longest .npy header in a .npz (numpy's own ``max_header_size``), checked before it is read."""

@@ -243,9 +243,20 @@ def _forged(path, samples: int, *, stored: int = 0, rate: float = 100.0, end_s: 
 def test_a_stream_declaring_more_samples_than_it_stores_is_refused(tmp_path):
     Replay(path=_forged(tmp_path / "ok.h5", 200, stored=200)).bind({})
     e = _refusal(Replay(path=_forged(tmp_path / "hollow.h5", 1 << 20, stored=200)))
-    assert "/streams/s.y/t declares shape (1048576,) but stores only 4 of its 16384 chunks" in str(e)
+    assert "/streams/s.y/t of shape (1048576,) stores only 4 of its 16384 chunks" in str(e)
     e = _refusal(Replay(path=_forged(tmp_path / "huge.h5", 1 << 40)))
     assert "declares 1099511627776 samples" in str(e) and "8.0 TiB, over the 1.0 GiB" in str(e)
+
+
+def test_chunks_too_large_to_inflate_are_refused(tmp_path, monkeypatch):
+    path = _forged(tmp_path / "chunky.h5", 200, stored=200)  # chunks of 64 samples: 512 B of t
+    Replay(path=path).bind({})
+    monkeypatch.setattr(replay, "MAX_CHUNK_BYTES", 511)
+    e = _refusal(Replay(path=path))
+    assert (
+        "/streams/s.y/t of shape (200,) is stored in chunks of 512 B; a replay reads chunks of at most"
+        in str(e)
+    )
 
 
 def test_numbers_a_recording_declares_are_range_checked(tmp_path):
