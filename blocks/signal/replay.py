@@ -581,8 +581,8 @@ def open_npz(path: Path) -> Iterator[zipfile.ZipFile]:
         _check_zip_directory(f, path)
         try:
             z = zipfile.ZipFile(f)
-        except zipfile.BadZipFile:
-            raise ReplayFileError(f"{path} is not a .npz file (not a zip archive)") from None
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
+            raise ReplayFileError(f"{path} is not a .npz file (not a readable zip archive: {e})") from None
         with z:
             yield z
 
@@ -646,7 +646,7 @@ def _npy_header(z: zipfile.ZipFile, key: str, path: Path) -> _NpyHeader:
                 )
             prefix, header = prefix[: 8 + size_len], prefix[8 + size_len :]
             header += fp.read(header_len - len(header))
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
         raise ReplayFileError(f"{what} cannot be read ({e})") from None
     buf = io.BytesIO(prefix + header)
     read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
@@ -687,7 +687,7 @@ def _npy_read(z: zipfile.ZipFile, head: _NpyHeader, path: Path) -> np.ndarray:
                 out[done : done + len(piece)] = np.frombuffer(piece, np.uint8)
                 done += len(piece)
             fp.read(1)  # at the end: the CRC is checked
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as e:
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
         raise ReplayFileError(f"{path}: array '{head.key}' cannot be read ({e})") from None
     if done != head.nbytes:
         raise ReplayFileError(f"{path}: array '{head.key}' ends after {done} of its {head.nbytes} bytes")
