@@ -9,6 +9,7 @@ Used by tests/test_hostile_input.py (through tests/hostile.py) and by the ``host
 
 from __future__ import annotations
 
+import io
 import os
 import re
 import subprocess
@@ -18,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
 TOUCH = str(files("flowtact.graphs") / "touch.yaml")
 
@@ -139,7 +141,229 @@ def alias_bomb_in_set(folder: Path) -> tuple[list[str], str]:  # noqa: ARG001
     return ["validate", TOUCH, "--set", f"sa1.tau_s={value}"], "--set:1:1: --set 'sa1.tau_s="
 
 
-CASES: dict[str, Callable[[Path], tuple[list[str], str]]] = {
+# -- replay readers (``--replay NODE=FILE`` and the ``replay`` block): one case per class ----------
+# Every file a replay reads is bounded before it allocates (blocks/signal/replay_limits.py).
+
+_GAUGES = "t,r[0],r[1],r[2],r[3],ref\n"  # the columns that stand in for touch.yaml's sensor
+
+
+def _zip_member(name: str, data: bytes | None, *, zeros: int = 0) -> tuple[bytes, bytes]:
+    """(local entry, central directory entry) of one deflated zip member: ``data`` then ``zeros``
+    zero bytes, deflated 16 MiB at a time (each block compresses to the same 16 kB: fast)."""
+    import struct
+    import zlib
+
+    comp = zlib.compressobj(9, zlib.DEFLATED, -15)
+    block = bytes(16 << 20)
+    head = comp.compress(data or b"") + comp.flush(zlib.Z_FULL_FLUSH)
+    crc = zlib.crc32(data or b"")
+    body = [head]
+    full, rest = divmod(zeros, len(block))
+    if full:
+        packed = comp.compress(block) + comp.flush(zlib.Z_FULL_FLUSH)
+        body += [packed] * full
+        for _ in range(full):
+            crc = zlib.crc32(block, crc)
+    body.append(comp.compress(bytes(rest)) + comp.flush())
+    crc = zlib.crc32(bytes(rest), crc)
+    packed = b"".join(body)
+    size, key = len(data or b"") + zeros, name.encode()
+    fields = (20, 0, 8, 0, 0x21, crc, len(packed), size, len(key))
+    local = struct.pack("<4s5H3L2H", b"PK\x03\x04", *fields, 0) + key + packed
+    central = struct.pack("<4s4H2H3L5H2L", b"PK\x01\x02", 20, *fields, 0, 0, 0, 0, 0, 0) + key
+    return local, central
+
+
+def _zip(path: Path, members: list[tuple[bytes, bytes]]) -> None:
+    """A zip archive of prepared members (see :func:`_zip_member`)."""
+    import struct
+
+    out, directory, offsets = b"", b"", []
+    for local, _ in members:
+        offsets.append(len(out))
+        out += local
+    for (_, central), offset in zip(members, offsets, strict=True):
+        directory += central[:42] + struct.pack("<L", offset) + central[46:]
+    end = struct.pack(
+        "<4s4H2LH", b"PK\x05\x06", 0, 0, len(members), len(members), len(directory), len(out), 0
+    )
+    path.write_bytes(out + directory + end)
+
+
+def _npy_header(shape: tuple[int, ...], descr: str = "<f8") -> bytes:
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": descr, "fortran_order": False, "shape": shape})
+    return buf.getvalue()
+
+
+def _replay_graph(folder: Path, data: str) -> str:
+    """A graph of one ``replay`` node playing ``data``, recorded."""
+    return _write(
+        folder,
+        "replay.yaml",
+        f"nodes:\n  log: {{block: replay, params: {{path: {data}}}}}\nrecord: [log.y]\n",
+    )
+
+
+def replay_npz_zip_bomb(folder: Path) -> tuple[list[str], str]:
+    """1.2 MB of .npz whose 't' inflates (honestly: sizes and CRC agree) to 1.125 GiB."""
+    n = 9 << 24  # 1.125 GiB of float64 time stamps
+    path = folder / "bomb.npz"
+    head = _npy_header((n,))
+    _zip(path, [_zip_member("data.npy", _npy_header((n, 0))), _zip_member("t.npy", head, zeros=8 * n)])
+    return ["validate", _replay_graph(folder, str(path))], f"array 't' ({n},) float64 takes 1.1 GiB, over the"
+
+
+def replay_npz_lying_header(folder: Path) -> tuple[list[str], str]:
+    """A .npz whose 't' header declares 2**40 samples in a 16-byte member."""
+    path = folder / "lies.npz"
+    _zip(
+        path,
+        [
+            _zip_member("data.npy", _npy_header((2,)) + bytes(16)),
+            _zip_member("t.npy", _npy_header((1 << 40,)) + bytes(16)),
+        ],
+    )
+    return ["validate", _replay_graph(folder, str(path))], "declares shape (1099511627776,) of float64"
+
+
+def replay_h5_not_hdf5_sparse(folder: Path) -> tuple[list[str], str]:
+    """A 1 GB sparse file named .h5: refused from its first bytes, never read whole."""
+    path = folder / "big.h5"
+    with open(path, "wb") as f:
+        f.truncate(1 << 30)
+    return ["validate", TOUCH, "--replay", f"sensor={path}"], f"{path}:1:1: node 'sensor' (replay): "
+
+
+def replay_csv_sparse(folder: Path) -> tuple[list[str], str]:
+    """A 1 GB sparse .csv: over the size a .csv log may be, refused from its size."""
+    path = folder / "big.csv"
+    with open(path, "wb") as f:
+        f.truncate(1 << 30)
+    return [
+        "validate",
+        TOUCH,
+        "--replay",
+        f"sensor={path}",
+    ], f"{path}:1:1: node 'sensor' (replay): 1.0 GiB: larger than"
+
+
+def replay_csv_wide_header(folder: Path) -> tuple[list[str], str]:
+    """A .csv naming 100 000 columns (a quadratic header check took minutes)."""
+    names = ",".join(["t", *(f"c{i}" for i in range(1, 100_000))])
+    path = _write(folder, "wide.csv", names + "\n")
+    return [
+        "validate",
+        TOUCH,
+        "--replay",
+        f"sensor={path}",
+    ], f"{path}:1:1: node 'sensor' (replay): 100000 columns"
+
+
+def replay_csv_long_line(folder: Path) -> tuple[list[str], str]:
+    """A .csv whose header is one 10 MB line."""
+    path = _write(folder, "long.csv", "t," + "x" * (10 << 20) + "\n0,1\n")
+    return [
+        "validate",
+        TOUCH,
+        "--replay",
+        f"sensor={path}",
+    ], f"{path}:1:1: node 'sensor' (replay): a line longer than"
+
+
+def replay_csv_far_times(folder: Path) -> tuple[list[str], str]:
+    """Time stamps 1e300 s apart: a run to the file's end would never end."""
+    path = _write(folder, "far.csv", _GAUGES + "0,0,0,0,0,0\n1e300,0,0,0,0,0\n")
+    return ["run", TOUCH, "--fast", "--replay", f"sensor={path}"], f"{path}:3:1: node 'sensor' (replay): "
+
+
+def replay_csv_rate(folder: Path) -> tuple[list[str], str]:
+    """Time stamps 1 ns apart: a 1 GHz stream, beyond what a replay may give."""
+    rows = "".join(f"{i}e-9,0,0,0,0,0\n" for i in range(3))
+    path = _write(folder, "fast.csv", _GAUGES + rows)
+    return [
+        "validate",
+        TOUCH,
+        "--replay",
+        f"sensor={path}",
+    ], f"{path}:1:1: node 'sensor' (replay): port 'r': sensor (replay): its time stamps step at 1e+09 Hz"
+
+
+def _h5_stream(g: Any, samples: int, shape: tuple[int, ...]) -> None:
+    """A stream group as record.py writes it (no checksums: an old-format file), declaring
+    ``samples`` samples of which none is stored."""
+    g.attrs.update(
+        {"events": 0, "rate_hz": 1000.0, "units": "1", "dtype": "float64", "shape": str(list(shape))}
+    )
+    g.create_dataset("t", (samples,), "f8", maxshape=(None,), chunks=(8192,))
+    g.create_dataset("data", (samples, *shape), "f8", maxshape=(None, *shape), chunks=(8192, *shape))
+
+
+def replay_h5_huge_declared(folder: Path) -> tuple[list[str], str]:
+    """A recording whose streams declare 2**40 samples (none stored): `validate` used to accept it."""
+    import h5py
+
+    path = folder / "huge.h5"
+    with h5py.File(path, "w") as f:
+        streams = f.create_group("streams")
+        _h5_stream(streams.create_group("sensor.r"), 1 << 40, (4,))
+        _h5_stream(streams.create_group("sensor.ref"), 1 << 40, ())
+    return ["run", TOUCH, "--fast", "--replay", f"sensor={path}"], "declares 1099511627776 samples"
+
+
+def replay_h5_many_streams(folder: Path) -> tuple[list[str], str]:
+    """A recording of 10 001 (empty) streams: over the count a replay lists."""
+    import h5py
+
+    path = folder / "many.h5"
+    with h5py.File(path, "w") as f:
+        streams = f.create_group("streams")
+        for i in range(10_001):
+            streams.create_group(f"s{i}.y")
+    return [
+        "validate",
+        TOUCH,
+        "--replay",
+        f"sensor={path}",
+    ], "10001 streams; a replayed recording may hold at most"
+
+
+def replay_fifo(folder: Path) -> tuple[list[str], str]:
+    """A FIFO named like a log: refused without opening it for a blocking read."""
+    path = folder / "log.csv"
+    os.mkfifo(path)
+    return [
+        "validate",
+        TOUCH,
+        "--replay",
+        f"sensor={path}",
+    ], f"{path}:1:1: node 'sensor' (replay): not a regular file (a FIFO)"
+
+
+REPLAY_CASES: dict[str, Callable[[Path], tuple[list[str], str]]] = {
+    f.__name__: f
+    for f in (
+        replay_npz_zip_bomb,
+        replay_npz_lying_header,
+        replay_h5_not_hdf5_sparse,
+        replay_csv_sparse,
+        replay_csv_wide_header,
+        replay_csv_long_line,
+        replay_csv_far_times,
+        replay_csv_rate,
+        replay_h5_huge_declared,
+        replay_h5_many_streams,
+        replay_fifo,
+    )
+}
+"""The replay readers' hostile cases (part of :data:`CASES`)."""
+
+# -- end of the replay readers' cases ------------------------------------------------------------
+
+
+CASES: dict[str, Callable[[Path], tuple[list[str], str]]] = REPLAY_CASES | {
     f.__name__: f
     for f in (
         big_file,

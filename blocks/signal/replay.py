@@ -10,19 +10,36 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import io
 import math
 import os
 import tempfile
 import zipfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
 from flowtact.block import Example, Port, Source, SpecError
-from flowtact.blocks.signal.csv_log import CsvError, read_csv_log
+from flowtact.blocks.signal.csv_log import CsvError, CsvLog, display, read_csv_log, row_place
+from flowtact.blocks.signal.replay_limits import (
+    MAX_CHUNK_BYTES,
+    MAX_NPY_HEADER_BYTES,
+    MAX_RATE_HZ,
+    MAX_STREAMS,
+    REPLAY_BUDGET_BYTES,
+    ReplayFileError,
+    budget_text,
+    has_hdf5_signature,
+    listing,
+    open_regular,
+    rate_problem,
+    time_problem,
+)
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.limits import MAX_TICK_S, format_bytes
 from flowtact.params import Config, did_you_mean, param
 
 __all__ = ["Replay", "ReplayConfig"]
@@ -48,7 +65,10 @@ class ReplayConfig(Config):
         None, doc="units of the data for .npz/.csv (default '1'); for .h5, if given, must match the recording"
     )
     rate_hz: float | None = param(
-        None, doc="nominal sample rate; default the recorded rate (.h5) or 1 / median step of t", gt=0
+        None,
+        doc="nominal sample rate; default the recorded rate (.h5) or 1 / median step of t",
+        gt=0,
+        le=MAX_RATE_HZ,
     )
     time_offset_s: float = param(0.0, doc="added to every time stamp; samples landing before 0 are skipped")
     loop: bool = param(False, doc="start again after the end, times continuing (period = recorded length)")
@@ -76,6 +96,7 @@ class _Source:
     end_s: float | None = None  # events: the recorded end watermark
     h5_stream: str | None = None
     h5_file: Any = None
+    csv: CsvLog | None = None  # a .csv's parsed log, to locate a bad time stamp at its line
 
 
 class Replay(Source):
@@ -118,6 +139,12 @@ class Replay(Source):
     stream or column is reported then, with what the file does hold). Data is read in ``open`` or
     at the first ``reset``: .npz / .csv wholly, .h5 times wholly and the data slice by slice
     from the open file (camera recordings need not fit in memory). Latency: none beyond the tick.
+
+    Every file is bounded before anything is allocated (:mod:`.replay_limits`): a regular file
+    only; what is read wholly at most ``REPLAY_BUDGET_BYTES`` (1 GiB), as the .npz headers (which
+    must match the bytes stored) or the .h5 shapes (each sample stored) declare it; time stamps
+    plus ``time_offset_s`` within ±``MAX_TIME_S`` (1e6 s); a rate within [1e-6, 1e6] Hz; at most
+    ``MAX_STREAMS`` streams or arrays. A file beyond a bound is refused naming it.
 
     Example
     -------
@@ -163,28 +190,38 @@ class Replay(Source):
     def _inspect(self) -> _Source:
         c = self.config
         path = Path(c.path)
-        if not path.is_file():
+        if not path.exists() and not path.is_symlink():
             raise c.error(
                 "path", f"does not exist: {path}" + ("" if path.parent.is_dir() else " (no such folder)")
             )
         suffix = path.suffix.lower()
-        if suffix in H5_SUFFIXES:
-            src = self._inspect_h5(path)
-        else:
-            src = self._inspect_npz(path) if suffix == ".npz" else self._inspect_csv(path)
-            self._check_times(src.t, path)
-            src.spec = src.spec.with_(rate_hz=self._rate(src.t, path))
+        try:
+            if suffix in H5_SUFFIXES:
+                src = self._inspect_h5(path)
+            else:
+                src = self._inspect_npz(path) if suffix == ".npz" else self._inspect_csv(path)
+                self._check_times(src.t, path, src.csv)
+                src.spec = src.spec.with_(rate_hz=self._rate(src.t, path))
+                self._check_density(src, src.t, path)
+        except ReplayFileError as e:
+            raise self._refused(path, str(e)) from None
         return src
+
+    def _refused(self, path: Path, message: str) -> SpecError:
+        """A file-level refusal, located at the file (so the message need not name it again)."""
+        message = message.removeprefix(f"{path}: ")
+        return SpecError("y", f"{self._where()}: {message}", where=(display(path), 1, 1))
 
     def _inspect_h5(self, path: Path) -> _Source:
         from flowtact.record import stream_specs
 
         c = self.config
+        check_h5_file(path)
         try:
             streams = stream_specs(path)
         except (OSError, ValueError) as e:
             raise c.error("path", str(e)) from None
-        available = ", ".join(streams) or "none"
+        available = listing(list(streams))
         name = c.stream
         if name is None:
             if len(streams) != 1:
@@ -193,6 +230,9 @@ class Replay(Source):
         if name not in streams:
             raise c.error("stream", f"must name a stream of {path} (available: {available}); got '{name}'")
         spec, _ = streams[name]
+        if spec.rate_hz is not None and (why := rate_problem(spec.rate_hz)):
+            raise ReplayFileError(f"{path}: stream {name} declares rate_hz {spec.rate_hz:g}; a rate {why}")
+        _check_h5_stream(path, name, spec, self.config.time_offset_s)
         if c.units is not None and c.units != spec.units:
             raise SpecError(
                 "y", f"{self._where()}: units '{c.units}' given, but {name} in {path} is in '{spec.units}'"
@@ -213,39 +253,38 @@ class Replay(Source):
     def _inspect_npz(self, path: Path) -> _Source:
         c = self.config
         key = c.stream if isinstance(c.stream, str) else "data"
-        try:
-            with zipfile.ZipFile(path) as z:
-                arrays = sorted(n[:-4] for n in z.namelist() if n.endswith(".npy"))
-                if key not in arrays:
-                    raise c.error(
-                        "stream",
-                        f"must name an array of {path} (arrays: {', '.join(arrays) or 'none'}); got '{key}'",
-                    )
-                shape, dtype = _npy_header(z, key)
-                t = None
-                if "t" in arrays and key != "t":
-                    with np.load(path) as npz:
-                        t = np.asarray(npz["t"], np.float64)
-        except zipfile.BadZipFile:
-            raise c.error("path", f"{path} is not a .npz file (not a zip archive)") from None
-        if dtype.hasobject:
-            raise c.error("stream", f"array '{key}' in {path} holds Python objects; numbers only")
-        if len(shape) == 0:
-            raise SpecError(
-                "y", f"{self._where()}: array '{key}' in {path} is a scalar; need (n, ...) samples"
-            )
-        n = shape[0]
+        with open_npz(path) as z:
+            arrays = npz_arrays(z)
+            if key not in arrays:
+                raise c.error(
+                    "stream", f"must name an array of {path} (arrays: {listing(arrays)}); got '{key}'"
+                )
+            head = _npy_header(z, key, path)
+            has_t = "t" in arrays and key != "t"
+            t_head = _npy_header(z, "t", path) if has_t else None
+            if len(head.shape) == 0:
+                raise SpecError(
+                    "y", f"{self._where()}: array '{key}' in {path} is a scalar; need (n, ...) samples"
+                )
+            n = head.shape[0]
+            if t_head is not None and t_head.shape != (n,):
+                raise SpecError(
+                    "y", f"{self._where()}: 't' in {path} has shape {t_head.shape}; '{key}' has {n} samples"
+                )
+            need = head.nbytes + 8 * n + (t_head.nbytes if t_head is not None else 0)
+            if need > REPLAY_BUDGET_BYTES:  # the data, its time stamps as float64 (and as stored)
+                raise ReplayFileError(
+                    f"{path}: array '{key}' {head.shape} {head.dtype} and its time stamps take "
+                    f"{budget_text(need)}; record long runs to .h5 (played slice by slice)"
+                )
+            t = None if t_head is None else np.asarray(_npy_read(z, t_head, path), np.float64)
         if t is None:
             if c.rate_hz is None:
                 raise c.error(
                     "rate_hz", f"is required: {path} has no 't' array (samples are stamped i / rate_hz)"
                 )
             t = np.arange(n) / c.rate_hz
-        elif t.shape != (n,):
-            raise SpecError(
-                "y", f"{self._where()}: 't' in {path} has shape {t.shape}; '{key}' has {n} samples"
-            )
-        spec = StreamSpec(dtype=dtype.name, shape=tuple(shape[1:]), units=c.units or "1")
+        spec = StreamSpec(dtype=head.dtype.name, shape=tuple(head.shape[1:]), units=c.units or "1")
         return _Source(spec=spec, t=t, data=(path, key))
 
     def _inspect_csv(self, path: Path) -> _Source:
@@ -255,19 +294,19 @@ class Replay(Source):
         except CsvError as e:
             raise SpecError("y", e.message, where=e.where) from None
         names = log.names
-        listed = ", ".join(names)
+        index = {n: i for i, n in enumerate(names)}
         if c.stream is None:
             columns = list(log.data_columns)
         else:
             columns = [c.stream] if isinstance(c.stream, str) else list(c.stream)
         for col in columns:
-            if col not in names:
+            if col not in index:
                 close = did_you_mean(col, names)
                 close = close if close.startswith(" (did") else ""  # the columns are listed anyway
                 raise c.error(
-                    "stream", f"must name columns of {path} (columns: {listed}); got '{col}'{close}"
+                    "stream", f"must name columns of {path} (columns: {listing(names)}); got '{col}'{close}"
                 )
-        idx = [names.index(col) for col in columns]
+        idx = [index[col] for col in columns]
         single = isinstance(c.stream, str)
         data = np.ascontiguousarray(log.table[:, idx[0]] if single else log.table[:, idx])
         spec = StreamSpec(
@@ -276,9 +315,11 @@ class Replay(Source):
             units=c.units or "1",
             labels=None if single else tuple(columns),
         )
-        return _Source(spec=spec, t=np.ascontiguousarray(log.t), data=data)
+        return _Source(spec=spec, t=np.ascontiguousarray(log.t), data=data, csv=log)
 
-    def _check_times(self, t: np.ndarray, path: Path) -> None:
+    def _check_times(self, t: np.ndarray, path: Path, log: CsvLog | None = None) -> None:
+        """Finite, non-decreasing, and (shifted by ``time_offset_s``) within the span a replay may
+        play: checked at the first bad sample, at its line in a .csv."""
         bad = ~np.isfinite(t)
         if bad.any():
             i = int(np.argmax(bad))
@@ -291,6 +332,39 @@ class Replay(Source):
                 f"{self._where()}: t decreases at sample {i} in {path} ({t[i]:.9g} s after {t[i - 1]:.9g} s); "
                 "time stamps must be non-decreasing",
             )
+        offset = self.config.time_offset_s
+        for i in (0, len(t) - 1) if len(t) else ():  # non-decreasing: the ends bound the rest
+            if why := time_problem(float(t[i]) + offset):
+                shifted = f" (+ time_offset_s {offset:g})" if offset else ""
+                if log is not None:
+                    line, col, text = row_place(log, i)
+                    raise SpecError(
+                        "y", f"{self._where()}: time {text}{shifted} {why}", where=(display(path), line, col)
+                    )
+                raise self._refused(path, f"t[{i}] = {t[i]:.9g} s{shifted} {why}")
+
+    def _check_density(self, src: _Source, t: np.ndarray, path: Path) -> None:
+        """Bound what one tick may emit: the samples in the densest ``MAX_TICK_S`` of the file
+        (times the repeats a loop fits in a tick) must fit the budget, or a file of equal time
+        stamps, or a short loop, would have one tick read everything at once (or for ever)."""
+        n = len(t)
+        if not n:
+            return
+        most = 0
+        for lo in range(0, n, _DENSITY_BLOCK):  # a block at a time: no n-sized temporaries
+            hi = min(n, lo + _DENSITY_BLOCK)
+            ends = np.searchsorted(t, t[lo:hi] + MAX_TICK_S, side="left")
+            most = max(most, int(np.max(ends - np.arange(lo, hi))))
+        if self.config.loop and (period := _period(src, t)) > 0:
+            most = max(most, n * (math.ceil(MAX_TICK_S / period) + 1))
+        row = math.prod(src.spec.shape) * np.dtype(src.spec.dtype).itemsize + 8  # and its time
+        if most * row > REPLAY_BUDGET_BYTES:
+            looped = " (looped)" if self.config.loop else ""
+            raise self._refused(
+                path,
+                f"up to {most} samples ({format_bytes(most * row)}) fall within {MAX_TICK_S:g} s{looped}, "
+                f"the longest tick; a replay may emit at most {format_bytes(REPLAY_BUDGET_BYTES)} in one tick",
+            )
 
     def _rate(self, t: np.ndarray, path: Path) -> float:
         c = self.config
@@ -300,6 +374,10 @@ class Replay(Source):
             inferred = 1.0 / float(np.median(steps))
             if abs(inferred - round(inferred)) <= 1e-6 * inferred:
                 inferred = float(round(inferred))
+            if why := rate_problem(inferred):
+                raise self._refused(
+                    path, f"its time stamps step at {inferred:g} Hz (median); a replayed rate {why}"
+                )
         if c.rate_hz is None:
             if inferred is None:
                 raise c.error(
@@ -360,14 +438,23 @@ class Replay(Source):
         if src.h5_stream is not None and src.h5_file is None:
             from flowtact.record import open_stream
 
+            try:  # the file as inspected: bounded, no declared size beyond what it stores
+                check_h5_file(path)
+                _check_h5_stream(path, src.h5_stream, src.spec, self.config.time_offset_s)
+            except ReplayFileError as e:
+                raise self._refused(path, str(e)) from None
             f, h = open_stream(path, src.h5_stream)  # every checksum verified: damage refused up front
             t = np.asarray(f.read(h.t, slice(0, h.n)), np.float64)
-            self._check_times(t, path)
             end = float(h.attrs.get("end_s", math.nan))
             src.h5_file, src.t, src.data, src.end_s = f, t, h.data, (end if math.isfinite(end) else None)
-        elif isinstance(src.data, tuple):  # npz, not read yet
-            with np.load(src.data[0]) as npz:
-                src.data = np.asarray(npz[src.data[1]])
+            self._check_times(t, path)
+            self._check_density(src, t, path)
+        elif isinstance(src.data, tuple):  # npz, not read yet: its header checked again, then read
+            try:
+                with open_npz(src.data[0]) as z:
+                    src.data = _npy_read(z, _npy_header(z, src.data[1], path), path)
+            except ReplayFileError as e:
+                raise self._refused(path, str(e)) from None
         if isinstance(src.data, np.ndarray):
             src.data.flags.writeable = False
         return src
@@ -388,10 +475,7 @@ class Replay(Source):
         if not self.config.loop or self._n == 0:
             return math.inf
         assert src.t is not None
-        if src.spec.events:
-            period = max(src.end_s or 0.0, float(src.t[-1]))
-        else:
-            period = float(src.t[-1] - src.t[0]) + 1.0 / float(src.spec.rate_hz or math.inf)
+        period = _period(src, src.t)
         if not period > 0:
             raise SpecError(
                 "y", f"{self._where()}: cannot loop {self.config.path}: its length is {period:g} s"
@@ -445,6 +529,13 @@ class Replay(Source):
         )
 
 
+def _period(src: _Source, t: np.ndarray) -> float:
+    """A loop's period: an event stream's recorded length, a sample stream's span plus a step."""
+    if src.spec.events:
+        return max(src.end_s or 0.0, float(t[-1]))
+    return float(t[-1] - t[0]) + 1.0 / float(src.spec.rate_hz or math.inf)
+
+
 def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
     """The last time stamp of a recorded stream and its recorded end watermark (None if absent)."""
     from flowtact.record import open_recording, stream_header
@@ -456,13 +547,228 @@ def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
     return last, (end if math.isfinite(end) else None)
 
 
-def _npy_header(z: zipfile.ZipFile, key: str) -> tuple[tuple[int, ...], np.dtype]:
-    """Shape and dtype of one array of an open .npz, from its header only."""
-    with z.open(f"{key}.npy") as fp:
-        major, _ = np.lib.format.read_magic(fp)
-        read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
-        shape, _, dtype = read(fp)
-    return tuple(shape), np.dtype(dtype)
+# -- .npz: every size a member declares is checked before its data is read --------------------
+
+_DENSITY_BLOCK = 1 << 20  # time stamps searched at a time by Replay._check_density
+_PIECE = 16 << 20  # bytes inflated at a time while reading a .npz member
+_EOCD = b"PK\x05\x06"  # a zip's end-of-central-directory record
+_EOCD64_LOCATOR = b"PK\x06\x07"
+#: Largest zip central directory read (16 MiB: MAX_STREAMS entries with names of 1.5 kB).
+_MAX_DIRECTORY_BYTES = 16 << 20
+
+
+@dataclass(frozen=True)
+class _NpyHeader:
+    """One .npy member of a .npz, as its header declares it (checked against the member's size)."""
+
+    member: zipfile.ZipInfo
+    key: str
+    shape: tuple[int, ...]
+    dtype: np.dtype
+    fortran: bool
+    offset: int  # bytes of magic + header before the data
+
+    @property
+    def nbytes(self) -> int:
+        return math.prod(self.shape) * self.dtype.itemsize
+
+
+@contextlib.contextmanager
+def open_npz(path: Path) -> Iterator[zipfile.ZipFile]:
+    """``path`` as a zip archive: a regular file whose directory is bounded (at most
+    :data:`MAX_STREAMS` members, read before zipfile lists them)."""
+    with open_regular(path) as f:
+        _check_zip_directory(f, path)
+        try:
+            z = zipfile.ZipFile(f)
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
+            raise ReplayFileError(f"{path} is not a .npz file (not a readable zip archive: {e})") from None
+        with z:
+            yield z
+
+
+def _check_zip_directory(f: BinaryIO, path: Path) -> None:
+    """Refuse a zip whose end record declares more members or a larger directory than allowed
+    (zipfile would read the whole directory into memory to list it)."""
+    size = os.fstat(f.fileno()).st_size
+    tail_start = max(0, size - (1 << 16) - 22)  # the end record, after a comment of at most 64 KiB
+    f.seek(tail_start)
+    tail = f.read()
+    at = tail.rfind(_EOCD)
+    if at < 0 or len(tail) - at < 22:
+        return  # not a zip: zipfile says so
+    entries = int.from_bytes(tail[at + 10 : at + 12], "little")
+    directory = int.from_bytes(tail[at + 12 : at + 16], "little")
+    if (
+        (entries == 0xFFFF or directory == 0xFFFFFFFF)
+        and at >= 20
+        and tail[at - 20 : at - 16] == _EOCD64_LOCATOR
+    ):
+        f.seek(int.from_bytes(tail[at - 12 : at - 4], "little"))
+        record = f.read(56)
+        if len(record) == 56:
+            entries = int.from_bytes(record[32:40], "little")
+            directory = int.from_bytes(record[40:48], "little")
+    if entries > MAX_STREAMS or directory > _MAX_DIRECTORY_BYTES:
+        raise ReplayFileError(
+            f"{path}: its zip directory declares {entries} members ({directory} bytes); "
+            f"a .npz may hold at most {MAX_STREAMS} arrays"
+        )
+
+
+def npz_arrays(z: zipfile.ZipFile) -> list[str]:
+    """The array names of an open .npz."""
+    return sorted(n[:-4] for n in z.namelist() if n.endswith(".npy"))
+
+
+def _npy_header(z: zipfile.ZipFile, key: str, path: Path) -> _NpyHeader:
+    """Shape and dtype of one array of an open .npz, from its header only, checked: a member
+    stored or deflated (as numpy writes them), a bounded header, numbers (no Python objects), and
+    exactly as many bytes of data as the header declares (a zip never inflates past its declared
+    size, so that size bounds what is read)."""
+    member = z.getinfo(f"{key}.npy")
+    what = f"{path}: array '{key}'"
+    if member.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED) or member.flag_bits & 1:
+        raise ReplayFileError(
+            f"{what} is encrypted or compressed other than numpy writes (stored or deflated)"
+        )
+    try:
+        with z.open(member) as fp:
+            prefix = fp.read(12)
+            major = prefix[6] if len(prefix) >= 10 and prefix[:6] == b"\x93NUMPY" else None
+            if major not in (1, 2):
+                raise ReplayFileError(f"{what} is not a .npy array of a readable version (1.0 or 2.0)")
+            size_len = 2 if major == 1 else 4
+            header_len = int.from_bytes(prefix[8 : 8 + size_len], "little")
+            if header_len > MAX_NPY_HEADER_BYTES:
+                raise ReplayFileError(
+                    f"{what} has a {header_len}-byte header; a .npy header is at most {MAX_NPY_HEADER_BYTES}"
+                )
+            prefix, header = prefix[: 8 + size_len], prefix[8 + size_len :]
+            header += fp.read(header_len - len(header))
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
+        raise ReplayFileError(f"{what} cannot be read ({e})") from None
+    buf = io.BytesIO(prefix + header)
+    read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+    try:
+        np.lib.format.read_magic(buf)
+        shape, fortran, dtype = read(buf)
+    except (ValueError, SyntaxError, TypeError) as e:
+        raise ReplayFileError(f"{what} has a damaged header ({e})") from None
+    dtype = np.dtype(dtype)
+    if dtype.hasobject:
+        raise ReplayFileError(f"{what} holds Python objects; numbers only")
+    if dtype.itemsize == 0 or dtype.subdtype is not None or dtype.names is not None:
+        raise ReplayFileError(f"{what} is of dtype {dtype}; plain numbers only")
+    head = _NpyHeader(
+        member, key, tuple(int(n) for n in shape), dtype, bool(fortran), len(prefix) + len(header)
+    )
+    if head.offset + head.nbytes != member.file_size:
+        raise ReplayFileError(
+            f"{what} declares shape {head.shape} of {dtype} ({head.nbytes} bytes), but the file holds "
+            f"{member.file_size - head.offset} bytes of data"
+        )
+    if head.nbytes > REPLAY_BUDGET_BYTES:
+        raise ReplayFileError(
+            f"{what} {head.shape} {dtype} takes {budget_text(head.nbytes)}; record long runs to .h5 "
+            "(played slice by slice)"
+        )
+    return head
+
+
+def _npy_read(z: zipfile.ZipFile, head: _NpyHeader, path: Path) -> np.ndarray:
+    """The data of a checked member, inflated a piece at a time into one array of its declared size."""
+    out = np.empty(head.nbytes, np.uint8)
+    done = 0
+    try:
+        with z.open(head.member) as fp:
+            fp.read(head.offset)
+            while done < head.nbytes and (piece := fp.read(min(_PIECE, head.nbytes - done))):
+                out[done : done + len(piece)] = np.frombuffer(piece, np.uint8)
+                done += len(piece)
+            fp.read(1)  # at the end: the CRC is checked
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
+        raise ReplayFileError(f"{path}: array '{head.key}' cannot be read ({e})") from None
+    if done != head.nbytes:
+        raise ReplayFileError(f"{path}: array '{head.key}' ends after {done} of its {head.nbytes} bytes")
+    data = out.view(head.dtype)
+    return data.reshape(head.shape[::-1]).T if head.fortran else data.reshape(head.shape)
+
+
+# -- .h5: the file and the played stream checked before record.py reads them ---------------------
+
+
+def check_h5_file(path: Path) -> None:
+    """A regular file with the HDF5 signature (a few bytes read, never the whole file), holding at
+    most :data:`MAX_STREAMS` streams (counted before any is listed)."""
+    import h5py
+
+    with open_regular(path) as f:
+        if not has_hdf5_signature(f):
+            empty = os.fstat(f.fileno()).st_size == 0
+            raise ReplayFileError(
+                f"{path}: not a readable HDF5 file ({'it is empty' if empty else 'it has no HDF5 signature'})"
+            )
+    try:
+        with h5py.File(path, "r") as h5:
+            group = h5.get("streams")
+            count = len(group) if isinstance(group, h5py.Group) else 0
+    except (OSError, ValueError, RuntimeError):
+        return  # record.py names the problem
+    if count > MAX_STREAMS:
+        raise ReplayFileError(f"{path}: {count} streams; a replayed recording may hold at most {MAX_STREAMS}")
+
+
+def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> None:
+    """The played stream's datasets: sizes within the budget and the file (every declared sample
+    stored), its sample shape as its spec says, its first and last time stamps playable."""
+    from flowtact.record import open_recording, stream_header
+
+    with open_recording(path) as f:
+        h = stream_header(f, name)
+        what = f"{path}: stream {name}"
+        t, data = h.t, h.data
+        if t.ndim != 1 or data.ndim < 1:
+            raise ReplayFileError(f"{what}: datasets of shape {t.shape} (t) and {data.shape} (data)")
+        if tuple(data.shape[1:]) != tuple(spec.shape):
+            raise ReplayFileError(
+                f"{what}: data of samples {data.shape[1:]}, but its attributes say {spec.shape}"
+            )
+        row = math.prod(data.shape[1:]) * data.dtype.itemsize
+        if 8 * t.shape[0] > REPLAY_BUDGET_BYTES or row > REPLAY_BUDGET_BYTES:
+            raise ReplayFileError(
+                f"{what} declares {t.shape[0]} samples of {data.shape[1:]} {data.dtype}: its time stamps "
+                f"alone take {budget_text(max(8 * t.shape[0], row))}"
+            )
+        for ds in (t, data):
+            if (why := _unstored(ds)) is not None:
+                raise ReplayFileError(f"{what}: {ds.name} of shape {ds.shape} {why}")
+        end = float(h.attrs.get("end_s", math.nan))
+        firsts = [f.read(t, i) for i in ((0, h.n - 1) if h.n else ())]
+        for i, value in zip((0, h.n - 1), firsts, strict=False):
+            if why := time_problem(float(value) + offset):
+                raise ReplayFileError(f"{what}: t[{i}] = {float(value):.9g} s {why}")
+        if math.isfinite(end) and (why := time_problem(end + offset)):
+            raise ReplayFileError(f"{what}: its end_s {end:.9g} s {why}")
+
+
+def _unstored(ds: Any) -> str | None:
+    """Why a dataset cannot be read as declared (a chunk index with too few chunks, contiguous
+    storage smaller than the shape, chunks too large to inflate), or None: a recording stores
+    what it declares, in small chunks."""
+    shape = ds.shape
+    if not shape or 0 in shape:
+        return None
+    if ds.chunks is None:
+        stored = ds.id.get_storage_size()
+        need = math.prod(shape) * ds.dtype.itemsize
+        return None if stored >= need or ds.compression else f"stores only {stored} of its {need} bytes"
+    chunk = math.prod(ds.chunks) * ds.dtype.itemsize
+    if chunk > MAX_CHUNK_BYTES and ds.chunks[0] > 1:  # HDF5 inflates a whole chunk to read a value
+        return f"is stored in chunks of {format_bytes(chunk)}; a replay reads chunks of at most {format_bytes(MAX_CHUNK_BYTES)}"
+    need = math.prod(-(-n // c) for n, c in zip(shape, ds.chunks, strict=True))
+    stored = ds.id.get_num_chunks()
+    return None if stored >= need else f"stores only {stored} of its {need} chunks (not written, or cut)"
 
 
 def _example_file() -> Path:
@@ -477,10 +783,10 @@ def _example_file() -> Path:
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")
         np.savez(tmp, t=t, data=data)
         os.replace(tmp, path)
-        atexit.register(_remove_quietly, path)
+        atexit.register(remove_quietly, path)
     return path
 
 
-def _remove_quietly(path: Path) -> None:
+def remove_quietly(path: Path) -> None:
     with contextlib.suppress(OSError):
         path.unlink()

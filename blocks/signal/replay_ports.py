@@ -13,7 +13,6 @@ import atexit
 import functools
 import os
 import tempfile
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -22,7 +21,15 @@ import numpy as np
 
 from flowtact.block import Block, Example, Source, SpecError
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
-from flowtact.blocks.signal.replay import SUFFIXES, Replay, _remove_quietly
+from flowtact.blocks.signal.replay import (
+    SUFFIXES,
+    Replay,
+    check_h5_file,
+    npz_arrays,
+    open_npz,
+    remove_quietly,
+)
+from flowtact.blocks.signal.replay_limits import ReplayFileError, listing
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, ConfigError, did_you_mean, param
 from flowtact.registry import UnknownBlockError, load_block
@@ -126,11 +133,15 @@ class ReplayPorts:
         """Port -> the file's column(s), array or stream feeding it."""
         c = self.config
         path = Path(c.path)
-        if not path.is_file():
+        if not path.exists() and not path.is_symlink():
             where = "" if path.parent.is_dir() else " (no such folder)"
             raise SpecError(None, f"no such file: {self._file()}{where}")
         suffix = path.suffix.lower()
-        names = self._names(path, suffix)
+        try:
+            names = self._names(path, suffix)
+        except ReplayFileError as e:
+            raise SpecError(None, str(e).removeprefix(f"{path}: "), where=(self._file(), 1, 1)) from None
+        known = set(names)
         what = {".csv": "column", ".npz": "array"}.get(suffix, "stream")
         explicit = parse_port_map(c.ports)
         sources: dict[str, str | tuple[str, ...]] = {}
@@ -145,17 +156,17 @@ class ReplayPorts:
                     None, f"port '{port}': a {suffix} file feeds a port from one {what}; got {cols}"
                 )
             for col in cols:
-                if col not in names:
+                if col not in known:
                     close = did_you_mean(col, names) if names else ""
                     close = close if close.startswith(" (did") else ""
                     raise SpecError(
                         None,
                         f"port '{port}': no {what} '{col}' in {self._file()}{close}"
-                        f" ({what}s: {', '.join(names) or 'none'})",
+                        f" ({what}s: {listing(names)})",
                     )
             sources[port] = cols if suffix == ".csv" else cols[0]
         for port in self.outputs:
-            if port not in sources and (found := self._by_name(port, suffix, names)) is not None:
+            if port not in sources and (found := self._by_name(port, suffix, known)) is not None:
                 sources[port] = found
         missing = [p for p in c.need if p not in sources]
         if missing:
@@ -164,7 +175,7 @@ class ReplayPorts:
                 None,
                 f"{self._file()} has no {what} for port{'s' if len(missing) > 1 else ''} "
                 f"{', '.join(repr(p) for p in missing)} of {self.replaces.name} ({what}s: "
-                f"{', '.join(names) or 'none'}); {'map them' if what == 'stream' else f'name {what}s after the ports or map them'}: "
+                f"{listing(names)}); {'map them' if what == 'stream' else f'name {what}s after the ports or map them'}: "
                 f"--replay '{self.node}={self._file()}:{example}'",
             )
         return sources
@@ -184,19 +195,18 @@ class ReplayPorts:
             except CsvError as e:
                 raise SpecError(None, e.message, where=e.where) from None
         if suffix == ".npz":
-            try:
-                with zipfile.ZipFile(path) as z:
-                    return sorted(n[:-4] for n in z.namelist() if n.endswith(".npy") and n != "t.npy")
-            except zipfile.BadZipFile:
-                raise SpecError(None, f"{self._file()} is not a .npz file (not a zip archive)") from None
+            with open_npz(path) as z:
+                return [n for n in npz_arrays(z) if n != "t"]
         from flowtact.record import stream_specs
+
+        check_h5_file(path)
 
         try:
             return list(stream_specs(path))
         except (OSError, ValueError, KeyError) as e:
             raise SpecError(None, f"{self._file()}: {e}") from None
 
-    def _by_name(self, port: str, suffix: str, names: list[str]) -> str | tuple[str, ...] | None:
+    def _by_name(self, port: str, suffix: str, names: set[str]) -> str | tuple[str, ...] | None:
         if suffix in (".h5", ".hdf5"):
             stream = f"{self.node}.{port}"
             return stream if stream in names else None
@@ -336,5 +346,5 @@ def _example_csv(block: type[Block]) -> Path:
             tmp, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments=""
         )
         os.replace(tmp, path)
-        atexit.register(_remove_quietly, path)
+        atexit.register(remove_quietly, path)
     return path

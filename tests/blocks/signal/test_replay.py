@@ -216,8 +216,9 @@ def test_h5_errors(recording, tmp_path):
     Replay(path=str(path), stream="force.f", units="N", rate_hz=1000.0).bind({})  # matching is fine
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"nothing")
-    with pytest.raises(ConfigError, match="not a readable HDF5 file"):
+    with pytest.raises(SpecError, match="not a readable HDF5 file") as e:
         Replay(path=str(junk)).bind({})
+    assert e.value.where == (str(junk), 1, 1)  # located at the file
 
 
 def test_h5_single_stream_needs_no_name_and_decreasing_t_is_caught(tmp_path):
