@@ -8,7 +8,6 @@ import math
 import os
 import select
 import subprocess
-import sys
 import tempfile
 import time
 from collections import OrderedDict, deque
@@ -34,6 +33,7 @@ from flowtact.blocks.teleop.exo_protocol import (
 from flowtact.blocks.teleop.hand import FINGERS, N_FINGERS
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
+from flowtact.python_child import python_command
 
 __all__ = ["SerialIo", "SerialIoConfig"]
 
@@ -351,8 +351,7 @@ class SerialIo(Source):
         c = self.config
         self._tmpdir = tempfile.mkdtemp(prefix="flowtact-serial-")
         link = os.path.join(self._tmpdir, "exo")
-        argv = [
-            sys.executable,
+        argv = python_command(
             "-m",
             "flowtact.blocks.teleop.exo_emulator",
             "--link",
@@ -361,7 +360,7 @@ class SerialIo(Source):
             repr(c.rate_hz),
             "--exit-with-parent",
             *c.emulator_args,
-        ]
+        )
         self._proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
         assert self._proc.stdout is not None
         ready, _, _ = select.select([self._proc.stdout], [], [], c.startup_timeout_s)

@@ -24,6 +24,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from flowtact.python_child import python_command
+
 __all__ = ["STEP_MARK", "Prior", "measure_children", "share"]
 
 STEP_MARK = "\x1eflowtact-bench-step "
@@ -48,8 +50,8 @@ def measure_children(
     for part in range(parts - 1):
         with tempfile.TemporaryDirectory(prefix="flowtact-bench-") as tmp:
             out = Path(tmp) / "figures.json"
-            cmd = [sys.executable, "-m", __name__, name, "--part", str(part), "--parts", str(parts), "--out",
-                   str(out), *(["--quick"] if quick else []), *(["--peers"] if peers else [])]  # fmt: skip
+            cmd = python_command("-m", __name__, name, "--part", str(part), "--parts", str(parts), "--out",
+                                 str(out), *(["--quick"] if quick else []), *(["--peers"] if peers else []))  # fmt: skip
             tail = _run_child(cmd, lambda text, p=part: on_step(f"process {p + 1}/{parts}: {text}"))
             if tail is not None or not out.exists():
                 last = tail[-1] if tail else "no figures written"

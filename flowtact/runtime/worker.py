@@ -348,7 +348,7 @@ class Worker:
         self.out_specs: dict[str, dict[str, StreamSpec]] = {}
         for nd in plan["nodes"]:
             self.busy = nd["name"]
-            cls = load_block(nd["block"])
+            cls = load_block(nd["block"], plan["allow_modules"])
             block = cls(cls.config_cls.build(nd["params"], owner=nd["name"]), node=nd["name"])
             specs = block.bind(
                 {p: spec_from_wire(s) for p, s in nd["inputs"].items()},
