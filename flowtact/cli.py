@@ -90,6 +90,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     worker.add_argument("--process", required=True, help="the process group to run")
     worker.add_argument("--keys", help="CURVE keys folder (default: $FLOWTACT_KEYS)")
+    add_allow_module(worker)  # this host's own permission: the supervisor's does not reach here
 
     keys = sub.add_parser("keys", help="create the CURVE key pair that hosts of a rig share")
     keys.add_argument("folder", help="folder to write flowtact.key and flowtact.key_secret into")
@@ -311,6 +312,8 @@ def _cmd_worker(args: argparse.Namespace) -> int:
     argv = [args.connect, "--process", args.process]
     if args.keys:
         argv += ["--keys", args.keys]
+    for module in args.allow_modules:
+        argv += ["--allow-module", module]
     return worker_main(argv)
 
 

@@ -166,6 +166,17 @@ def test_workers_ignore_a_poisoned_working_directory(tmp_path):
     assert sorted(p.name for p in tmp_path.glob("MARK-*")) == []
 
 
+def test_a_sweep_pool_ignores_a_poisoned_working_directory(tmp_path):
+    pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    for name in ("struct", "threading", "socket", "selectors"):  # what multiprocessing's helpers import first
+        (tmp_path / f"{name}.py").write_text(POISON.format(mark=str(tmp_path / f"MARK-{name}"), name=name))
+    done = flowtact("sweep", "touch", "--set-grid", "sa1.tau_s=0.005,0.01", "--duration", "0.2", "--workers", "1",
+                    "--quiet", cwd=tmp_path)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in tmp_path.glob("MARK-*")) == []
+
+
 def test_python_children_leave_the_working_directory_off_their_path_and_keep_pythonpath(tmp_path):
     mine = tmp_path / "mine"
     code = "import json, sys; print(json.dumps(sys.path))"

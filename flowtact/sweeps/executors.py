@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from typing import Any
 
+from flowtact.python_child import safe_path_env
 from flowtact.sweeps.grid import SweepSpecError
 
 __all__ = ["dask_executor", "local_pool_factory"]
@@ -30,6 +31,10 @@ def local_pool_factory(workers: int | None, preload: Sequence[str] = ()) -> Call
     ctx.set_forkserver_preload(["flowtact.sweeps.runs", "flowtact.launch", "flowtact.compile", *preload])
 
     def make() -> Executor:
+        from multiprocessing import forkserver
+
+        with safe_path_env():  # the fork server (and its resource tracker): no cwd on their import path
+            forkserver.ensure_running()
         return ProcessPoolExecutor(max_workers=n, mp_context=ctx)
 
     return make
