@@ -198,3 +198,54 @@ def test_a_sweep_refuses_the_module_before_any_run(evil, monkeypatch):
     with pytest.raises(GraphErrors, match="--allow-module evilblocks"):
         flowtact.sweep(graph, grid={"gain.gain": [1.0, 2.0]}, workers=1)
     assert not mark.exists()
+
+
+REMOTE = """\
+duration_s: 0.5
+nodes:
+  src:  {{block: "evilblocks:Ramp", process: a}}
+  gain: {{block: "evilblocks:Scale", process: b}}
+edges: [src.y -> gain.x]
+processes:
+  b: {{host: 127.0.0.1}}
+network: {{listen: 127.0.0.1, port: {port}, keys: keys}}
+record: [gain.y]
+"""
+WHO = """
+import pathlib, sys
+with open({mark!r}, "a") as f:
+    f.write(" ".join(sys.argv) + "\\n")
+from toyblocks import Ramp, Scale
+"""
+
+
+@pytest.mark.slow
+def test_a_worker_on_another_host_imports_only_what_its_own_command_line_allows(tmp_path):
+    """The supervisor's --allow-module does not reach a worker started by hand on another host."""
+    import socket
+
+    from flowtact.runtime.security import generate_keys
+
+    generate_keys(tmp_path / "keys")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    mods, mark = tmp_path / "mods", tmp_path / "who"
+    mods.mkdir()
+    (mods / "evilblocks.py").write_text(WHO.format(mark=str(mark)))
+    (tmp_path / "g.yaml").write_text(REMOTE.format(port=port))
+    exe = Path(sys.executable).parent / "flowtact"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(mods), str(TESTS)])}
+    env.pop("FLOWTACT_KEYS", None)
+    run = [str(exe), "run", "g.yaml", "--fast", "--quiet", "--allow-module", "evilblocks"]
+    sup = subprocess.Popen(run, cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+    line = sup.stderr.readline()  # the first line says how to start the remote group
+    assert "--process b --allow-module evilblocks`" in line, line
+    worker = subprocess.run([str(exe), "worker", f"tcp://127.0.0.1:{port}", "--process", "b", "--keys", "keys"],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)  # fmt: skip
+    _, err = sup.communicate(timeout=120)
+    assert worker.returncode == 1 and sup.returncode == 1
+    assert "process 'b' (nodes gain) ModuleNotAllowedError: block 'evilblocks:Scale'" in err, err
+    assert [
+        w for w in mark.read_text().splitlines() if " worker " in w
+    ] == []  # the remote worker never imported it

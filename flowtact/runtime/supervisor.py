@@ -301,9 +301,10 @@ class ProcessExecutor:
     def _say_waiting(self, proc: _Proc) -> None:
         waited = time.monotonic() - proc.since
         if waited < 1.0:
+            allow = "".join(f" --allow-module {m}" for m in self.plan.graph.allow_modules)  # that host's say
             self.warn(
                 f"waiting for process '{proc.name}' on {proc.host} (up to {proc.startup_s:g} s, its "
-                f"startup_s): start it there with `flowtact worker {self.tcp_ctl} --process {proc.name}`"
+                f"startup_s): start it there with `flowtact worker {self.tcp_ctl} --process {proc.name}{allow}`"
             )
         else:
             self.warn(
