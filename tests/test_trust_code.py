@@ -166,13 +166,16 @@ def test_workers_ignore_a_poisoned_working_directory(tmp_path):
     assert sorted(p.name for p in tmp_path.glob("MARK-*")) == []
 
 
-def test_a_sweep_pool_ignores_a_poisoned_working_directory(tmp_path):
+@pytest.mark.parametrize("executor", ["local", "dask"])
+def test_a_sweep_pool_ignores_a_poisoned_working_directory(tmp_path, executor):
     pytest.importorskip("pandas")
     pytest.importorskip("pyarrow")
+    if executor == "dask":
+        pytest.importorskip("distributed")
     for name in ("struct", "threading", "socket", "selectors"):  # what multiprocessing's helpers import first
         (tmp_path / f"{name}.py").write_text(POISON.format(mark=str(tmp_path / f"MARK-{name}"), name=name))
     done = flowtact("sweep", "touch", "--set-grid", "sa1.tau_s=0.005,0.01", "--duration", "0.2", "--workers", "1",
-                    "--quiet", cwd=tmp_path)  # fmt: skip
+                    "--executor", executor, "--quiet", cwd=tmp_path)  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in tmp_path.glob("MARK-*")) == []
 

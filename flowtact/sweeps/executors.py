@@ -60,14 +60,19 @@ def dask_executor(scheduler: str | None, workers: int | None) -> Iterator[tuple[
             except OSError as e:
                 raise SweepSpecError(f"--scheduler {scheduler}: cannot connect ({e})") from None
         else:
-            cluster = stack.enter_context(
-                LocalCluster(
-                    n_workers=workers or os.cpu_count() or 1,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
+            import dask
+
+            # its workers (restarts too) and helpers start without the cwd on their import path
+            safe = dask.config.set({"distributed.nanny.pre-spawn-environ.PYTHONSAFEPATH": "1"})
+            with safe, safe_path_env():
+                cluster = stack.enter_context(
+                    LocalCluster(
+                        n_workers=workers or os.cpu_count() or 1,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,
+                    )
                 )
-            )
             client = stack.enter_context(Client(cluster))
         n = max(sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()), 1)
         yield client.get_executor(pure=False), n
