@@ -4,7 +4,8 @@ Any installed package can add blocks by declaring entry points in that group. A 
 name a class directly as ``package.module:Class``, but a graph is data from anyone: such a module
 is imported only when the user allows it (``--allow-module MODULE`` on the command line,
 ``allow_modules=`` in Python), or when it belongs to a package that registers blocks (installed
-code the user chose, e.g. the replay stand-ins in ``flowtact.blocks.signal.replay_ports``).
+code the user chose, e.g. the replay stand-ins in ``flowtact.blocks.signal.replay_ports``; never
+a ``__main__``, which would run that package's command).
 Nothing a file says widens the permission. See docs/security.md.
 """
 
@@ -99,7 +100,8 @@ def load_block(name: str, allow_modules: Iterable[str] = ()) -> type[Block]:
         allow = _ALLOWED.get() | frozenset(allow_modules)
         if not MODULE_RE.match(module) or not attr:
             raise UnknownBlockError(f"block '{name}' is neither a registered block nor module:Class")
-        if not module_allowed(module, allow | _block_packages()):
+        installed = "__main__" not in module.split(".") and module_allowed(module, _block_packages())
+        if not (installed or module_allowed(module, allow)):
             raise ModuleNotAllowedError(
                 f"block '{name}' names a Python module; flowtact imports only registered blocks "
                 f"unless you allow it: --allow-module {module}"

@@ -252,3 +252,14 @@ def test_a_worker_on_another_host_imports_only_what_its_own_command_line_allows(
     assert [
         w for w in mark.read_text().splitlines() if " worker " in w
     ] == []  # the remote worker never imported it
+
+
+def test_modules_of_installed_block_packages_need_no_flag_but_never_a_main():
+    from flowtact.registry import ModuleNotAllowedError, load_block
+
+    # what --replay writes into a graph (and so into recordings): loads without a flag
+    stand_in = load_block("flowtact.blocks.signal.replay_ports:aunp_sensor")
+    assert stand_in.outputs.keys() == load_block("aunp_sensor").outputs.keys()
+    assert load_block("flowtact.blocks.signal.savgol:SavGol") is load_block("savgol")
+    with pytest.raises(ModuleNotAllowedError, match=r"--allow-module flowtact\.blocks\.signal\.__main__$"):
+        load_block("flowtact.blocks.signal.__main__:X")  # a package's command, never run by a graph
