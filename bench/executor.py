@@ -82,7 +82,9 @@ def _pass_along(c: object) -> object:
 def bench_overhead(ctx: Context, chunk: int, n_nodes: int, n_ticks: int) -> list[object]:
     """µs per node-step of a source and a chain of pass-through nodes, four ways, and the executor's
     framework overhead: executor minus the blocks' own ``step`` calls, pair by pair."""
-    plan = compile_graph(load_graph("chain.yaml", text=chain_graph(n_nodes)))
+    plan = compile_graph(
+        load_graph("chain.yaml", text=chain_graph(n_nodes), allow_modules=["flowtact.bench.executor"])
+    )
     tick = chunk / 1000.0
     duration = n_ticks * tick
     blocks = [Pass(node=f"p{i}") for i in range(n_nodes)]
@@ -173,7 +175,7 @@ edges:
   - src.y -> pop.x
 record: [pop.spikes]
 """
-    return compile_graph(load_graph("nlif.yaml", text=text))
+    return compile_graph(load_graph("nlif.yaml", text=text, allow_modules=["flowtact.bench.executor"]))
 
 
 def bench_nlif(ctx: Context, n: int, sigma: float, seconds: float) -> None:

@@ -104,6 +104,7 @@ def flowtact_run(
     """Run ``flowtact run GRAPH ... --json --quiet`` in a subprocess and return its JSON summary."""
     cmd = [sys.executable, "-c", "import sys; from flowtact.cli import main; sys.exit(main())", "run"]
     cmd += [str(graph), "--duration", repr(duration), "--tick", repr(tick), "--json", "--quiet"]
+    cmd += ["--allow-module", "flowtact.bench"]  # fast.yaml's blocks are flowtact.bench.transport_blocks
     cmd += ["--fast"] if fast else []
     for s in sets:
         cmd += ["--set", s]

@@ -54,6 +54,7 @@ def _parser() -> argparse.ArgumentParser:
             "'sensor=log.csv:r=g1,g2,g3,g4;ref=g0'. Without --duration the run ends at the file's "
             "end; see docs/your-own-data.md. Repeatable",
         )
+        add_allow_module(sp)
 
     run = sub.add_parser("run", help="run a graph")
     graph_args(run)
@@ -89,6 +90,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     worker.add_argument("--process", required=True, help="the process group to run")
     worker.add_argument("--keys", help="CURVE keys folder (default: $FLOWTACT_KEYS)")
+    add_allow_module(worker)  # this host's own permission: the supervisor's does not reach here
 
     keys = sub.add_parser("keys", help="create the CURVE key pair that hosts of a rig share")
     keys.add_argument("folder", help="folder to write flowtact.key and flowtact.key_secret into")
@@ -187,6 +189,30 @@ def _plugin_help(ep: Any) -> str:
     return (doc or ep.value).splitlines()[0]
 
 
+def _module_name(text: str) -> str:
+    from flowtact.registry import check_module_name
+
+    try:
+        return check_module_name(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def add_allow_module(sp: argparse.ArgumentParser) -> None:
+    """``--allow-module MODULE`` (repeatable): the modules whose ``module:Class`` blocks a graph
+    may import. Only the command line gives this: no file, recording or environment variable."""
+    sp.add_argument(
+        "--allow-module",
+        dest="allow_modules",
+        action="append",
+        default=[],
+        type=_module_name,
+        metavar="MODULE",
+        help="let the graph's 'module:Class' blocks import MODULE (or modules inside package MODULE); "
+        "without it only registered blocks load. Repeatable; see docs/security.md",
+    )
+
+
 def _version() -> str:
     from flowtact import __version__
 
@@ -211,7 +237,12 @@ def _replays(items: Sequence[str]) -> dict[str, str]:
 def _plan(args: argparse.Namespace) -> Any:
     from flowtact.launch import load_plan
 
-    return load_plan(args.graph, overrides=args.overrides, replays=_replays(args.replays))
+    return load_plan(
+        args.graph,
+        overrides=args.overrides,
+        replays=_replays(args.replays),
+        allow_modules=args.allow_modules,
+    )
 
 
 class _Progress:
@@ -281,6 +312,8 @@ def _cmd_worker(args: argparse.Namespace) -> int:
     argv = [args.connect, "--process", args.process]
     if args.keys:
         argv += ["--keys", args.keys]
+    for module in args.allow_modules:
+        argv += ["--allow-module", module]
     return worker_main(argv)
 
 
@@ -319,7 +352,7 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
     from flowtact.registry import UnknownBlockError
 
     try:
-        cls = load_block(args.name)
+        cls = load_block(args.name, [args.name.partition(":")[0]])  # named on the command line: allowed
     except UnknownBlockError as e:
         print(f"flowtact: {e}", file=sys.stderr)
         return EXIT_GRAPH_ERROR

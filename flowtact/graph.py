@@ -24,7 +24,7 @@ from flowtact.limits import MAX_QUEUE, MAX_TICK_S, positive_seconds
 from flowtact.located import GraphError, GraphErrors, Loc, Located
 from flowtact.param_paths import resolve_path, resolve_paths
 from flowtact.params import ConfigError, did_you_mean
-from flowtact.registry import UnknownBlockError, load_block
+from flowtact.registry import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
 from flowtact.replay_spec import parse_port_map, split_replay
 from flowtact.safe_yaml import SafeYamlError, compose, load_value, read_graph_text
 
@@ -112,6 +112,9 @@ class Graph:
     description: str = ""
     overrides: dict[str, Any] = field(default_factory=dict)
     deployment: Deployment = field(default_factory=Deployment)
+    allow_modules: tuple[str, ...] = ()
+    """Modules the user allowed for ``module:Class`` blocks (``--allow-module``): workers and sweep
+    rows load the graph's blocks with exactly this permission, never one the file gives itself."""
 
 
 def resolve_graph_path(name: str | Path) -> Path:
@@ -144,8 +147,13 @@ def load_graph(
     overrides: Iterable[str] = (),
     replays: Mapping[str, str] | None = None,
     text: str | None = None,
+    allow_modules: Iterable[str] = (),
 ) -> Graph:
     """Load and validate a graph file; raise :class:`GraphErrors` listing every problem.
+
+    A ``module:Class`` block is imported only if its module is in ``allow_modules`` (module names
+    or package prefixes: ``mypkg`` allows ``mypkg.blocks``; :mod:`flowtact.registry`); otherwise it
+    is an error at the block's place and nothing is imported.
 
     ``overrides`` are ``node.param=value`` strings (``--set``), applied before validation, so they
     go through exactly the same checks. ``replays`` maps a node to ``FILE[:PORT=COLUMNS;...]``
@@ -175,7 +183,11 @@ def load_graph(
         mark = e.problem_mark
         loc = Loc(path, mark.line + 1, mark.column + 1) if mark else Loc(path)
         raise GraphErrors([GraphError(loc, f"unsupported YAML value: {e.problem}")]) from None
-    return _build(doc, located, path, text, list(overrides), dict(replays or {}))
+    allow = tuple(dict.fromkeys(allow_modules))
+    with allowing(allow):
+        graph = _build(doc, located, path, text, list(overrides), dict(replays or {}))
+    graph.allow_modules = allow
+    return graph
 
 
 def _apply_replays(
@@ -409,13 +421,8 @@ def _node(
     try:
         cls = load_block(block_name)
     except UnknownBlockError as e:
-        errors.append(
-            GraphError(
-                y.loc("nodes", name, "block"),
-                f"node '{name}': {e}",
-                "see `flowtact blocks` for the catalogue",
-            )
-        )
+        hint = "" if isinstance(e, ModuleNotAllowedError) else "see `flowtact blocks` for the catalogue"
+        errors.append(GraphError(y.loc("nodes", name, "block"), f"node '{name}': {e}", hint))
         return None
     classes[name] = cls
     params = ndoc.get("params", {}) or {}

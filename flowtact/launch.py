@@ -31,16 +31,24 @@ def load_plan(
     *,
     overrides: Iterable[str] = (),
     replays: Mapping[str, str] | None = None,
+    allow_modules: Iterable[str] = (),
 ) -> Plan:
-    """Load and compile a graph file, or the graph stored in a recording (``.h5``)."""
+    """Load and compile a graph file, or the graph stored in a recording (``.h5``).
+
+    ``allow_modules`` (``--allow-module``) are the modules whose ``module:Class`` blocks may be
+    imported (:func:`flowtact.graph.load_graph`); a recording's stored graph never widens them."""
     path = Path(source)
     if path.suffix in (".h5", ".hdf5"):
         from flowtact.record import read_recording
 
         text = read_recording(path, streams=()).provenance["graph_yaml"]
-        graph = load_graph(f"{path}#graph", text=text, overrides=overrides, replays=replays)
+        graph = load_graph(
+            f"{path}#graph", text=text, overrides=overrides, replays=replays, allow_modules=allow_modules
+        )
     else:
-        graph = load_graph(resolve_graph_path(source), overrides=overrides, replays=replays)
+        graph = load_graph(
+            resolve_graph_path(source), overrides=overrides, replays=replays, allow_modules=allow_modules
+        )
     return compile_graph(graph)
 
 

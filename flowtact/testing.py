@@ -199,6 +199,7 @@ def run_graph(
     overrides: Sequence[str] = (),
     feed: Mapping[str, Chunk | tuple[np.ndarray, np.ndarray]] | None = None,
     tick_s: float | None = None,
+    allow_modules: Sequence[str] = (),
 ) -> dict[str, Chunk]:
     """Run a whole graph offline (in process, virtual clock) and return its recorded streams.
 
@@ -207,6 +208,7 @@ def run_graph(
     (every consumed output of a fed node must be given; a recorded one that is not is left out of
     the result), so a graph can be driven by your own data without touching its file. Without
     ``duration_s`` the run lasts until the fed samples end (one sample period after the last).
+    ``allow_modules``: the modules whose ``module:Class`` blocks may be imported (``--allow-module``).
     """
     from flowtact.compile import compile_graph
     from flowtact.graph import load_graph, resolve_graph_path
@@ -221,7 +223,9 @@ def run_graph(
         if feed:
             from flowtact.record import Recorder
 
-            base = compile_graph(load_graph(resolve_graph_path(graph), overrides=overrides))
+            base = compile_graph(
+                load_graph(resolve_graph_path(graph), overrides=overrides, allow_modules=allow_modules)
+            )
             by_node: dict[str, dict[str, Chunk]] = {}
             for stream, value in feed.items():
                 node, _, port = stream.partition(".")
@@ -245,7 +249,10 @@ def run_graph(
                     for port, c in ports.items():
                         rec.write(f"{node}.{port}", c)
                 replays[node] = path
-        plan = compile_graph(load_graph(resolve_graph_path(graph), overrides=overrides, replays=replays))
+        graph_def = load_graph(
+            resolve_graph_path(graph), overrides=overrides, replays=replays, allow_modules=allow_modules
+        )
+        plan = compile_graph(graph_def)
         memory = _Memory()
         InprocExecutor(plan, fast=True, tick_s=tick_s, recorder=memory).run(
             default_duration(plan, duration_s)

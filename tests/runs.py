@@ -18,6 +18,20 @@ ROOT = Path(__file__).resolve().parent.parent
 TESTS = Path(__file__).resolve().parent
 
 
+TEST_BLOCKS = ("toyblocks", "hotpathblocks", "sealblocks", "brokenblocks", "warmblocks", "sweepblocks")
+"""The test modules whose ``module:Class`` blocks the tests' graphs name: a graph may import them
+only when allowed (``allow_modules=TEST_BLOCKS``, ``--allow-module``; docs/security.md)."""
+
+GRAPH_COMMANDS = ("run", "validate", "graph", "sweep")
+
+
+def allow_args(args: tuple[str, ...] | list[str]) -> list[str]:
+    """``args`` with ``--allow-module M`` for each test block module when its command loads a graph."""
+    command = next((a for a in args if not a.startswith("-")), None)
+    extra = [w for m in TEST_BLOCKS for w in ("--allow-module", m)] if command in GRAPH_COMMANDS else []
+    return [*args, *extra]
+
+
 def env() -> dict[str, str]:
     """The environment with the test blocks (``toyblocks:Class``) importable."""
     out = dict(os.environ)
@@ -26,9 +40,9 @@ def env() -> dict[str, str]:
 
 
 def flowtact(*args: str, **kw) -> subprocess.Popen:
-    """Start ``flowtact ARGS`` (text stdout/stderr pipes)."""
+    """Start ``flowtact ARGS`` (text stdout/stderr pipes), the test blocks allowed (:func:`allow_args`)."""
     return subprocess.Popen(
-        [sys.executable, "-m", "flowtact.cli", *args],
+        [sys.executable, "-m", "flowtact.cli", *allow_args(args)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -5,7 +5,7 @@ import subprocess
 import sys
 
 import pytest
-from runs import env, flowtact
+from runs import allow_args, env, flowtact
 
 from flowtact.debug import HINT, debug_enabled, print_error
 from flowtact.runtime.inproc import NodeError
@@ -28,7 +28,7 @@ def run(*args, environ=None):
         out, err = proc.communicate(timeout=120)
         return proc.returncode, out, err
     done = subprocess.run(
-        [sys.executable, "-m", "flowtact.cli", *args],
+        [sys.executable, "-m", "flowtact.cli", *allow_args(args)],
         capture_output=True,
         text=True,
         env=environ,

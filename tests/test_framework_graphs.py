@@ -5,6 +5,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from runs import TEST_BLOCKS
 
 from flowtact.compile import compile_graph
 from flowtact.graph import GraphErrors, load_graph
@@ -28,7 +29,7 @@ record: [add.y, dbl.y]
 
 
 def load(text, **kw):
-    return load_graph("g.yaml", text=textwrap.dedent(text), **kw)
+    return load_graph("g.yaml", text=textwrap.dedent(text), allow_modules=TEST_BLOCKS, **kw)
 
 
 class Collect:

@@ -241,7 +241,7 @@ def test_a_block_without_an_extra_names_the_module(tmp_path):
     )
     env = _hiding(tmp_path, "toyheavy")
     env["PYTHONPATH"] += os.pathsep + str(TESTS)
-    proc = _flowtact(env, "validate", str(graph))
+    proc = _flowtact(env, "validate", str(graph), "--allow-module", "toyblocks")
     assert proc.returncode == 2
     assert f"{graph}:3:3: node 'h': block heavy needs module 'toyheavy': pip install toyheavy" in proc.stderr
 

@@ -5,6 +5,7 @@ import textwrap
 import numpy as np
 import pytest
 import sealblocks
+from runs import TEST_BLOCKS
 
 from flowtact.chunk import Chunk
 from flowtact.compile import compile_graph
@@ -15,7 +16,7 @@ from flowtact.runtime.inproc import InprocExecutor, NodeError
 def run(text: str, ticks: int = 5) -> dict[str, list[Chunk]]:
     sealblocks.made.clear()
     sealblocks.got.clear()
-    plan = compile_graph(load_graph("g.yaml", text=textwrap.dedent(text)))
+    plan = compile_graph(load_graph("g.yaml", text=textwrap.dedent(text), allow_modules=TEST_BLOCKS))
     rec: dict[str, list[Chunk]] = {}
 
     class Memory:

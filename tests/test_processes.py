@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import toyblocks
-from runs import ROOT, alive, flowtact, wait_children, wait_recorded, worker_of
+from runs import ROOT, TEST_BLOCKS, alive, flowtact, wait_children, wait_recorded, worker_of
 
 from flowtact.graph import GraphErrors
 from flowtact.launch import load_plan, run_plan
@@ -78,8 +78,12 @@ record: [gain.y, mean.y, camera.y]
 def test_a_multi_rate_graph_gives_the_same_outputs_in_real_time_and_fast(tmp_path):
     path = tmp_path / "multirate.yaml"
     path.write_text(MULTIRATE)
-    run_plan(load_plan(path), duration_s=1.0, fast=False, record=tmp_path / "rt.h5")
-    run_plan(load_plan(path), duration_s=1.0, fast=True, record=tmp_path / "fast.h5")
+    run_plan(
+        load_plan(path, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=False, record=tmp_path / "rt.h5"
+    )
+    run_plan(
+        load_plan(path, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=True, record=tmp_path / "fast.h5"
+    )
     _same(tmp_path / "rt.h5", tmp_path / "fast.h5")
     rec = read_recording(tmp_path / "fast.h5")
     assert len(rec.streams["gain.y"].t) == 1000 and len(rec.streams["mean.y"].t) == 40
@@ -108,15 +112,28 @@ record: [g2.y, g3.y, g4.y]
 def test_one_output_fans_out_to_several_processes_and_recordings_keep_the_placement(tmp_path):
     path = tmp_path / "fanout.yaml"
     path.write_text(FANOUT)
-    summary = run_plan(load_plan(path), duration_s=2.0, fast=True, record=tmp_path / "procs.h5")
+    summary = run_plan(
+        load_plan(path, allow_modules=TEST_BLOCKS), duration_s=2.0, fast=True, record=tmp_path / "procs.h5"
+    )
     assert set(summary.streams) == {"src.y@b", "src.y@c"}
-    run_plan(load_plan(path), duration_s=2.0, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    run_plan(
+        load_plan(path, allow_modules=TEST_BLOCKS),
+        duration_s=2.0,
+        fast=True,
+        inproc=True,
+        record=tmp_path / "inproc.h5",
+    )
     _same(tmp_path / "procs.h5", tmp_path / "inproc.h5")
-    again = load_plan(tmp_path / "procs.h5")  # re-created from the recording's provenance
+    again = load_plan(
+        tmp_path / "procs.h5", allow_modules=TEST_BLOCKS
+    )  # re-created from the recording's provenance
     assert again.graph.deployment.processes["c"].restart == "on-failure"
     assert again.graph.deployment.deadlines[0].budget_s == pytest.approx(0.02)
     assert [(e.policy, e.queue) for e in again.graph.edges] == [("block", 64), ("latest", 2), ("latest", 2)]
-    assert place(again, fast=False).group_of == place(load_plan(path), fast=False).group_of
+    assert (
+        place(again, fast=False).group_of
+        == place(load_plan(path, allow_modules=TEST_BLOCKS), fast=False).group_of
+    )
 
 
 def test_latest_policy_is_declared_per_edge_and_checked():
@@ -127,7 +144,7 @@ def test_latest_policy_is_declared_per_edge_and_checked():
     from flowtact.graph import load_graph
 
     with pytest.raises(GraphErrors) as e:
-        load_graph("g.yaml", text=text)
+        load_graph("g.yaml", text=text, allow_modules=TEST_BLOCKS)
     assert "edge policy must be one of block, latest; got 'newest'" in str(e.value)
     assert "edge queue must be an integer from 1 to" in str(e.value)
 
@@ -303,7 +320,7 @@ def test_the_live_view_gets_rates_latencies_and_cpu_while_running(tmp_path):
     path = tmp_path / "deadline.yaml"
     path.write_text(DEADLINE.replace("BUDGET", "50ms"))
     live = Capture()
-    run_plan(load_plan(path), duration_s=2.5, fast=False, live=live)
+    run_plan(load_plan(path, allow_modules=TEST_BLOCKS), duration_s=2.5, fast=False, live=live)
     # the last view taken while running (on a loaded machine a view may also come after the end)
     running = [
         s

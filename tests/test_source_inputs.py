@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import toyblocks
+from runs import TEST_BLOCKS
 
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
@@ -42,8 +43,16 @@ def test_a_feedback_loop_through_a_source_is_identical_in_and_across_processes(t
     graph = tmp_path / "loop.yaml"
     graph.write_text(LOOP)
     # a loop keeps the real-time tick in --fast runs (5 ms), so the command really comes back
-    a = run_plan(load_plan(graph), duration_s=1.0, fast=True, inproc=True, record=tmp_path / "a.h5")
-    b = run_plan(load_plan(graph), duration_s=1.0, fast=True, record=tmp_path / "b.h5")
+    a = run_plan(
+        load_plan(graph, allow_modules=TEST_BLOCKS),
+        duration_s=1.0,
+        fast=True,
+        inproc=True,
+        record=tmp_path / "a.h5",
+    )
+    b = run_plan(
+        load_plan(graph, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=True, record=tmp_path / "b.h5"
+    )
     assert set(b.processes) == {"hardware", "control"}
     ra, rb = read_recording(tmp_path / "a.h5"), read_recording(tmp_path / "b.h5")
     y = ra.streams["plant.y"].data
@@ -60,8 +69,8 @@ def test_a_graph_may_set_its_tick_and_a_bad_one_is_refused(tmp_path: Path):
 
     ok = tmp_path / "ok.yaml"
     ok.write_text(LOOP + "tick_s: 0.002\n")
-    assert load_graph(str(ok)).tick_s == 0.002
+    assert load_graph(str(ok), allow_modules=TEST_BLOCKS).tick_s == 0.002
     bad = tmp_path / "bad.yaml"
     bad.write_text(LOOP + "tick_s: -1\n")
     with pytest.raises(GraphErrors, match="'tick_s' must be a number of seconds > 0"):
-        load_graph(str(bad))
+        load_graph(str(bad), allow_modules=TEST_BLOCKS)

@@ -99,8 +99,8 @@ def test_every_command_on_the_page_runs(folder):
     commands = [line for lang, t in blocks() if lang == "bash" for line in t.splitlines() if line.strip()]
     assert commands == [
         "pytest test_envelope.py",
-        "flowtact validate envelope.yaml",
-        "flowtact run envelope.yaml --fast --record envelope.h5",
+        "flowtact validate envelope.yaml --allow-module envelope",
+        "flowtact run envelope.yaml --fast --record envelope.h5 --allow-module envelope",
     ]
     bindir = Path(sys.executable).parent
     for line in commands:

@@ -9,7 +9,6 @@ import os
 import select
 import stat
 import subprocess
-import sys
 import time
 from collections import OrderedDict, deque
 from collections.abc import Mapping
@@ -34,6 +33,7 @@ from flowtact.blocks.teleop.exo_protocol import (
 from flowtact.blocks.teleop.hand import FINGERS, N_FINGERS
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
+from flowtact.python_child import python_command
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 __all__ = ["SerialIo", "SerialIoConfig"]
@@ -386,8 +386,7 @@ class SerialIo(Source):
         c = self.config
         self._folder = make_run_folder("serial")  # private; swept after a kill
         link = os.path.join(self._folder.path, "exo")
-        argv = [
-            sys.executable,
+        argv = python_command(
             "-m",
             "flowtact.blocks.teleop.exo_emulator",
             "--link",
@@ -396,7 +395,7 @@ class SerialIo(Source):
             repr(c.rate_hz),
             "--exit-with-parent",
             *c.emulator_args,
-        ]
+        )
         self._proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE)
         assert self._proc.stdout is not None
         ready, _, _ = select.select([self._proc.stdout], [], [], c.startup_timeout_s)

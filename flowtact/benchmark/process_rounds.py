@@ -23,6 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from flowtact.python_child import python_command
 from flowtact.runtime.rundir import make_run_folder
 
 __all__ = ["STEP_MARK", "Prior", "measure_children", "share"]
@@ -49,8 +50,8 @@ def measure_children(
     for part in range(parts - 1):
         with make_run_folder("bench") as folder:  # swept by a later start if this process is killed
             out = Path(folder.path) / "figures.json"
-            cmd = [sys.executable, "-m", __name__, name, "--part", str(part), "--parts", str(parts), "--out",
-                   str(out), *(["--quick"] if quick else []), *(["--peers"] if peers else [])]  # fmt: skip
+            cmd = python_command("-m", __name__, name, "--part", str(part), "--parts", str(parts), "--out",
+                                 str(out), *(["--quick"] if quick else []), *(["--peers"] if peers else []))  # fmt: skip
             tail = _run_child(cmd, lambda text, p=part: on_step(f"process {p + 1}/{parts}: {text}"))
             if tail is not None or not out.exists():
                 last = tail[-1] if tail else "no figures written"

@@ -147,6 +147,7 @@ class Placement:
         return {
             "process": group,
             "graph": graph.name,
+            "allow_modules": list(graph.allow_modules),  # the user's --allow-module, for module:Class
             "fast": fast,
             "merge_ticks": fast and ticks_mergeable(plan),
             "tick_s": tick_s,

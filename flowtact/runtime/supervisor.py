@@ -40,6 +40,7 @@ import zmq
 
 from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
+from flowtact.python_child import python_command
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
@@ -284,15 +285,9 @@ class ProcessExecutor:
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)  # `module:Class` blocks resolve alike
         env.setdefault("NUMBA_NUM_THREADS", "1")
-        cmd = [
-            sys.executable,
-            "-m",
-            "flowtact.runtime.worker",
-            f"ipc://{self.rundir}/ctl",
-            "--process",
-            proc.name,
-            "--child",
-        ]
+        cmd = python_command(
+            "-m", "flowtact.runtime.worker", f"ipc://{self.rundir}/ctl", "--process", proc.name, "--child"
+        )
         if self.auth is not None:
             cmd += ["--keys", self.keys_dir]
         proc.popen = subprocess.Popen(cmd, env=env, start_new_session=True)
@@ -306,9 +301,10 @@ class ProcessExecutor:
     def _say_waiting(self, proc: _Proc) -> None:
         waited = time.monotonic() - proc.since
         if waited < 1.0:
+            allow = "".join(f" --allow-module {m}" for m in self.plan.graph.allow_modules)  # that host's say
             self.warn(
                 f"waiting for process '{proc.name}' on {proc.host} (up to {proc.startup_s:g} s, its "
-                f"startup_s): start it there with `flowtact worker {self.tcp_ctl} --process {proc.name}`"
+                f"startup_s): start it there with `flowtact worker {self.tcp_ctl} --process {proc.name}{allow}`"
             )
         else:
             self.warn(

@@ -172,9 +172,18 @@ class Worker:
     """One process group of a running graph."""
 
     def __init__(
-        self, control: str, process: str, *, keys_dir: str | None = None, child: bool = False
+        self,
+        control: str,
+        process: str,
+        *,
+        keys_dir: str | None = None,
+        child: bool = False,
+        allow_modules: tuple[str, ...] | None = None,
     ) -> None:
         self.process = process
+        self.allow_modules = allow_modules
+        """Modules whose ``module:Class`` blocks this worker may import: None (a child of the local
+        supervisor) takes the user's list from the plan; a worker on another host has its own."""
         self.ctx = zmq.Context()
         self.keys = None
         self.ctl = self.ctx.socket(zmq.DEALER)
@@ -348,7 +357,8 @@ class Worker:
         self.out_specs: dict[str, dict[str, StreamSpec]] = {}
         for nd in plan["nodes"]:
             self.busy = nd["name"]
-            cls = load_block(nd["block"])
+            allow = plan["allow_modules"] if self.allow_modules is None else self.allow_modules
+            cls = load_block(nd["block"], allow)
             block = cls(cls.config_cls.build(nd["params"], owner=nd["name"]), node=nd["name"])
             specs = block.bind(
                 {p: spec_from_wire(s) for p, s in nd["inputs"].items()},
@@ -971,6 +981,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--process", required=True, help="the process group to run")
     p.add_argument("--keys", help="CURVE keys folder for tcp (default: $FLOWTACT_KEYS)")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    from flowtact.cli import add_allow_module
+
+    add_allow_module(p)
     args = p.parse_args(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the supervisor coordinates a Ctrl-C
     if args.child and sys.platform.startswith("linux"):
@@ -978,7 +991,8 @@ def main(argv: list[str] | None = None) -> int:
     from flowtact.runtime.security import SecurityError
 
     try:
-        worker = Worker(args.connect, args.process, keys_dir=args.keys, child=args.child)
+        allow = None if args.child else tuple(args.allow_modules)  # on another host: this host's own word
+        worker = Worker(args.connect, args.process, keys_dir=args.keys, child=args.child, allow_modules=allow)
     except SecurityError as e:
         print(f"flowtact worker: {e}", file=sys.stderr)
         return 1

@@ -84,14 +84,15 @@ def _table(table: Any) -> list[dict[str, Any]]:
 
 
 def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: set[str],
-           metrics: MetricSpec, duration_s: float | None) -> Any:  # fmt: skip
+           metrics: MetricSpec, duration_s: float | None, allow_modules: Sequence[str]) -> Any:  # fmt: skip
     """Load the graph as the first row would run it (without the swept values): graph problems
     raise GraphErrors (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too."""
     from flowtact.compile import compile_graph
     from flowtact.graph import load_graph
     from flowtact.source_ends import default_duration
 
-    graph = load_graph(source, text=text, overrides=overrides, replays=_abs(first.recordings))
+    graph = load_graph(source, text=text, overrides=overrides, replays=_abs(first.recordings),
+                       allow_modules=allow_modules)  # fmt: skip
     for name in sorted(names):
         node, _, param = name.partition(".")
         nd = graph.nodes.get(node)
@@ -159,6 +160,7 @@ def sweep(
     out: str | Path | None = None,
     duration_s: float | None = None,
     progress: bool | SweepProgress = False,
+    allow_modules: Sequence[str] = (),
 ) -> Any:
     """Run ``graph`` once per row and return the table (a pandas DataFrame, one row per run).
 
@@ -170,6 +172,7 @@ def sweep(
     ``executor``: ``"local"`` (processes), ``"dask"`` (``scheduler`` address, else a LocalCluster
     of ``workers``) or any ``concurrent.futures.Executor``. ``out``: a Parquet file, written as
     rows finish and resumed when it exists. ``df.attrs["executed"]`` is the number of runs made.
+    ``allow_modules``: the modules whose ``module:Class`` blocks the graph may import (``--allow-module``).
     """
     need_extras()
     source, text = _graph_text(graph)
@@ -178,7 +181,7 @@ def sweep(
     spec = parse_metrics(metrics, rmse)
     all_rows = rows(axes, trows, recordings)
     names = {a.name for a in axes} | {k for r in trows for k in r}
-    base = _check(source, text, overrides, all_rows[0], names, spec, duration_s)
+    base = _check(source, text, overrides, all_rows[0], names, spec, duration_s, tuple(allow_modules))
     first_cols = [
         *dict.fromkeys(k for r in all_rows for k in r.params),
         *(f"recording:{n}" for n in recordings),
@@ -199,6 +202,7 @@ def sweep(
             replays=_abs(r.recordings),
             duration_s=duration_s,
             metrics=spec,
+            allow_modules=base.allow_modules,
         )
         for i, r in enumerate(all_rows)
         if r.key not in kept

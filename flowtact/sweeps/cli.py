@@ -23,6 +23,8 @@ EXAMPLE = (
 
 def add_sweep_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``sweep`` sub-command to the ``flowtact`` parser."""
+    from flowtact.cli import add_allow_module
+
     sp = sub.add_parser(
         "sweep",
         help="run a graph over parameter grids and recordings: one table row per run",
@@ -35,6 +37,7 @@ def add_sweep_parser(sub: Any) -> argparse.ArgumentParser:
     )
     sp.add_argument("--set", dest="overrides", action="append", default=[], metavar="NODE.PARAM=VALUE",
                     help="a fixed override for every run (as in flowtact run); repeatable")  # fmt: skip
+    add_allow_module(sp)
     sp.add_argument("--set-grid", dest="grid", action="append", default=[], metavar="NODE.PARAM=V1,V2,...",
                     help="values to sweep (read like --set values); several: their Cartesian product")  # fmt: skip
     sp.add_argument(
@@ -92,7 +95,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         df = sweep(args.graph, grid=args.grid, table=args.table, replay=_replays(args.replays),
                    overrides=args.overrides, metrics=args.metrics, rmse=args.rmse, executor=args.executor,
                    workers=args.workers, scheduler=args.scheduler, out=args.out, duration_s=args.duration,
-                   progress=not args.quiet)  # fmt: skip
+                   progress=not args.quiet, allow_modules=args.allow_modules)  # fmt: skip
     except SweepSpecError as e:
         print(f"flowtact sweep: error: {e}", file=sys.stderr)
         return 2
@@ -114,7 +117,8 @@ def _report(df: Any, args: argparse.Namespace) -> int:
         from flowtact.sweeps.plot import plot_rates
 
         try:
-            graph = load_plan(args.graph, overrides=args.overrides).graph  # parameter docs: axis units
+            plan = load_plan(args.graph, overrides=args.overrides, allow_modules=args.allow_modules)
+            graph = plan.graph  # parameter docs: axis units
         except GraphErrors:
             graph = None
         plot_rates(df, args.plot, graph)

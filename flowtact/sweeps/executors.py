@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from typing import Any
 
+from flowtact.python_child import safe_path_env
 from flowtact.sweeps.grid import SweepSpecError
 
 __all__ = ["dask_executor", "local_pool_factory"]
@@ -30,6 +31,10 @@ def local_pool_factory(workers: int | None, preload: Sequence[str] = ()) -> Call
     ctx.set_forkserver_preload(["flowtact.sweeps.runs", "flowtact.launch", "flowtact.compile", *preload])
 
     def make() -> Executor:
+        from multiprocessing import forkserver
+
+        with safe_path_env():  # the fork server (and its resource tracker): no cwd on their import path
+            forkserver.ensure_running()
         return ProcessPoolExecutor(max_workers=n, mp_context=ctx)
 
     return make
@@ -55,14 +60,19 @@ def dask_executor(scheduler: str | None, workers: int | None) -> Iterator[tuple[
             except OSError as e:
                 raise SweepSpecError(f"--scheduler {scheduler}: cannot connect ({e})") from None
         else:
-            cluster = stack.enter_context(
-                LocalCluster(
-                    n_workers=workers or os.cpu_count() or 1,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
+            import dask
+
+            # its workers (restarts too) and helpers start without the cwd on their import path
+            safe = dask.config.set({"distributed.nanny.pre-spawn-environ.PYTHONSAFEPATH": "1"})
+            with safe, safe_path_env():
+                cluster = stack.enter_context(
+                    LocalCluster(
+                        n_workers=workers or os.cpu_count() or 1,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,
+                    )
                 )
-            )
             client = stack.enter_context(Client(cluster))
         n = max(sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()), 1)
         yield client.get_executor(pure=False), n

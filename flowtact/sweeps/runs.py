@@ -38,6 +38,8 @@ class RunTask:
     replays: dict[str, str] = field(default_factory=dict)
     duration_s: float | None = None
     metrics: MetricSpec = field(default_factory=MetricSpec)
+    allow_modules: tuple[str, ...] = ()
+    """The user's ``--allow-module``: the modules whose ``module:Class`` blocks the row may import."""
 
 
 class MemorySink:
@@ -99,7 +101,8 @@ def _plan(task: RunTask) -> Any:
     from flowtact.compile import compile_graph
     from flowtact.graph import load_graph
 
-    graph = load_graph(task.source, text=task.text, overrides=task.overrides, replays=task.replays)
+    graph = load_graph(task.source, text=task.text, overrides=task.overrides, replays=task.replays,
+                       allow_modules=task.allow_modules)  # fmt: skip
     return compile_graph(dataclasses.replace(graph, seed=task.seed))
 
 

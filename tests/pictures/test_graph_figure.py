@@ -10,6 +10,7 @@ pytest.importorskip("matplotlib")
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_hex
 from matplotlib.transforms import Bbox
+from runs import TEST_BLOCKS
 
 from flowtact.cli import main
 from flowtact.compile import compile_graph
@@ -139,7 +140,7 @@ def test_a_cycle_through_a_delayed_port_and_a_self_loop():
       - s.y -> s.fb
     record: [c.y, s.y]
     """
-    plan = compile_graph(load_graph("loops.yaml", text=textwrap.dedent(text)))
+    plan = compile_graph(load_graph("loops.yaml", text=textwrap.dedent(text), allow_modules=TEST_BLOCKS))
     _, r, boxes, arrows, edges = check_picture(plan)
     (back,) = [i for i, e in enumerate(plan.graph.edges) if (e.src, e.dst) == ("c", "a")]
     tip, *wings = arrows[f"arrow:{back}"].get_verts()[:3]

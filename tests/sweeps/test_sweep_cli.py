@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from runs import env, flowtact
+from runs import allow_args, env, flowtact
 
 from flowtact.cli import main
 
@@ -29,7 +29,7 @@ record: [src.y, probe.y]
 
 
 def sweep(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flowtact.cli", "sweep", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "flowtact.cli", *allow_args(["sweep", *args])], capture_output=True,
                           text=True, env=env(), cwd=cwd, timeout=300)  # fmt: skip
 
 
@@ -59,7 +59,7 @@ def toy(tmp_path: Path) -> Path:
 def test_usage_errors_are_one_line_and_exit_2(toy: Path, args: list[str], says: str, capsys) -> None:
     if "--duration" in says:
         toy.write_text(toy.read_text().replace("duration_s: 0.3\n", ""))
-    assert main(["sweep", str(toy), *args]) == 2
+    assert main(allow_args(["sweep", str(toy), *args])) == 2
     err = capsys.readouterr().err.strip()
     assert says in err and len(err.splitlines()) == 1, err
 
@@ -69,7 +69,7 @@ def test_without_pandas_it_names_the_extra(toy: Path, monkeypatch, capsys) -> No
 
     real = flowtact.extras.module_available
     monkeypatch.setattr(flowtact.extras, "module_available", lambda m: m != "pandas" and real(m))
-    assert main(["sweep", str(toy), "--set-grid", "src.noise=0,1"]) == 2
+    assert main(allow_args(["sweep", str(toy), "--set-grid", "src.noise=0,1"])) == 2
     assert 'flowtact sweep needs pandas: pip install "flowtact[sweep]"' in capsys.readouterr().err
 
 
@@ -84,8 +84,8 @@ def test_table_and_replayed_recordings_with_a_failing_row(toy: Path, tmp_path: P
     recs = tmp_path / "recs"
     recs.mkdir()
     for noise in (0.0, 0.2):
-        done = subprocess.run([sys.executable, "-m", "flowtact.cli", "run", str(toy), "--fast", "--quiet",
-                               "--set", f"src.noise={noise}", "--record", str(recs / f"n{noise}.h5")],
+        done = subprocess.run([sys.executable, "-m", "flowtact.cli", *allow_args(["run", str(toy), "--fast", "--quiet",
+                               "--set", f"src.noise={noise}", "--record", str(recs / f"n{noise}.h5")])],
                               env=env(), capture_output=True, text=True, timeout=120)  # fmt: skip
         assert done.returncode == 0, done.stderr
     table = tmp_path / "rows.csv"

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from runs import TEST_BLOCKS
 
 import flowtact
 from flowtact.sweeps.grid import Row
@@ -89,7 +90,7 @@ def test_touch_sweep_is_independent_of_worker_count_and_matches_a_direct_run() -
 
 
 def test_rmse_and_user_metrics_against_numpy(toy: Path) -> None:
-    df = flowtact.sweep(toy, grid={"src.noise": [0.0, 0.5]}, workers=1, rmse=["dbl.y=src.y"],
+    df = flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid={"src.noise": [0.0, 0.5]}, workers=1, rmse=["dbl.y=src.y"],
                         metrics="spikes,sweepblocks:mean_y")  # fmt: skip
     assert (df["status"] == "ok").all(), df["error"].tolist()
     clean = df[df["src.noise"] == 0.0].iloc[0]
@@ -106,7 +107,7 @@ def test_failing_rows_killed_workers_and_resume(toy: Path, tmp_path: Path) -> No
     flag.touch()
     fixed = [f"probe.flag={flag}", f"probe.log={log}"]
     grid = ["probe.mode=ok,raise,kill", "src.noise=0,0.1,-1"]
-    first = flowtact.sweep(toy, grid=grid, overrides=fixed, workers=2, out=out)
+    first = flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=grid, overrides=fixed, workers=2, out=out)
     assert len(first) == 9 and first.attrs["executed"] == 9
     by = {(r["probe.mode"], r["src.noise"]): r for _, r in first.iterrows()}
     assert [k for k, r in by.items() if r["status"] == "ok"] == [("ok", 0), ("ok", 0.1)]
@@ -122,7 +123,7 @@ def test_failing_rows_killed_workers_and_resume(toy: Path, tmp_path: Path) -> No
 
     flag.unlink()  # the cause goes away: a resumed sweep runs the 7 failed rows only
     log.write_text("")
-    again = flowtact.sweep(toy, grid=grid, overrides=fixed, workers=2, out=out)
+    again = flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=grid, overrides=fixed, workers=2, out=out)
     assert again.attrs == {"executed": 7, "kept": 2}
     assert len(log.read_text().splitlines()) == 4  # raise ×2, kill ×2 built and ran; bad values never build
     assert sorted(again.loc[again["status"] != "ok", "src.noise"]) == [-1, -1, -1]
@@ -132,5 +133,5 @@ def test_failing_rows_killed_workers_and_resume(toy: Path, tmp_path: Path) -> No
     assert now["seed"].tolist() == kept["seed"].tolist()  # kept as they were, not run again
     assert now["run_s"].tolist() == kept["run_s"].tolist()
     log.write_text("")
-    third = flowtact.sweep(toy, grid=grid, overrides=fixed, workers=2, out=out)
+    third = flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=grid, overrides=fixed, workers=2, out=out)
     assert third.attrs == {"executed": 3, "kept": 6} and log.read_text() == ""
