@@ -117,23 +117,31 @@ def _row_setup(common: str, row: Row, digests: dict[str, str]) -> str:
     return hashlib.sha256((common + json.dumps(files, sort_keys=True)).encode()).hexdigest()[:16]
 
 
-def _check_resume(out: str | Path, previous: Sequence[Mapping[str, Any]], made: Mapping[str, Any],
-                  row_setups: Mapping[str, str]) -> None:  # fmt: skip
+def _refusal(out: str | Path, what: str) -> SweepSpecError:
+    return SweepSpecError(f"{out}: made by another setup ({what}); use another --out or --fresh")
+
+
+def _check_setup(out: str | Path, made: Mapping[str, Any]) -> None:
     """Refuse to resume into a table another setup made (one line naming ``out`` and what differs)."""
     from flowtact.sweeps.store import read_setup, setup_differences
 
-    def refuse(what: str) -> SweepSpecError:
-        return SweepSpecError(f"{out}: made by another setup ({what}); use another --out or --fresh")
-
     old = read_setup(out)
-    if old is None or any("setup" not in r for r in previous):
-        raise refuse("it records none: an older flowtact or another tool wrote it")
+    if old is None:
+        raise _refusal(out, "it records none: an older flowtact or another tool wrote it")
     if diff := setup_differences(old, made):
-        raise refuse("; ".join(diff))
+        raise _refusal(out, "; ".join(diff))
+
+
+def _check_rows(
+    out: str | Path, previous: Sequence[Mapping[str, Any]], row_setups: Mapping[str, str]
+) -> None:
+    """Refuse a table whose rows of this sweep were made from other replayed data (or have no setup)."""
+    if any("setup" not in r for r in previous):
+        raise _refusal(out, "a row records none: an older flowtact or another tool wrote it")
     for r in previous:
         want = row_setups.get(r["key"])
         if want is not None and r["setup"] != want:
-            raise refuse("a row's setup differs: a file it replayed has changed")
+            raise _refusal(out, "a row's setup differs: a file it replayed has changed")
 
 
 def _check_numbers(workers: int | None, duration_s: float | None, row_timeout_s: float | None) -> None:
@@ -299,9 +307,11 @@ def sweep(
         *(f"recording:{n}" for n in recordings),
     ]
 
-    previous = done_rows(out) if out is not None and not fresh else []
-    if previous:
-        _check_resume(out, previous, made, row_setups)  # type: ignore[arg-type]
+    previous = []
+    if out is not None and not fresh and Path(out).exists():
+        _check_setup(out, made)  # from the footer, before reading any row
+        previous = done_rows(out)
+        _check_rows(out, previous, row_setups)
     kept = {r["key"]: r for r in previous if r.get("status") == "ok"}
     tasks = [
         RunTask(

@@ -6,8 +6,10 @@ running one row at a time. Unlike a ``ProcessPoolExecutor`` it knows which proce
 so a row that overruns its timeout is ended by killing its own process (:meth:`RowPool.kill`) and
 a process that dies fails its own row only; the others go on. Dask connects to ``scheduler`` or
 starts a ``LocalCluster`` of ``workers`` single-threaded processes that only holders of the
-sweep's temporary TLS credentials can reach (:func:`local_cluster`); its
-``Client.get_executor()`` is a standard ``concurrent.futures.Executor``.
+sweep's temporary TLS credentials can reach (:func:`local_cluster`); :class:`DaskRows` hands it
+the rows as a standard ``concurrent.futures.Executor`` whose :meth:`DaskRows.kill` cancels a row
+that overran its timeout and, on a cluster the sweep started itself, restarts the worker running
+it (a running Python thread cannot be stopped otherwise).
 """
 
 from __future__ import annotations
@@ -19,14 +21,14 @@ import os
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor, Future, InvalidStateError
 from typing import Any
 
 from flowtact.errors import FlowtactError
 from flowtact.sweeps.grid import SweepSpecError
 from flowtact.sweeps.schedule import WORKER_DIED
 
-__all__ = ["RowPool", "WorkerDied", "dask_executor", "local_cluster", "local_pool_factory"]
+__all__ = ["DaskRows", "RowPool", "WorkerDied", "dask_executor", "local_cluster", "local_pool_factory"]
 
 
 class WorkerDied(FlowtactError, RuntimeError):
@@ -229,6 +231,60 @@ class RowPool(Executor):
                 os.close(fd)
 
 
+class DaskRows(Executor):
+    """A dask ``Client`` as a ``concurrent.futures.Executor`` (like ``client.get_executor()``) that
+    can end a row: :meth:`kill` cancels its task and, with ``restart_workers``, restarts the worker
+    running it (only for a cluster the sweep owns: other clients' tasks may share a worker)."""
+
+    def __init__(self, client: Any, restart_workers: bool = False) -> None:
+        self.client, self.restart = client, restart_workers
+        self._tasks: dict[Future, Any] = {}
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        """Submit ``fn(*args)`` as a dask task (never cached: ``pure=False``)."""
+        if kwargs:
+            raise TypeError("DaskRows.submit takes positional arguments only")
+        task = self.client.submit(fn, *args, pure=False)
+        f: Future = Future()
+        self._tasks[f] = task
+
+        def settle(done: Any) -> None:
+            self._tasks.pop(f, None)
+            with contextlib.suppress(InvalidStateError):  # cancelled by kill() meanwhile
+                try:
+                    result = done.result()
+                except BaseException as e:  # noqa: BLE001 - the task's failure (KilledWorker, cancelled, ...)
+                    f.set_exception(e)
+                else:
+                    f.set_result(result)
+
+        task.add_done_callback(settle)
+        return f
+
+    def kill(self, future: Future) -> bool:
+        """Cancel ``future``'s task; restart the worker running it when this sweep owns the cluster."""
+        task = self._tasks.pop(future, None)
+        if task is None:
+            return False
+        where = []
+        if self.restart:
+            with contextlib.suppress(Exception):
+                where = [w for w, keys in self.client.processing().items() if task.key in keys]
+        task.cancel()
+        if where:
+            with contextlib.suppress(Exception):  # a worker that fails to restart is reported by dask
+                self.client.restart_workers(where, raise_for_error=False)
+        future.cancel()
+        return True
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Cancel the tasks still out when asked (the client and cluster are closed by their owner)."""
+        if cancel_futures or not wait:
+            tasks, self._tasks = list(self._tasks.values()), {}
+            with contextlib.suppress(Exception):
+                self.client.cancel(tasks)
+
+
 def _temporary_security() -> Any:
     """Dask TLS with a fresh self-signed certificate, required of every connection."""
     from distributed.security import Security
@@ -278,6 +334,7 @@ def dask_executor(scheduler: str | None, workers: int | None) -> Iterator[tuple[
 
     logging.getLogger("distributed").setLevel(logging.ERROR)  # worker restarts are reported as rows
     with contextlib.ExitStack() as stack:
+        own = not scheduler
         if scheduler:
             try:
                 client: Any = stack.enter_context(Client(scheduler, timeout="10s"))
@@ -287,4 +344,4 @@ def dask_executor(scheduler: str | None, workers: int | None) -> Iterator[tuple[
             cluster = stack.enter_context(local_cluster(workers))
             client = stack.enter_context(Client(cluster, security=cluster.security))
         n = max(sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()), 1)
-        yield client.get_executor(pure=False), n
+        yield DaskRows(client, restart_workers=own), n

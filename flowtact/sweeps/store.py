@@ -8,7 +8,8 @@ the rows whose status is ``ok`` and runs every other row again.
 
 A table may come from someone else: it is read only if it is a regular file within
 :data:`MAX_TABLE_BYTES` on disk and, as its footer declares, uncompressed, with at most
-:data:`MAX_TABLE_ROWS` rows and :data:`MAX_TABLE_COLUMNS` columns (checked before reading rows).
+:data:`MAX_TABLE_ROWS` rows, :data:`MAX_TABLE_COLUMNS` columns and :data:`MAX_TABLE_CELLS` cells
+(checked before reading rows); its setup is compared, from the footer, before its rows are read.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from flowtact.sweeps.grid import MAX_ROWS, SweepSpecError
 __all__ = [
     "FIRST_COLUMNS",
     "MAX_TABLE_BYTES",
+    "MAX_TABLE_CELLS",
     "MAX_TABLE_COLUMNS",
     "MAX_TABLE_ROWS",
     "SETUP_KEY",
@@ -41,12 +43,15 @@ __all__ = [
 FIRST_COLUMNS = ("key", "status", "error", "seed", "setup", "provenance", "run_s", "duration_s")
 SETUP_KEY = b"flowtact.sweep.setup"
 """The Parquet metadata key holding the sweep's setup (JSON)."""
-MAX_TABLE_BYTES = 1 << 30
-"""Largest table resumed from (1 GiB on disk, and uncompressed as its footer declares it)."""
+MAX_TABLE_BYTES = 256 << 20
+"""Largest table resumed from (256 MiB): on disk, uncompressed as its footer declares it, and
+decoded (a text repeated in every row counted once per row)."""
 MAX_TABLE_ROWS = MAX_ROWS
 """Most rows a resumed table may hold: the most a sweep can have."""
 MAX_TABLE_COLUMNS = 10_000
 """Most columns a resumed table may hold (parameters, recordings, bookkeeping and metrics)."""
+MAX_TABLE_CELLS = 5_000_000
+"""Most cells (rows × columns) a resumed table may hold: each becomes a Python value of a row."""
 
 
 def to_frame(rows: Sequence[dict[str, Any]], first: Sequence[str] = ()) -> Any:
@@ -150,14 +155,18 @@ def read_setup(out: str | Path) -> dict[str, Any] | None:
 
 def done_rows(out: str | Path) -> list[dict[str, Any]]:
     """Rows of an existing table (none if ``out`` does not exist); rows are plain dicts."""
-    import pandas as pd
 
     out = Path(out)
     if not out.exists():
         return []
-    _footer(out)
+    meta = _footer(out)
+    if meta.num_rows * meta.num_columns > MAX_TABLE_CELLS:
+        raise SweepSpecError(f"--out {out}: cannot resume from it, {meta.num_rows:,} rows × {meta.num_columns:,} "
+                             f"columns is over {MAX_TABLE_CELLS:,} cells")  # fmt: skip
     try:
-        df = pd.read_parquet(out)
+        df = _read_frame(out)
+    except SweepSpecError:
+        raise
     except Exception as e:  # noqa: BLE001 - pyarrow raises several types for a file that is not Parquet
         raise SweepSpecError(f"--out {out}: cannot resume from it, not a readable Parquet table "
                              f"({_short(e)}); use another --out or --fresh") from None  # fmt: skip
@@ -165,6 +174,38 @@ def done_rows(out: str | Path) -> list[dict[str, Any]]:
         raise SweepSpecError(f"--out {out}: cannot resume from it, not a flowtact sweep table "
                              "(no key/status columns); use another --out or --fresh")  # fmt: skip
     return [{k: _plain(v) for k, v in r.items() if not _missing(v)} for r in df.to_dict(orient="records")]
+
+
+def _read_frame(out: Path) -> Any:
+    """The table as a DataFrame, text columns kept dictionary-encoded (pandas categoricals), so a
+    value repeated in every row is held once, as the file holds it, not once per row."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    schema = pq.read_schema(out)
+    text = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
+    table = pq.read_table(out, read_dictionary=text)
+    if (size := _decoded_bytes(table)) > MAX_TABLE_BYTES:
+        raise SweepSpecError(f"--out {out}: cannot resume from it, its rows hold {size:,} bytes "
+                             f"(at most {MAX_TABLE_BYTES:,})")  # fmt: skip
+    return table.to_pandas()
+
+
+def _decoded_bytes(table: Any) -> int:
+    """Bytes the table's values take once decoded: a dictionary-encoded text column's values
+    counted once per row that refers to them (what pandas would hold), other columns as Arrow holds them."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    total = 0
+    for column in table.columns:
+        for chunk in column.chunks:
+            if pa.types.is_dictionary(chunk.type):
+                lengths = pc.binary_length(chunk.dictionary)
+                total += int(pc.sum(pc.take(lengths, chunk.indices)).as_py() or 0) + 8 * len(chunk)
+            else:
+                total += chunk.nbytes
+    return total
 
 
 def setup_differences(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:

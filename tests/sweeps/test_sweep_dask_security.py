@@ -1,11 +1,12 @@
 """The LocalCluster a Dask sweep starts is reachable by the sweep only (issue 30): TLS with
 temporary credentials, so a foreign client on the same machine cannot submit a task; the sweep
-itself runs on it, and a hung row there times out as a failed row."""
+itself runs on it, and a hung row there times out as a failed row whose worker is restarted."""
 
 from __future__ import annotations
 
 import asyncio
 import multiprocessing
+import os
 from pathlib import Path
 
 import pytest
@@ -18,7 +19,7 @@ pytest.importorskip("cryptography")
 from distributed import Client
 from distributed.security import Security
 
-from flowtact.sweeps.executors import local_cluster
+from flowtact.sweeps.executors import DaskRows, local_cluster
 
 TOY = """
 name: toy
@@ -96,11 +97,18 @@ def test_a_foreign_client_cannot_submit_to_the_sweeps_cluster(cluster, client, t
 
 
 def test_the_sweep_runs_on_it_and_a_hung_row_there_times_out(client, tmp_path: Path) -> None:
-    toy, flag = tmp_path / "toy.yaml", tmp_path / "armed"
+    toy, flag, log = tmp_path / "toy.yaml", tmp_path / "armed", tmp_path / "opens.log"
     toy.write_text(TOY)
     flag.touch()
-    df = flowtact.sweep(toy, grid=["probe.mode=ok,hang"], overrides=[f"probe.flag={flag}"],
-                        executor=client.get_executor(pure=False), workers=2, row_timeout_s=3)  # fmt: skip
+    rows = DaskRows(client, restart_workers=True)  # as dask_executor makes it for its own cluster
+    df = flowtact.sweep(toy, grid=["probe.mode=ok,hang"], overrides=[f"probe.flag={flag}", f"probe.log={log}"],
+                        executor=rows, workers=2, row_timeout_s=3)  # fmt: skip
     by = df.set_index("probe.mode")
     assert by.loc["ok", "status"] == "ok", by.loc["ok", "error"]
     assert by.loc["hang", "error"] == "timed out after 3 s (--row-timeout)"
+    hung = [int(line.split()[1]) for line in log.read_text().splitlines() if line.startswith("hang ")]
+    assert len(hung) == 1
+    with pytest.raises(ProcessLookupError):  # its worker was restarted: the hung task is gone
+        os.kill(hung[0], 0)
+    assert len(client.scheduler_info()["workers"]) == 2
+    assert client.submit(sum, [1, 2]).result(timeout=30) == 3

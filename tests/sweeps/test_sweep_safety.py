@@ -170,3 +170,45 @@ def test_a_table_over_budget_is_refused_before_its_rows_are_read(
     monkeypatch.setattr(store, "MAX_TABLE_ROWS", 1)
     with pytest.raises(SweepSpecError, match=r"big\.parquet: cannot resume from it, it declares 2 rows"):
         flowtact.sweep(toy, grid=GRID, workers=1, out=out)
+
+
+def hostile_table(path: Path, rows: int, setup_of: str | None) -> None:
+    """A table of ``rows`` rows whose every cell is one 1000-character text, dictionary-encoded: a
+    few hundred KB on disk, 4 GB if read naively; its setup is ``setup_of`` graph's (forged) or none."""
+    import json
+
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from flowtact.sweeps.api import setup
+    from flowtact.sweeps.metrics import parse_metrics
+
+    one = pa.DictionaryArray.from_arrays(pa.array(np.zeros(rows, dtype=np.int32)), pa.array(["x" * 1000]))
+    table = pa.table({"key": one, "status": one, "setup": one, "error": one})
+    if setup_of is not None:
+        made = setup(Path(setup_of).read_text(), [], 0.1, parse_metrics(None))
+        table = table.replace_schema_metadata({store.SETUP_KEY: json.dumps(made, sort_keys=True).encode()})
+    pq.write_table(table, path)
+
+
+@pytest.mark.parametrize(
+    ("rows", "forged", "says"),
+    [
+        (1_000_000, False, "made by another setup (it records none"),
+        (1_000_000, True, "cannot resume from it, its rows hold 4,032,000,000 bytes (at most 268,435,456)"),
+        (1_000_001, True, "cannot resume from it, it declares 1,000,001 rows"),
+    ],
+)
+def test_a_hostile_table_is_refused_in_bounded_time_and_memory(tmp_path: Path, rows: int, forged: bool,
+                                                               says: str) -> None:  # fmt: skip
+    from hostile import TOUCH, run_measured
+
+    out = tmp_path / "hostile.parquet"
+    hostile_table(out, rows, TOUCH if forged else None)
+    m = run_measured(["sweep", TOUCH, "--set-grid", "sa1.tau_s=0.01", "--duration", "0.1", "--out", str(out),
+                      "--quiet"], timeout_s=120)  # fmt: skip
+    assert m.returncode == 2, m.stderr
+    first = m.stderr.splitlines()[0]
+    assert first.startswith("flowtact sweep: error: ") and str(out) in first and says in first, first
+    assert m.peak_mib < 500, f"peak RSS {m.peak_mib:.0f} MiB"
