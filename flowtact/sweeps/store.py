@@ -242,7 +242,9 @@ SETUP_LABELS = {
 
 def _shown(v: Any) -> str:
     """A setting as text, short and with control characters escaped (a table's metadata is data)."""
-    if v is None or v == []:
+    if v is None:
+        return "(not given)"
+    if v == []:
         return "(none)"
     text = "[" + ", ".join(map(str, v)) + "]" if isinstance(v, (list, tuple)) else str(v)
     text = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
