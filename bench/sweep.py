@@ -92,9 +92,11 @@ def run(ctx: Context) -> None:
 
 
 def _dask(ctx: Context, stack: contextlib.ExitStack, params: dict) -> object | None:
-    """A started LocalCluster's executor (its start-up recorded), or None without Dask."""
+    """A started LocalCluster's executor, as ``--executor dask`` makes it (its start-up recorded), or None without Dask."""
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client
+
+        from flowtact.sweeps.executors import DaskRows, local_cluster
     except ImportError:
         ctx.note('Dask is not installed (pip install "flowtact[dask]"): the Dask part was not measured.')
         return None
@@ -103,12 +105,10 @@ def _dask(ctx: Context, stack: contextlib.ExitStack, params: dict) -> object | N
     logging.getLogger("distributed").setLevel(logging.ERROR)
     ctx.step("dask LocalCluster start")
     t0 = time.perf_counter()
-    cluster = stack.enter_context(
-        LocalCluster(n_workers=WORKERS, threads_per_worker=1, processes=True, dashboard_address=None)
-    )
-    client = stack.enter_context(Client(cluster))
+    cluster = stack.enter_context(local_cluster(WORKERS))  # the sweep's own: TLS, temporary credentials
+    client = stack.enter_context(Client(cluster, security=cluster.security))
     ctx.figure("dask LocalCluster(2) start, s", time.perf_counter() - t0, "s", "lower", params=params)
-    return client.get_executor(pure=False)
+    return DaskRows(client, restart_workers=True)
 
 
 def _median(xs: list[float]) -> float:

@@ -1,14 +1,15 @@
 """Test blocks and metrics for sweeps (graphs name them as ``sweepblocks:Class``; tests/ is on the path).
 
-``Probe`` passes its input through, and while its ``flag`` file exists it raises or kills its own
-process (SIGKILL) at the first sample, as its ``mode`` says; each time it opens it appends a line
-to ``log`` (so a test counts the runs that actually executed).
+``Probe`` passes its input through, and while its ``flag`` file exists it raises, kills its own
+process (SIGKILL) or blocks forever at the first sample, as its ``mode`` says; each time it opens
+it appends a line to ``log`` (so a test counts the runs that actually executed).
 """
 
 from __future__ import annotations
 
 import os
 import signal
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -20,13 +21,13 @@ from flowtact import Block, Chunk, Config, Example, Port, param
 
 @dataclass(frozen=True)
 class ProbeConfig(Config):
-    mode: Literal["ok", "raise", "kill"] = param("ok", doc="what to do while the flag file exists")
+    mode: Literal["ok", "raise", "kill", "hang"] = param("ok", doc="what to do while the flag file exists")
     flag: str = param("", doc="the flag file (empty: never act)")
     log: str = param("", doc="a file to append one line to at each open (empty: none)")
 
 
 class Probe(Block):
-    """y = x; raises or kills its process while ``flag`` exists, per ``mode``."""
+    """y = x; raises, kills its process or hangs while ``flag`` exists, per ``mode``."""
 
     config_cls = ProbeConfig
     inputs = {"x": Port(doc="in")}
@@ -43,6 +44,8 @@ class Probe(Block):
             raise ZeroDivisionError("probe raised as asked")
         if armed and len(x) and self.config.mode == "kill":
             os.kill(os.getpid(), signal.SIGKILL)
+        if armed and len(x) and self.config.mode == "hang":
+            threading.Event().wait()  # a row that never returns
         return {"y": x}
 
     @classmethod

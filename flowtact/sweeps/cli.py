@@ -2,7 +2,9 @@
 
 Usage problems (a bad ``--set-grid``, a pattern matching nothing, an unknown metric, a missing
 extra) print one line and exit 2; runs that failed are rows of the table and make the exit status
-1; Ctrl-C keeps the finished rows in ``--out`` and exits 130.
+1; Ctrl-C keeps the finished rows in ``--out`` and exits 130. An ``--out`` that cannot be written,
+or a table there that another setup made (another graph, ``--set``, ``--duration``, metrics), is
+refused before the first run.
 """
 
 from __future__ import annotations
@@ -51,7 +53,11 @@ def add_sweep_parser(sub: Any) -> argparse.ArgumentParser:
     sp.add_argument("--rmse", action="append", default=[], metavar="STREAM=REFERENCE",
                     help="RMSE of a recorded stream against a recorded reference stream; repeatable")  # fmt: skip
     sp.add_argument("--out", metavar="FILE.parquet",
-                    help="the result table (resumed when it exists: rows with status ok are kept)")  # fmt: skip
+                    help="the result table (resumed when it exists and the same setup made it: rows with "
+                    "status ok are kept)")  # fmt: skip
+    sp.add_argument("--fresh", action="store_true", help="start --out over instead of resuming it")
+    sp.add_argument("--row-timeout", type=cli_positive_seconds, metavar="SECONDS",
+                    help="a run still going after this is a failed row (default: 600 s + 10 s per graph second)")  # fmt: skip
     sp.add_argument("--executor", choices=("local", "dask"), default="local", help="default: local processes")
     sp.add_argument("--scheduler", metavar="ADDRESS", help="a dask scheduler (default: a local cluster)")
     sp.add_argument(
@@ -95,7 +101,8 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         df = sweep(args.graph, grid=args.grid, table=args.table, replay=_replays(args.replays),
                    overrides=args.overrides, metrics=args.metrics, rmse=args.rmse, executor=args.executor,
                    workers=args.workers, scheduler=args.scheduler, out=args.out, duration_s=args.duration,
-                   progress=not args.quiet, allow_modules=args.allow_modules)  # fmt: skip
+                   progress=not args.quiet, row_timeout_s=args.row_timeout, fresh=args.fresh,
+                   allow_modules=args.allow_modules)  # fmt: skip
     except SweepSpecError as e:
         print(f"flowtact sweep: error: {e}", file=sys.stderr)
         return 2
