@@ -111,5 +111,10 @@ def run_command(body: Callable[[], int | None], *, prog: str = "flowtact", debug
         status = _graph_errors(e)
         if status is not None:
             return status
-        print_error(f"{prog}: error: {shown(error_text(e), limit=MAX_ERROR_CHARS)}", e, debug)
-        return exit_status(e)
+        line = f"{prog}: error: {shown(error_text(e), limit=MAX_ERROR_CHARS)}"
+        status = exit_status(e)
+        if status == EXIT_USAGE and not debug:  # the input's fault: no traceback to offer
+            print(line, file=sys.stderr)
+        else:
+            print_error(line, e, debug)
+        return status

@@ -191,7 +191,9 @@ def _number(text: str, integer: bool) -> float:
 
 
 def _interval(lo: float, hi: float, lo_open: bool, unit: str) -> str:
-    return f"{'(' if lo_open else '['}{lo:g}, {hi:g}]{' ' + unit if unit else ''}"
+    """``(0, 10] Hz``: a range as it is written (integers in full)."""
+    a, b = (f"{lo}", f"{hi}") if isinstance(lo, int) and isinstance(hi, int) else (f"{lo:g}", f"{hi:g}")
+    return f"{'(' if lo_open else '['}{a}, {b}]{' ' + unit if unit else ''}"
 
 
 def cli_int(lo: int, hi: int, unit: str = "") -> Callable[[str], int]:

@@ -7,7 +7,6 @@ import argparse
 import contextlib
 import os
 import signal
-import sys
 import tempfile
 import time
 from typing import TextIO
@@ -16,11 +15,35 @@ from flowtact.blocks.teleop.exo_device import ExoDevice, ExoParams
 from flowtact.blocks.teleop.exo_protocol import (
     N_FINGERS,
 )
+from flowtact.command import CommandParser, run_command
+from flowtact.limits import MAX_SEED, cli_float, cli_int
 
 # -- the emulator process -----------------------------------------------------------------------
 
 
 __all__ = ["main"]
+
+# -- the documented ranges of the flags (a value outside is a one-line usage error, exit 2) ---------
+
+MAX_RATE_HZ = 10_000.0
+"""Fastest packet rate: the board sends at 100 Hz; a pty and a Python loop keep up to about 10 kHz."""
+MAX_DRIFT_PPM = 10_000.0
+"""Largest clock error either way (1 %: a crystal is within 100 ppm, an RC oscillator within 1 %)."""
+MAX_OFFSET_S = float(1 << 32) * 1e-6
+"""Largest initial device clock: the 32-bit microsecond counter wraps there (about 71.6 min)."""
+MAX_DELAY_MS = 10_000.0
+"""Longest write delay, fixed or random (10 s: the host's watchdog has long tripped by then)."""
+_P = ExoParams()
+MIN_PERIOD_S = 0.5 + _P.close_s + _P.squeeze_s + _P.open_s
+"""Shortest grasp cycle: rest, close, squeeze and open must fit in it (4 s)."""
+MAX_PERIOD_S = 3600.0
+"""Longest grasp cycle (an hour)."""
+MAX_PUSH_N = 100.0
+"""Strongest push of the emulated user (a human finger pushes well under 100 N)."""
+MAX_STIFFNESS = 1e6
+"""Stiffest virtual object, N per unit of closure (stiffer is a wall at the time step used)."""
+MAX_REPLUG_S = 60.0
+"""Longest gap between an unplug and the replug (SIGUSR1)."""
 
 
 class _ExoLine:
@@ -70,33 +93,78 @@ class _ExoLine:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = CommandParser(
         prog="flowtact sim exo",
         description="Emulate the Remote Feelings exoskeleton (3 fingers) on a pseudo-terminal. Prints "
         "'PORT <path>' first, then serves until SIGTERM/SIGINT; SIGUSR1 simulates an unplug/replug.",
     )
     ap.add_argument("--link", help="stable symlink to the pty (default: a temporary path, printed)")
-    ap.add_argument("--rate-hz", type=float, default=100.0, help="packets per second (default 100)")
-    ap.add_argument("--drift-ppm", type=float, default=50.0, help="device clock error in ppm (default 50)")
-    ap.add_argument("--offset-s", type=float, default=None, help="initial device clock in s (default random)")
-    ap.add_argument("--latency-ms", type=float, default=0.0, help="fixed delay before each write (ms)")
-    ap.add_argument("--jitter-ms", type=float, default=0.0, help="extra uniform random write delay (ms)")
-    ap.add_argument("--seed", type=int, default=0, help="random seed (noise, preload, clock start)")
+    ap.add_argument(
+        "--rate-hz",
+        type=cli_float(0, MAX_RATE_HZ, "Hz", lo_open=True),
+        default=100.0,
+        help="packets per second (default 100)",
+    )
+    ap.add_argument(
+        "--drift-ppm",
+        type=cli_float(-MAX_DRIFT_PPM, MAX_DRIFT_PPM, "ppm"),
+        default=50.0,
+        help="device clock error in ppm (default 50)",
+    )
+    ap.add_argument(
+        "--offset-s",
+        type=cli_float(0, MAX_OFFSET_S, "s"),
+        default=None,
+        help="initial device clock in s (default random)",
+    )
+    ap.add_argument(
+        "--latency-ms",
+        type=cli_float(0, MAX_DELAY_MS, "ms"),
+        default=0.0,
+        help="fixed delay before each write (ms)",
+    )
+    ap.add_argument(
+        "--jitter-ms",
+        type=cli_float(0, MAX_DELAY_MS, "ms"),
+        default=0.0,
+        help="extra uniform random write delay (ms)",
+    )
+    ap.add_argument(
+        "--seed", type=cli_int(0, MAX_SEED), default=0, help="random seed (noise, preload, clock start)"
+    )
     ap.add_argument(
         "--user", nargs="+", choices=("grasp", "idle"), default=["grasp"], help="user per finger (1 or 3)"
     )
-    ap.add_argument("--period-s", type=float, default=5.0, help="grasp cycle period (default 5 s)")
-    ap.add_argument("--max-push-n", type=float, default=3.0, help="the user's largest push (default 3 N)")
+    ap.add_argument(
+        "--period-s",
+        type=cli_float(MIN_PERIOD_S, MAX_PERIOD_S, "s"),
+        default=5.0,
+        help="grasp cycle period (default 5 s)",
+    )
+    ap.add_argument(
+        "--max-push-n",
+        type=cli_float(0, MAX_PUSH_N, "N", lo_open=True),
+        default=3.0,
+        help="the user's largest push (default 3 N)",
+    )
     ap.add_argument(
         "--object-stiffness",
-        type=float,
+        type=cli_float(0, MAX_STIFFNESS, "N", lo_open=True),
         default=None,
         help="standalone mode: a virtual object of this stiffness (N per unit closure) stops the fingers",
     )
     ap.add_argument(
-        "--object-closure", type=float, default=0.6, help="closure (0 open, 1 closed) where the object starts"
+        "--object-closure",
+        type=cli_float(0, 1),
+        default=0.6,
+        help="closure (0 open, 1 closed) where the object starts",
     )
-    ap.add_argument("--replug-s", type=float, default=0.3, help="gap between unplug and replug (SIGUSR1)")
+    ap.add_argument(
+        "--replug-s",
+        type=cli_float(0, MAX_REPLUG_S, "s"),
+        default=0.3,
+        help="gap between unplug and replug (SIGUSR1)",
+    )
     ap.add_argument("--no-reset-on-replug", action="store_true", help="keep the device clock across a replug")
     ap.add_argument("--no-noise", action="store_true", help="no sensor noise")
     ap.add_argument(
@@ -112,13 +180,18 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``flowtact sim exo``: serve an emulated exoskeleton on a pty until SIGTERM/SIGINT."""
+    """``flowtact sim exo``: serve an emulated exoskeleton on a pty until SIGTERM/SIGINT; its exit
+    status (:func:`flowtact.command.run_command`: 2 for a bad flag, one line, no traceback)."""
+    return run_command(lambda: _serve(argv), prog="flowtact sim exo")
+
+
+def _serve(argv: list[str] | None) -> int:
     from flowtact.blocks.devices.ptyserver import PtyServer
 
-    args = _parser().parse_args(argv)
+    ap = _parser()
+    args = ap.parse_args(argv)
     if len(args.user) not in (1, N_FINGERS):
-        print("--user takes 1 or 3 values", file=sys.stderr)
-        return 2
+        ap.error("argument --user: takes 1 or 3 values")
     users = tuple(args.user * N_FINGERS if len(args.user) == 1 else args.user)
     params = ExoParams(
         rate_hz=args.rate_hz,
