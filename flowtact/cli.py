@@ -39,7 +39,6 @@ from flowtact.limits import (
 __all__ = ["main"]
 
 
-
 def _parser() -> argparse.ArgumentParser:
     p = CommandParser(prog="flowtact", description=__doc__.splitlines()[0])
     p.add_argument("--version", action="version", version=f"flowtact {_version()}")
@@ -412,11 +411,19 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     plugins = plugin_commands()
-    if argv[:1] == ["--debug"] and argv[1:2] and argv[1] in plugins:
-        os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
-        argv = argv[1:]
+    debug = argv[:1] == ["--debug"] and len(argv) > 1 and argv[1] in plugins
+    argv = argv[1:] if debug else argv
     if argv and argv[0] in plugins and argv[0] not in COMMANDS:  # a plugin parses its own arguments
-        return run_command(lambda: _plugin(plugins[argv[0]], argv[1:]), prog=f"flowtact {argv[0]}")
+        before = os.environ.get(ENV)
+        if debug:
+            os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
+        try:
+            return run_command(lambda: _plugin(plugins[argv[0]], argv[1:]), prog=f"flowtact {argv[0]}")
+        finally:  # main() called in process leaves the environment as it found it
+            if debug and before is None:
+                del os.environ[ENV]
+            elif debug:
+                os.environ[ENV] = before  # type: ignore[assignment]
     parser = _parser()
     args = parser.parse_args(argv)
     if args.command == "plot" and args.t0 is not None and args.t1 is not None and not args.t0 < args.t1:

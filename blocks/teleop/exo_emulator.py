@@ -206,12 +206,13 @@ def _serve(argv: list[str] | None) -> int:
     )
     tick0 = None if args.offset_s is None else round(args.offset_s * 1e6)
     dev = ExoDevice(params, seed=args.seed, tick0_us=tick0)
+    # before the temporary folder: a --log that cannot be opened leaves nothing behind
+    log = open(args.log, "a", buffering=1) if args.log else None  # noqa: SIM115 (closed below)
     tmp = None
     link = args.link
     if link is None:
         tmp = tempfile.mkdtemp(prefix="flowtact-exo-")
         link = os.path.join(tmp, "tty")
-    log = open(args.log, "a", buffering=1) if args.log else None  # noqa: SIM115 (closed below)
     server = PtyServer(
         _ExoLine(dev, args.truth, not args.no_reset_on_replug, log),
         link,
