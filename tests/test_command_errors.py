@@ -263,3 +263,19 @@ def test_a_built_in_commands_error_text_is_escaped_too(tmp_path, capsys):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1, err
     assert "rec\\x1b]0;pwned\\x07.h5" in err and "\x1b" not in err and "\x07" not in err
+
+
+def test_a_damaged_json_file_is_named(tmp_path, capsys):
+    """``Expecting property name…`` alone said neither which file nor what it should be."""
+    bad = tmp_path / "earlier" / "results" / "executor.json"
+    bad.parent.mkdir(parents=True)
+    bad.write_text("{'suite': 1}")
+    assert (
+        main(["bench", "executor", "--out", str(tmp_path / "o"), "--compare", str(tmp_path / "earlier")]) == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"flowtact: error: --compare: {bad}: not a results file of flowtact bench "
+        "(Expecting property name enclosed in double quotes: line 1 column 2 (char 1))"
+    ]
+    assert not (tmp_path / "o").exists()  # refused before a suite ran
