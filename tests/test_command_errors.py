@@ -279,3 +279,10 @@ def test_a_damaged_json_file_is_named(tmp_path, capsys):
         "(Expecting property name enclosed in double quotes: line 1 column 2 (char 1))"
     ]
     assert not (tmp_path / "o").exists()  # refused before a suite ran
+
+
+def test_a_sweeps_duration_is_bounded_like_a_runs(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["sweep", TOUCH, "--set-grid", "sa1.n=1,2", "--duration", "1e308"])
+    assert e.value.code == 2
+    assert "argument --duration: must be at most 1e+10 s, got '1e308'" in capsys.readouterr().err
