@@ -1,7 +1,16 @@
 """The ``flowtact`` command: run, validate, draw and document graphs; list blocks; plot recordings.
 
-Graph problems print as ``file:line:col: message`` with a hint and exit with status 2, never a
-traceback; a block failing at run time names its node and exits with status 1.
+Every command, the plugins' (``flowtact.commands``) included, fails the same way
+(:func:`flowtact.command.run_command`): ONE line on stderr naming the place (``file:line:col``,
+the flag, or the file), control characters escaped, no traceback unless ``--debug``
+(``flowtact --debug CMD ...`` or ``FLOWTACT_DEBUG=1``). Exit status:
+
+- 0: done;
+- 2: bad usage or bad input, refused before the work starts: an unknown command or flag, a flag
+  value out of its documented range (:mod:`flowtact.limits`), a graph's problems, a file the user
+  named that is missing, a folder, unreadable or not what was asked for;
+- 1: the command ran and failed: a block failed (its node named), a worker died, memory ran out;
+- 130: interrupted.
 """
 
 from __future__ import annotations
@@ -16,17 +25,22 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from flowtact.command import EXIT_RUN_ERROR, CommandParser, run_command
+from flowtact.errors import UsageError
 from flowtact.graph import GraphErrors
-from flowtact.limits import MAX_TICK_S, cli_finite_seconds, cli_positive_seconds, cli_tick_seconds
+from flowtact.limits import (
+    MAX_TICK_S,
+    MIN_TICK_S,
+    cli_duration_seconds,
+    cli_finite_seconds,
+    cli_tick_seconds,
+)
 
 __all__ = ["main"]
 
-EXIT_GRAPH_ERROR = 2
-EXIT_RUN_ERROR = 1
-
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="flowtact", description=__doc__.splitlines()[0])
+    p = CommandParser(prog="flowtact", description=__doc__.splitlines()[0])
     p.add_argument("--version", action="version", version=f"flowtact {_version()}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -60,7 +74,7 @@ def _parser() -> argparse.ArgumentParser:
     graph_args(run)
     run.add_argument(
         "--duration",
-        type=cli_positive_seconds,
+        type=cli_duration_seconds,
         metavar="S",
         help="graph seconds to run (default: the end of the --replay'd files, else the graph's duration_s)",
     )
@@ -72,7 +86,8 @@ def _parser() -> argparse.ArgumentParser:
         "--tick",
         type=cli_tick_seconds,
         metavar="S",
-        help=f"clock tick, at most {MAX_TICK_S:g} s (default 1 s with --fast, 5 ms real time)",
+        help=f"clock tick, {MIN_TICK_S:g} to {MAX_TICK_S:g} s (default 1 s with --fast, 5 ms real time); "
+        "a run takes at most 1e9 ticks",
     )
     run.add_argument(
         "--inproc",
@@ -353,9 +368,8 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
 
     try:
         cls = load_block(args.name, [args.name.partition(":")[0]])  # named on the command line: allowed
-    except UnknownBlockError as e:
-        print(f"flowtact: {e}", file=sys.stderr)
-        return EXIT_GRAPH_ERROR
+    except UnknownBlockError as e:  # a usage error: the name given is not a block
+        raise UsageError(str(e)) from e
     from flowtact.describe import describe_block
 
     print(describe_block(cls))
@@ -367,11 +381,7 @@ def _cmd_graph(args: argparse.Namespace) -> int:
 
     suffix = Path(args.output).suffix
     if suffix not in FORMATS:  # a usage error: say so before loading anything
-        print(
-            f"flowtact: error: -o {args.output}: cannot draw to '{suffix}'; use {', '.join(FORMATS)}",
-            file=sys.stderr,
-        )
-        return EXIT_GRAPH_ERROR
+        raise UsageError(f"-o {args.output}: cannot draw to '{suffix}'; use {', '.join(FORMATS)}")
     out = draw_plan(_plan(args), args.output)
     print(f"wrote {out}")
     return 0
@@ -386,8 +396,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             args.recording, args.output, streams=args.streams, t_range=t_range, paper=args.paper
         )
     except KeyError as e:  # an unknown --streams name: a usage error
-        print(f"flowtact: error: {e.args[0]}", file=sys.stderr)
-        return EXIT_GRAPH_ERROR
+        raise UsageError(str(e.args[0])) from e
     print(f"wrote {out}")
     return 0
 
@@ -430,41 +439,34 @@ COMMANDS = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``flowtact`` command."""
-    from flowtact.debug import ENV, debug_enabled, print_error
+    """Entry point of the ``flowtact`` command: its exit status (see the module notes)."""
+    from flowtact.debug import ENV, debug_enabled
 
     argv = list(sys.argv[1:] if argv is None else argv)
     plugins = plugin_commands()
-    if argv[:1] == ["--debug"] and argv[1:2] and argv[1] in plugins:
-        os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
-        argv = argv[1:]
+    debug = argv[:1] == ["--debug"] and len(argv) > 1 and argv[1] in plugins
+    argv = argv[1:] if debug else argv
     if argv and argv[0] in plugins and argv[0] not in COMMANDS:  # a plugin parses its own arguments
-        return int(plugins[argv[0]].load()(argv[1:]) or 0)
+        before = os.environ.get(ENV)
+        if debug:
+            os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
+        try:
+            return run_command(lambda: _plugin(plugins[argv[0]], argv[1:]), prog=f"flowtact {argv[0]}")
+        finally:  # main() called in process leaves the environment as it found it
+            if debug and before is None:
+                del os.environ[ENV]
+            elif debug:
+                os.environ[ENV] = before  # type: ignore[assignment]
     parser = _parser()
     args = parser.parse_args(argv)
     if args.command == "plot" and args.t0 is not None and args.t1 is not None and not args.t0 < args.t1:
         parser.error(f"plot: --from ({args.t0:g}) must be before --to ({args.t1:g})")
-    debug = debug_enabled(args.debug)
-    try:
-        return COMMANDS[args.command](args)
-    except GraphErrors as e:
-        print(str(e), file=sys.stderr)
-        n = len(e.errors)
-        print(f"flowtact: {n} problem{'s' if n != 1 else ''} in the graph", file=sys.stderr)
-        return EXIT_GRAPH_ERROR
-    except KeyboardInterrupt:
-        print("flowtact: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # the reader left (flowtact blocks nlif | head): nothing went wrong here
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
-        return 0
-    except Exception as e:  # noqa: BLE001 — every failure: one line naming it, the traceback with --debug
-        from flowtact.errors import FlowtactError
+    return run_command(lambda: COMMANDS[args.command](args), debug=debug_enabled(args.debug))
 
-        known = (FlowtactError, FileNotFoundError, ValueError, ImportError, OSError)  # say what, not the type
-        what = str(e) if isinstance(e, known) else f"{type(e).__name__}: {e}"
-        print_error(f"flowtact: error: {what}", e, debug)
-        return EXIT_RUN_ERROR
+
+def _plugin(ep: Any, argv: list[str]) -> int:
+    """Load a plugin command and run its ``main(argv)`` (under :func:`run_command`, as the built-ins)."""
+    return int(ep.load()(argv) or 0)
 
 
 if __name__ == "__main__":

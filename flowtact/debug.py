@@ -13,6 +13,8 @@ import sys
 import traceback
 from typing import TextIO
 
+from flowtact.safe_text import shown
+
 __all__ = ["ENV", "HINT", "debug_enabled", "failure_traceback", "has_traceback", "print_error"]
 
 ENV = "FLOWTACT_DEBUG"
@@ -44,11 +46,16 @@ def has_traceback(e: BaseException) -> bool:
 
 
 def print_error(line: str, e: BaseException, debug: bool, file: TextIO | None = None) -> None:
-    """Print ``line``; then the traceback (``debug``) or, where one exists, the hint to ask for it."""
+    """Print ``line``; then the traceback (``debug``) or, where one exists, the hint to ask for it.
+
+    Error texts quote files and libraries: control characters in the line, and in each line of the
+    traceback, are shown escaped (:func:`~flowtact.safe_text.shown`), so none reaches the terminal.
+    """
     out = file if file is not None else sys.stderr
+    line = shown(line)
     if debug:
         print(line, file=out)
-        print(failure_traceback(e), end="", file=out)
+        print("".join(shown(t) + "\n" for t in failure_traceback(e).splitlines()), end="", file=out)
     elif has_traceback(e):
         print(f"{line} {HINT}", file=out)
     else:

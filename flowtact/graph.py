@@ -20,7 +20,15 @@ import yaml
 
 from flowtact.block import Block
 from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, deadline_path_errors, parse_deployment
-from flowtact.limits import MAX_QUEUE, MAX_TICK_S, positive_seconds
+from flowtact.limits import (
+    MAX_DURATION_S,
+    MAX_QUEUE,
+    MAX_SEED,
+    MAX_TICK_S,
+    MIN_TICK_S,
+    positive_seconds,
+    run_ticks_problem,
+)
 from flowtact.located import GraphError, GraphErrors, Loc, Located
 from flowtact.param_paths import resolve_path, resolve_paths
 from flowtact.params import ConfigError, did_you_mean
@@ -296,25 +304,7 @@ def _build(
             errors.append(
                 GraphError(y.key_loc(key), f"unknown top-level key '{key}'{did_you_mean(str(key), TOP_KEYS)}")
             )
-    seed = doc.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        errors.append(GraphError(y.loc("seed"), f"'seed' must be a non-negative integer; got {seed!r}"))
-        seed = 0
-    duration = doc.get("duration_s")
-    if duration is not None and positive_seconds(duration) is None:
-        errors.append(
-            GraphError(y.loc("duration_s"), f"'duration_s' must be a finite number > 0; got {duration!r}")
-        )
-        duration = None
-    tick = doc.get("tick_s")
-    if tick is not None and not (positive_seconds(tick) or math.inf) <= MAX_TICK_S:
-        errors.append(
-            GraphError(
-                y.loc("tick_s"),
-                f"'tick_s' must be a number of seconds > 0 and <= {MAX_TICK_S:g}; got {tick!r}",
-            )
-        )
-        tick = None
+    seed, duration, tick = _run_settings(doc, y, errors)
     name = doc.get("name", Path(path).stem)
     if not isinstance(name, str):
         errors.append(GraphError(y.loc("name"), f"'name' must be a string; got {name!r}"))
@@ -360,6 +350,49 @@ def _build(
         overrides={o: parse_override(o)[2] for o in overrides},
         deployment=deployment,
     )
+
+
+def _run_settings(doc: Mapping[str, Any], y: Located, errors: list[GraphError]) -> tuple[int, Any, Any]:
+    """The graph's ``seed``, ``duration_s`` and ``tick_s``, each checked against its documented
+    bound (:mod:`flowtact.limits`); a bad one is reported and replaced by its default."""
+    seed = doc.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        errors.append(GraphError(y.loc("seed"), f"'seed' must be a non-negative integer; got {seed!r}"))
+        seed = 0
+    elif seed > MAX_SEED:
+        errors.append(GraphError(y.loc("seed"), f"'seed' must be at most 2**63 - 1; got {seed!r}"))
+        seed = 0
+    duration = doc.get("duration_s")
+    if duration is not None and positive_seconds(duration) is None:
+        errors.append(
+            GraphError(y.loc("duration_s"), f"'duration_s' must be a finite number > 0; got {duration!r}")
+        )
+        duration = None
+    elif duration is not None and duration > MAX_DURATION_S:
+        errors.append(
+            GraphError(
+                y.loc("duration_s"), f"'duration_s' must be at most {MAX_DURATION_S:g} s; got {duration!r}"
+            )
+        )
+        duration = None
+    tick = doc.get("tick_s")
+    if tick is not None and not (positive_seconds(tick) or math.inf) <= MAX_TICK_S:
+        errors.append(
+            GraphError(
+                y.loc("tick_s"),
+                f"'tick_s' must be a number of seconds > 0 and <= {MAX_TICK_S:g}; got {tick!r}",
+            )
+        )
+        tick = None
+    elif tick is not None and tick < MIN_TICK_S:
+        errors.append(
+            GraphError(y.loc("tick_s"), f"'tick_s' must be at least {MIN_TICK_S:g} s; got {tick!r}")
+        )
+        tick = None
+    too_long = run_ticks_problem(duration, tick) if duration is not None and tick is not None else None
+    if too_long:
+        errors.append(GraphError(y.loc("duration_s"), f"'duration_s' at 'tick_s': {too_long}"))
+    return seed, duration, tick
 
 
 def _overrides(

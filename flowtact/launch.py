@@ -18,8 +18,10 @@ import yaml
 import flowtact
 from flowtact.compile import Plan, compile_graph
 from flowtact.deployment import DEFAULT_QUEUE, STOP_GRACE_S
+from flowtact.errors import UsageError
 from flowtact.graph import load_graph, resolve_graph_path
-from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S
+from flowtact.limits import run_ticks_problem
+from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
 from flowtact.source_ends import EndWatch, default_duration
 
@@ -139,6 +141,29 @@ def has_feedback(plan: Plan) -> bool:
     return any(g.nodes[e.dst].cls.inputs[e.dst_port].delay for e in g.edges)
 
 
+def check_run_length(plan: Plan, duration_s: float | None, tick_s: float | None, fast: bool) -> None:
+    """Refuse, before anything starts, a run of more than :data:`~flowtact.limits.MAX_RUN_TICKS`
+    ticks: :class:`~flowtact.errors.UsageError` naming where the duration and the tick came from."""
+    duration = default_duration(plan, duration_s)
+    tick = tick_for(
+        fast, tick_s or plan.graph.tick_s or (DEFAULT_TICK_REALTIME_S if has_feedback(plan) else None)
+    )
+    problem = run_ticks_problem(duration, tick)
+    if problem is None:
+        return
+    if duration_s is not None:
+        said = "--duration"
+    else:
+        said = "the graph's duration_s" if duration == plan.graph.duration_s else "the replayed files' end"
+    if tick_s is not None:
+        said += " and --tick"
+    elif plan.graph.tick_s is not None:
+        said += " and the graph's tick_s"
+    else:
+        said += f" and the default tick ({'--fast' if fast else 'real time'})"
+    raise UsageError(f"{said}: {problem}")
+
+
 def run_plan(
     plan: Plan,
     *,
@@ -160,6 +185,7 @@ def run_plan(
     duration = default_duration(
         plan, duration_s
     )  # --duration, else the replayed files' end, else the graph's
+    check_run_length(plan, duration_s, tick_s, fast)
     tick_s = tick_s or plan.graph.tick_s or (DEFAULT_TICK_REALTIME_S if has_feedback(plan) else None)
     ends = EndWatch(plan, duration, warn)
     progress = ends.progress(progress)

@@ -160,7 +160,7 @@ def test_truncated_and_foreign_files_one_line(touch, tmp_path, capsys):
         f["x"] = 1
     assert main(["info", str(tmp_path / "other.h5")]) == 1
     assert "not a flowtact recording (no /streams group)" in capsys.readouterr().err
-    assert main(["info", str(tmp_path / "missing.h5")]) == 1
+    assert main(["info", str(tmp_path / "missing.h5")]) == 2  # a missing input file: bad input
     assert "recording not found" in capsys.readouterr().err
 
 

@@ -33,15 +33,33 @@ from flowtact.blocks.spiking.nb_model import (
     save_model,
 )
 from flowtact.blocks.spiking.window_features import window_features
+from flowtact.command import CommandParser, run_command
+from flowtact.errors import UsageError
+from flowtact.limits import MAX_SEED, cli_float, cli_int, format_bytes
 from flowtact.terminal_bar import TerminalBar
 
 from .cells import LETTERS
-from .reading import LAYERS, OPEN_GRAPH, prefix_windows, read_line
+from .reading import LAYERS, OPEN_GRAPH, graph_text, prefix_windows, read_line
 
 __all__ = ["HELDOUT_SEED", "build_parser", "main", "train_braille", "train_layers"]
 
 #: Graph seeds from here up are the benchmark's held-out text; training never uses them.
 HELDOUT_SEED = 100_000
+
+# The documented bounds of a training set, checked before anything is simulated or allocated.
+MAX_LETTERS = 10_000
+"""Most letters in one run (``--letters``): 10 000 letters at 15 mm/s are about 70 min of reading
+simulated in one process, whose spikes (about 77 MB) are held in memory until the run ends."""
+MAX_WINDOWS = 30_000
+"""Most character windows over all runs (letters × speeds × repeats): about 40 times the shipped
+model's 780; each window also gets about 40 partial windows for the running posterior's
+calibration (25 MB per 1 000 windows on the first layer's 24 units)."""
+MAX_BINS = 100
+"""Most time-normalised sub-bins per window (``--bins``; the shipped model uses 2)."""
+MAX_SMOOTHING = 1e6
+"""Largest ``--alpha`` or ``--var-smoothing`` (past this the data no longer matters)."""
+FEATURE_BUDGET_BYTES = 256 << 20
+"""Most memory (256 MiB) the feature matrix may take: windows × units × sub-bins × 8 bytes."""
 
 
 def _speeds(text: str) -> tuple[float, ...]:
@@ -54,19 +72,6 @@ def _speeds(text: str) -> tuple[float, ...]:
     if not v or any(not 0 < s <= 1000 for s in v):
         raise argparse.ArgumentTypeError(f"speeds must be in (0, 1000] mm/s; got {text!r}")
     return v
-
-
-def _positive(kind: type) -> Callable[[str], Any]:
-    def parse(text: str) -> Any:
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a {kind.__name__}, got {text!r}") from None
-        if v <= 0:
-            raise argparse.ArgumentTypeError(f"must be > 0; got {text!r}")
-        return v
-
-    return parse
 
 
 def train_braille(
@@ -110,12 +115,14 @@ def train_layers(
         raise ValueError(f"layer must be one of {', '.join(LAYERS)}; got {', '.join(bad) or 'none'}")
     if features not in ("counts", "latency"):
         raise ValueError(f"features must be counts or latency; got {features!r}")
-    runs = [(s, r) for r in range(repeats) for s in speeds]
-    if seed < 0 or seed + len(runs) > HELDOUT_SEED:
+    n_runs = repeats * len(speeds)
+    if seed < 0 or seed + n_runs > HELDOUT_SEED:  # before the list of runs: --repeats 1e9 is refused here
         raise ValueError(
-            f"seed must be in [0, {HELDOUT_SEED - len(runs)}]: seeds from {HELDOUT_SEED} are held out"
+            f"seed must be in [0, {HELDOUT_SEED - n_runs}]: seeds from {HELDOUT_SEED} are held out"
         )
     bins = n_bins if features == "counts" else 1
+    _check_size(graph, speeds, letters, n_runs, layers, bins)
+    runs = [(s, r) for r in range(repeats) for s in speeds]
     data: dict[str, dict[str, list[Any]]] = {k: {"x": [], "prefix": []} for k in layers}
     ys: list[str] = []
     prefix_labels: list[str] = []
@@ -187,13 +194,44 @@ def train_layers(
     return out
 
 
+def _check_size(
+    graph: str | Path, speeds: Sequence[float], letters: int, n_runs: int, layers: Sequence[str], bins: int
+) -> None:
+    """Refuse (ValueError naming the flags) a training set over :data:`MAX_LETTERS`,
+    :data:`MAX_WINDOWS`, :data:`MAX_BINS` or :data:`FEATURE_BUDGET_BYTES`, before any run: the
+    units per layer come from the compiled graph, nothing is simulated."""
+    if not (1 <= letters <= MAX_LETTERS and 1 <= bins <= MAX_BINS and n_runs >= 1):
+        raise ValueError(
+            f"--letters must be in [1, {MAX_LETTERS}], --bins in [1, {MAX_BINS}], --repeats >= 1; "
+            f"got {letters}, {bins}, {n_runs // max(len(speeds), 1)}"
+        )
+    windows = letters * n_runs
+    if windows > MAX_WINDOWS:
+        raise ValueError(
+            f"--letters {letters} × {n_runs} runs (--speeds × --repeats) is {windows} letters; "
+            f"at most {MAX_WINDOWS} in all"
+        )
+    from flowtact.compile import compile_graph
+    from flowtact.graph import load_graph
+
+    path, yml = graph_text(graph, seed=0, speed_mm_s=speeds[0], letters=letters, record=[])
+    plan = compile_graph(load_graph(path, text=yml))
+    units = max(int(plan.specs[(LAYERS[k], "spikes")].n_units or 0) for k in layers)
+    need = windows * units * bins * 8
+    if need > FEATURE_BUDGET_BYTES:
+        raise ValueError(
+            f"{windows} windows × {units} units × --bins {bins} need {format_bytes(need)} of features; "
+            f"at most {format_bytes(FEATURE_BUDGET_BYTES)} (fewer --letters, --repeats or --bins)"
+        )
+
+
 def _bar_callback(bar: TerminalBar) -> Callable[[str, float, float], None]:
     """The trainer's ``progress(text, done, total)`` drawn on a terminal bar."""
     return lambda text, done, total: bar.update(completed=done / total, description=text)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = CommandParser(
         prog="flowtact train-braille",
         description="Train the naive Bayes Braille decoder on simulated reading (graphs/braille_open.yaml).",
     )
@@ -209,9 +247,17 @@ def build_parser() -> argparse.ArgumentParser:
         default=(15.0, 30.0, 60.0),
         help="constant speeds in mm/s (default 15,30,60)",
     )
-    p.add_argument("--letters", type=_positive(int), default=260, help="random letters per run (default 260)")
     p.add_argument(
-        "--repeats", type=_positive(int), default=1, help="runs per speed, each its own seed (default 1)"
+        "--letters",
+        type=cli_int(1, MAX_LETTERS),
+        default=260,
+        help=f"random letters per run (default 260, at most {MAX_LETTERS})",
+    )
+    p.add_argument(
+        "--repeats",
+        type=cli_int(1, HELDOUT_SEED),
+        default=1,
+        help=f"runs per speed, each its own seed (default 1; at most {MAX_WINDOWS} letters in all)",
     )
     p.add_argument(
         "--layer",
@@ -224,34 +270,43 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--bins",
-        type=_positive(int),
+        type=cli_int(1, MAX_BINS),
         default=2,
-        help="time-normalised sub-bins per window, counts (default 2)",
+        help=f"time-normalised sub-bins per window, counts (default 2, at most {MAX_BINS})",
     )
     p.add_argument(
-        "--alpha", type=_positive(float), default=1.0, help="additive smoothing of counts (default 1)"
+        "--alpha",
+        type=cli_float(0, MAX_SMOOTHING, lo_open=True),
+        default=1.0,
+        help="additive smoothing of counts (default 1)",
     )
     p.add_argument(
         "--var-smoothing",
-        type=_positive(float),
+        type=cli_float(0, MAX_SMOOTHING, lo_open=True),
         default=1e-3,
         help="variance smoothing of latencies (default 1e-3)",
     )
-    p.add_argument("--seed", type=int, default=1, help=f"first graph seed (default 1; < {HELDOUT_SEED})")
+    p.add_argument(
+        "--seed",
+        type=cli_int(0, MAX_SEED),
+        default=1,
+        help=f"first graph seed (default 1; < {HELDOUT_SEED})",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the provenance as JSON")
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``flowtact train-braille``: returns the exit status (0 ok, 1 failed, 2 usage)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        args = build_parser().parse_args(argv)
-    except SystemExit as e:
-        return int(e.code or 0)
-    from flowtact.errors import FlowtactError
+    """``flowtact train-braille``: returns the exit status (:func:`flowtact.command.run_command`:
+    0 ok, 2 a bad flag or a training set over its bounds, 1 failed)."""
+    return run_command(
+        lambda: _train(list(sys.argv[1:] if argv is None else argv)), prog="flowtact train-braille"
+    )
 
+
+def _train(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
     bar = TerminalBar("train-braille", 1.0, show=not args.no_progress, count=False, description="simulating")
     t0 = time.perf_counter()
     try:
@@ -270,19 +325,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         prov["command"] = "flowtact train-braille " + " ".join(argv)
         path = save_model(args.out, model, prov)
-    except ValueError as e:  # bad arguments found while training (seed range, too few letters)
-        bar.close()
-        print(f"flowtact train-braille: {e}", file=sys.stderr)
-        return 2 if not isinstance(e, ModelError) else 1
-    except (FlowtactError, OSError) as e:
-        bar.close()
-        print(f"flowtact train-braille: {e}", file=sys.stderr)
-        return 1
+    except ValueError as e:  # bad arguments found while training (seed range, too few letters, size)
+        if isinstance(e, ModelError):
+            raise
+        raise UsageError(str(e)) from e
     except KeyboardInterrupt:
         bar.close()
         print("flowtact train-braille: interrupted; nothing saved", file=sys.stderr)
         return 130
-    bar.close()
+    finally:
+        bar.close()
     if args.json:
         print(json.dumps(prov, indent=1))
     else:

@@ -4,24 +4,47 @@ pseudo-terminal, so the host side (``serial_io``) runs over a real tty with no h
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import signal
-import sys
 import time
-from collections.abc import Callable, Sequence
-from typing import Any, NoReturn, TextIO
+from collections.abc import Sequence
+from typing import Any, TextIO
 
 from flowtact.blocks.teleop.exo_device import ExoDevice, ExoParams
 from flowtact.blocks.teleop.exo_protocol import (
     N_FINGERS,
 )
+from flowtact.command import CommandParser, run_command
+from flowtact.errors import UsageError
+from flowtact.limits import MAX_SEED, cli_float, cli_int
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 # -- the emulator process -----------------------------------------------------------------------
 
 
 __all__ = ["MAX_RATE_HZ", "OWN_FLAGS", "PATH_FLAGS", "graph_args_problem", "main"]
+
+# -- the documented ranges of the flags (a value outside is a one-line usage error, exit 2) ---------
+
+MAX_RATE_HZ = 10_000.0
+"""Fastest packet rate: the board sends at 100 Hz; a pty and a Python loop keep up to about 10 kHz."""
+MAX_DRIFT_PPM = 10_000.0
+"""Largest clock error either way (1 %: a crystal is within 100 ppm, an RC oscillator within 1 %)."""
+MAX_OFFSET_S = float(1 << 32) * 1e-6
+"""Largest initial device clock: the 32-bit microsecond counter wraps there (about 71.6 min)."""
+MAX_DELAY_MS = 10_000.0
+"""Longest write delay, fixed or random (10 s: the host's watchdog has long tripped by then)."""
+_P = ExoParams()
+MIN_PERIOD_S = 0.5 + _P.close_s + _P.squeeze_s + _P.open_s
+"""Shortest grasp cycle: rest, close, squeeze and open must fit in it (4 s)."""
+MAX_PERIOD_S = 3600.0
+"""Longest grasp cycle (an hour)."""
+MAX_PUSH_N = 100.0
+"""Strongest push of the emulated user (a human finger pushes well under 100 N)."""
+MAX_STIFFNESS = 1e6
+"""Stiffest virtual object, N per unit of closure (stiffer is a wall at the time step used)."""
+MAX_REPLUG_S = 60.0
+"""Longest gap between an unplug and the replug (SIGUSR1)."""
 
 
 class _ExoLine:
@@ -70,39 +93,13 @@ class _ExoLine:
         return [self.dev.hello()]
 
 
-#: Highest packet rate the emulator serves (a real board sends 100 Hz; a pty carries a few kHz of lines).
-MAX_RATE_HZ = 10_000.0
-#: Longest time flag (period, replug gap, initial clock) in s, and longest latency or jitter in ms.
-MAX_TIME_S = 3600.0
-
-
-def _number(lo: float, hi: float, *, above: bool = False, integer: bool = False) -> Callable[[str], float]:
-    """An argparse type: a finite number in [lo, hi] (``above``: > lo), as an int with ``integer``."""
-    show = (lambda v: str(int(v))) if integer else (lambda v: f"{v:g}")
-    rule = f"{'>' if above else '>='} {show(lo)} and <= {show(hi)}"
-
-    def parse(text: str) -> float:
-        try:
-            value = int(text) if integer else float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected {'an integer' if integer else 'a number'}, got {text!r}"
-            ) from None
-        if not (math.isfinite(value) and (value > lo if above else value >= lo) and value <= hi):
-            raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}")
-        return value
-
-    parse.__name__ = "integer" if integer else "number"
-    return parse
-
-
 #: Flags that name a file: refused in a graph's ``serial_io.emulator_args`` (a graph writes no files).
 PATH_FLAGS = ("--link", "--log")
 #: Flags ``serial_io`` sets itself: refused in ``emulator_args`` (with the parameter to use instead).
 OWN_FLAGS = {"--rate-hz": "set rate_hz", "--exit-with-parent": "always given", "--help": "", "-h": ""}
 
 
-class _Parser(argparse.ArgumentParser):
+class _Parser(CommandParser):
     """Usage errors in one line (the flag, the rule, the value), exit status 2; keeps its flags."""
 
     def __init__(self, **kw: Any) -> None:
@@ -113,9 +110,6 @@ class _Parser(argparse.ArgumentParser):
         action = super().add_argument(*args, **kw)
         self.flags.update(dict.fromkeys(action.option_strings, action))
         return action
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: {message} (see --help)\n")
 
 
 def _parser() -> _Parser:
@@ -133,28 +127,37 @@ def _parser() -> _Parser:
     )
     ap.add_argument(
         "--rate-hz",
-        type=_number(0, MAX_RATE_HZ, above=True),
+        type=cli_float(0, MAX_RATE_HZ, "Hz", lo_open=True),
         default=100.0,
         help="packets per second (default 100)",
     )
     ap.add_argument(
-        "--drift-ppm", type=_number(-5000, 5000), default=50.0, help="device clock error in ppm (default 50)"
+        "--drift-ppm",
+        type=cli_float(-MAX_DRIFT_PPM, MAX_DRIFT_PPM, "ppm"),
+        default=50.0,
+        help="device clock error in ppm (default 50)",
     )
     ap.add_argument(
         "--offset-s",
-        type=_number(0, MAX_TIME_S),
+        type=cli_float(0, MAX_OFFSET_S, "s"),
         default=None,
         help="initial device clock in s (default random)",
     )
     ap.add_argument(
-        "--latency-ms", type=_number(0, MAX_TIME_S), default=0.0, help="fixed delay before each write (ms)"
+        "--latency-ms",
+        type=cli_float(0, MAX_DELAY_MS, "ms"),
+        default=0.0,
+        help="fixed delay before each write (ms)",
     )
     ap.add_argument(
-        "--jitter-ms", type=_number(0, MAX_TIME_S), default=0.0, help="extra uniform random write delay (ms)"
+        "--jitter-ms",
+        type=cli_float(0, MAX_DELAY_MS, "ms"),
+        default=0.0,
+        help="extra uniform random write delay (ms)",
     )
     ap.add_argument(
         "--seed",
-        type=_number(0, 2**32 - 1, integer=True),
+        type=cli_int(0, MAX_SEED),
         default=0,
         help="random seed (noise, preload, clock start)",
     )
@@ -163,30 +166,33 @@ def _parser() -> _Parser:
     )
     ap.add_argument(
         "--period-s",
-        type=_number(0, MAX_TIME_S, above=True),
+        type=cli_float(MIN_PERIOD_S, MAX_PERIOD_S, "s"),
         default=5.0,
         help="grasp cycle period (default 5 s)",
     )
     ap.add_argument(
         "--max-push-n",
-        type=_number(0, 1000, above=True),
+        type=cli_float(0, MAX_PUSH_N, "N", lo_open=True),
         default=3.0,
         help="the user's largest push (default 3 N)",
     )
     ap.add_argument(
         "--object-stiffness",
-        type=_number(0, 1e9, above=True),
+        type=cli_float(0, MAX_STIFFNESS, "N", lo_open=True),
         default=None,
         help="standalone mode: a virtual object of this stiffness (N per unit closure) stops the fingers",
     )
     ap.add_argument(
         "--object-closure",
-        type=_number(0, 1),
+        type=cli_float(0, 1),
         default=0.6,
         help="closure (0 open, 1 closed) where the object starts",
     )
     ap.add_argument(
-        "--replug-s", type=_number(0, MAX_TIME_S), default=0.3, help="gap between unplug and replug (SIGUSR1)"
+        "--replug-s",
+        type=cli_float(0, MAX_REPLUG_S, "s"),
+        default=0.3,
+        help="gap between unplug and replug (SIGUSR1)",
     )
     ap.add_argument("--no-reset-on-replug", action="store_true", help="keep the device clock across a replug")
     ap.add_argument("--no-noise", action="store_true", help="no sensor noise")
@@ -204,30 +210,33 @@ def _parser() -> _Parser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``flowtact sim exo``: serve an emulated exoskeleton on a pty until SIGTERM/SIGINT."""
+    """``flowtact sim exo``: serve an emulated exoskeleton on a pty until SIGTERM/SIGINT; its exit
+    status (:func:`flowtact.command.run_command`: 2 for a bad flag, one line, no traceback)."""
+    return run_command(lambda: _serve(argv), prog="flowtact sim exo")
+
+
+def _serve(argv: list[str] | None) -> int:
     from flowtact.blocks.devices.ptyserver import LinkError, PtyServer
 
-    args = _parser().parse_args(argv)
+    ap = _parser()
+    args = ap.parse_args(argv)
     if len(args.user) not in (1, N_FINGERS):
-        print("flowtact sim exo: --user takes 1 or 3 values", file=sys.stderr)
-        return 2
+        ap.error("argument --user: takes 1 or 3 values")
     users = tuple(args.user * N_FINGERS if len(args.user) == 1 else args.user)
     try:
         params = _params(args, users)
     except ValueError as e:  # rules across flags (a grasp cycle longer than the period)
-        print(f"flowtact sim exo: {e}", file=sys.stderr)
-        return 2
+        raise UsageError(str(e)) from None
     tick0 = None if args.offset_s is None else round(args.offset_s * 1e6)
     dev = ExoDevice(params, seed=args.seed, tick0_us=tick0)
-    folder = None
+    log = _open_log(args.log)  # before the folder: a --log refused leaves nothing behind
     try:
         link, folder = _link(args.link)
-        log = _open_log(args.log)
-    except _UsageError as e:
-        if folder is not None:
-            folder.close()
-        print(f"flowtact sim exo: {e}", file=sys.stderr)
-        return 2
+    except UsageError:
+        if log is not None:  # the new, empty log this run made: nothing of anyone else's
+            log.close()
+            os.unlink(args.log)
+        raise
     server = PtyServer(
         _ExoLine(dev, args.truth, not args.no_reset_on_replug, log),
         link,
@@ -244,8 +253,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"PORT {link}", flush=True)
         server.serve(parent_pid=os.getppid() if args.exit_with_parent else None)
     except LinkError as e:  # the link was swapped for something else since it was checked
-        print(f"flowtact sim exo: --link {link}: {e}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--link {link}: {e}") from None
     finally:
         server.close()
         if log is not None:
@@ -323,10 +331,6 @@ def _value_problem(action: argparse.Action, text: str) -> str | None:
     return None
 
 
-class _UsageError(Exception):
-    """A flag names a path the emulator may not use (the message names the flag and the path)."""
-
-
 def _link(path: str | None) -> tuple[str, RunFolder | None]:
     """The pty link to make: ``path`` if a link may go there, else a fresh one in a private folder."""
     from flowtact.blocks.devices.ptyserver import link_problem
@@ -336,7 +340,7 @@ def _link(path: str | None) -> tuple[str, RunFolder | None]:
         return os.path.join(folder.path, "tty"), folder
     problem = link_problem(os.path.abspath(path))
     if problem:
-        raise _UsageError(f"--link {path}: {problem}")
+        raise UsageError(f"--link {path}: {problem}")
     return path, None
 
 
@@ -348,9 +352,9 @@ def _open_log(path: str | None) -> TextIO | None:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
     except FileExistsError:
         what = "a folder" if os.path.isdir(path) else "an existing file"
-        raise _UsageError(f"--log {path}: is {what}; the log is only ever written to a new file") from None
+        raise UsageError(f"--log {path}: is {what}; the log is only ever written to a new file") from None
     except OSError as e:
-        raise _UsageError(f"--log {path}: cannot create it ({e.strerror})") from None
+        raise UsageError(f"--log {path}: cannot create it ({e.strerror})") from None
     return os.fdopen(fd, "w", buffering=1)
 
 

@@ -7,7 +7,6 @@ recording; :func:`main` is the command (``--ssim ssim.y --force sim.force --json
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from collections.abc import Sequence
@@ -16,9 +15,16 @@ from typing import Any
 
 import numpy as np
 
+from flowtact.command import CommandParser, run_command
+from flowtact.errors import UsageError
+from flowtact.limits import cli_float
+
 from .hand import FINGERS
 
-__all__ = ["fit_from_recording", "fit_linear_force", "main"]
+__all__ = ["MAX_TOL_S", "fit_from_recording", "fit_linear_force", "main"]
+
+MAX_TOL_S = 1.0
+"""Widest pairing tolerance for ``--tol-s``: samples a second apart are not the same moment."""
 
 
 # -- fitting ---------------------------------------------------------------------------------------
@@ -130,8 +136,14 @@ def _pair_by_time(ta: np.ndarray, tb: np.ndarray, tol_s: float) -> tuple[np.ndar
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``flowtact fit-force REC.h5``: fit the SSIM→force lines of a recording; 0 ok, 1 failed."""
-    ap = argparse.ArgumentParser(
+    """``flowtact fit-force REC.h5``: fit the SSIM→force lines of a recording; its exit status
+    (:func:`flowtact.command.run_command`: 0 ok, 2 a bad flag or a recording without the streams
+    asked for, 1 failed)."""
+    return run_command(lambda: _fit(list(sys.argv[1:] if argv is None else argv)), prog="flowtact fit-force")
+
+
+def _parser() -> CommandParser:
+    ap = CommandParser(
         prog="flowtact fit-force",
         description="Fit linear_force's per-sensor lines F = intercept + slope·SSIM on a recording that "
         "holds an SSIM stream and a true-force stream (e.g. tactip_sim's), paired by time stamp.",
@@ -142,16 +154,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--force", default="sim.force", help="true-force stream '<node>.<port>' (default sim.force)"
     )
     ap.add_argument(
-        "--tol-s", type=float, default=1e-9, help="time stamps closer than this pair (default 1e-9)"
+        "--tol-s",
+        type=cli_float(0, MAX_TOL_S, "s"),
+        default=1e-9,
+        help=f"time stamps closer than this pair (default 1e-9, at most {MAX_TOL_S:g})",
     )
     ap.add_argument("--json", metavar="OUT", help="also write the fit to this JSON file")
-    args = ap.parse_args(list(sys.argv[1:] if argv is None else argv))
+    return ap
+
+
+def _fit(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    if args.json and Path(args.json).is_dir():  # found before the fit, not after it was printed
+        raise UsageError(f"--json {args.json}: is a folder; give the file to write")
     try:
         fit = fit_from_recording(args.recording, args.ssim, args.force, tol_s=args.tol_s)
-    except (OSError, KeyError, ValueError) as e:
-        msg = e.args[0] if isinstance(e, KeyError) and e.args else e
-        print(f"flowtact fit-force: {msg}", file=sys.stderr)
-        return 1
+    except (KeyError, ValueError) as e:  # the recording lacks what the flags ask for
+        raise UsageError(str(e.args[0] if isinstance(e, KeyError) and e.args else e)) from e
     print(f"{fit['pairs']} (SSIM, force) pairs from {args.recording}: {args.ssim} vs {args.force}")
     print(f"{'sensor':>8} {'slope N':>10} {'intercept N':>12} {'MAE N':>8}")
     for name, a, b, m in zip(fit["sensors"], fit["slope_n"], fit["intercept_n"], fit["mae_n"], strict=True):

@@ -34,6 +34,9 @@ from typing import Any
 
 import numpy as np
 
+from flowtact.command import CommandParser, run_command
+from flowtact.errors import UsageError
+from flowtact.limits import MAX_SEED, cli_float, cli_int
 from flowtact.terminal_bar import TerminalBar
 
 from .cnn import ARCHS, TORCH_HINT, Arch, Preprocess, build_model, import_torch, n_parameters, save_checkpoint
@@ -608,6 +611,25 @@ def train_force(
 # -- command line -----------------------------------------------------------------------------------------
 
 
+# The documented ranges of the flags: a value outside is a one-line usage error (exit 2).
+MAX_EPOCHS = 100_000
+"""Most epochs, patience or plateau length (the recipe's 400 epochs take about 20 min on a CPU)."""
+MAX_DOWNSAMPLE = 64
+"""Largest pooling factor (a 240×320 frame pooled by 64 is 3×5 pixels)."""
+MAX_BATCH = 65_536
+"""Largest mini-batch (the recipe's is 64)."""
+MAX_LR = 10.0
+"""Largest learning rate (Adam's usual is 1e-3)."""
+MAX_PENALTY = 1e6
+"""Largest l1 or l2 weight penalty."""
+MAX_THREADS = 1024
+"""Most torch threads."""
+MAX_TIME_LIMIT_S = 1e7
+"""Longest ``--time-limit`` (about 4 months)."""
+MAX_CROP_PX = 100_000
+"""Largest crop corner, width or height in pixels (frames are 240×320)."""
+
+
 def _crop_arg(text: str) -> tuple[int, int, int, int] | str | None:
     if text in ("auto", "none"):
         return None if text == "none" else "auto"
@@ -617,6 +639,10 @@ def _crop_arg(text: str) -> tuple[int, int, int, int] | str | None:
         parts = ()
     if len(parts) != 4:
         raise argparse.ArgumentTypeError(f"expected x0,y0,w,h (4 integers), 'auto' or 'none'; got {text!r}")
+    if min(parts[:2]) < 0 or min(parts[2:]) < 1 or max(parts) > MAX_CROP_PX:
+        raise argparse.ArgumentTypeError(
+            f"x0, y0 must be in [0, {MAX_CROP_PX}] and w, h in [1, {MAX_CROP_PX}] pixels; got {text!r}"
+        )
     return parts  # type: ignore[return-value]
 
 
@@ -626,17 +652,19 @@ def _sensors_arg(text: str) -> tuple[int, ...]:
         part = part.strip()
         if part in FINGERS:
             out.append(FINGERS.index(part))
-        elif part.isdigit():
+        elif part.isdigit() and int(part) < len(FINGERS):
             out.append(int(part))
         else:
-            raise argparse.ArgumentTypeError(f"sensor {part!r}: use {', '.join(FINGERS)} or an index")
+            raise argparse.ArgumentTypeError(
+                f"sensor {part!r}: use {', '.join(FINGERS)} or an index in [0, {len(FINGERS) - 1}]"
+            )
     return tuple(out)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``flowtact train-force`` argument parser."""
     d = TrainConfig()
-    p = argparse.ArgumentParser(
+    p = CommandParser(
         prog="flowtact train-force",
         description="Train the TacTip contact-force CNN on recorded (frame, force) pairs and save a checkpoint "
         "for the cnn_force block. Make a training set with: "
@@ -652,11 +680,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="checkpoint to write (.pt; a .json copy of the metadata beside it)",
     )
     p.add_argument(
-        "--epochs", type=int, default=d.max_epochs, help=f"maximum epochs (default {d.max_epochs})"
+        "--epochs",
+        type=cli_int(1, MAX_EPOCHS),
+        default=d.max_epochs,
+        help=f"maximum epochs (default {d.max_epochs})",
     )
     p.add_argument(
         "--patience",
-        type=int,
+        type=cli_int(1, MAX_EPOCHS),
         default=d.patience,
         help=f"early-stopping patience in epochs (default {d.patience})",
     )
@@ -669,35 +700,56 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--downsample",
-        type=int,
+        type=cli_int(1, MAX_DOWNSAMPLE),
         default=d.downsample,
         help=f"average-pool factor after the crop (default {d.downsample})",
     )
     p.add_argument(
-        "--batch-size", type=int, default=d.batch_size, help=f"mini-batch size (default {d.batch_size})"
+        "--batch-size",
+        type=cli_int(2, MAX_BATCH),
+        default=d.batch_size,
+        help=f"mini-batch size (default {d.batch_size})",
     )
-    p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (default {d.lr:g})")
+    p.add_argument(
+        "--lr",
+        type=cli_float(0, MAX_LR, lo_open=True),
+        default=d.lr,
+        help=f"Adam learning rate (default {d.lr:g})",
+    )
     p.add_argument(
         "--lr-plateau",
-        type=int,
+        type=cli_int(0, MAX_EPOCHS),
         default=d.lr_plateau,
         metavar="N",
         help=f"halve the learning rate after N epochs without progress (default {d.lr_plateau}; 0: never)",
     )
-    p.add_argument("--l1", type=float, default=d.l1, help=f"l1 penalty on weights (default {d.l1:g})")
-    p.add_argument("--l2", type=float, default=d.l2, help=f"l2 penalty on weights (default {d.l2:g})")
+    p.add_argument(
+        "--l1", type=cli_float(0, MAX_PENALTY), default=d.l1, help=f"l1 penalty on weights (default {d.l1:g})"
+    )
+    p.add_argument(
+        "--l2", type=cli_float(0, MAX_PENALTY), default=d.l2, help=f"l2 penalty on weights (default {d.l2:g})"
+    )
     p.add_argument(
         "--sensors", type=_sensors_arg, default=None, help="train on these sensors only, e.g. thumb or 0,2"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the split, initial weights and batch order")
+    p.add_argument(
+        "--seed",
+        type=cli_int(0, MAX_SEED),
+        default=0,
+        help="seed of the split, initial weights and batch order",
+    )
     p.add_argument(
         "--threads",
-        type=int,
+        type=cli_int(0, MAX_THREADS),
         default=d.threads,
         help=f"torch threads (default {d.threads}; 0: torch's choice)",
     )
     p.add_argument(
-        "--time-limit", type=float, default=None, metavar="S", help="stop after S seconds of training"
+        "--time-limit",
+        type=cli_float(0, MAX_TIME_LIMIT_S, "s", lo_open=True),
+        default=None,
+        metavar="S",
+        help="stop after S seconds of training",
     )
     p.add_argument(
         "--heldout",
@@ -712,14 +764,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``flowtact train-force``: returns the exit status (0 ok, 1 failed, 2 usage)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    """``flowtact train-force``: returns the exit status (:func:`flowtact.command.run_command`:
+    0 ok, 2 a bad flag or input, 1 failed)."""
+    return run_command(
+        lambda: _command(list(sys.argv[1:] if argv is None else argv)), prog="flowtact train-force"
+    )
+
+
+def _command(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     try:
         import_torch()
     except ImportError:
-        print(f"flowtact train-force: {TORCH_HINT}", file=sys.stderr)
-        return 1
+        raise ImportError(TORCH_HINT) from None
     try:
         config = TrainConfig(
             arch=args.arch,
@@ -752,9 +809,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 log=None if quiet else _log,
                 stop=interrupt.requested,
             )
-    except (ValueError, KeyError, FileNotFoundError, OSError) as e:
-        print(f"flowtact train-force: {e}", file=sys.stderr)
-        return 1
+    except (ValueError, KeyError) as e:  # settings, streams or frames that do not fit: the input's fault
+        raise UsageError(str(e.args[0] if isinstance(e, KeyError) and e.args else e)) from e
     except KeyboardInterrupt as e:
         print(f"flowtact train-force: {e or 'aborted'}; nothing saved", file=sys.stderr)
         return 130

@@ -51,7 +51,12 @@ def load_results(folder: Path) -> dict[str, dict[str, Any]]:
     out = {}
     for path in sorted(results.glob("*.json")):
         if path.name != "run.json":
-            rec = json.loads(path.read_text())
+            try:
+                rec = json.loads(path.read_text())
+            except (ValueError, RecursionError) as e:  # the file's name, not only the parser's words
+                raise ValueError(f"{path}: not a results file of flowtact bench ({e})") from None
+            if not isinstance(rec, dict):
+                raise ValueError(f"{path}: not a results file of flowtact bench (not a JSON object)")
             out[rec.get("suite", path.stem)] = rec
     return out
 

@@ -139,19 +139,18 @@ def run_suites(
     or an unreadable ``compare`` folder (an earlier run whose ratios this one is held to)."""
     from flowtact.benchmark.compare import compare_records, load_results, report_lines, shift_percentiles
     from flowtact.benchmark.report import write_report
+    from flowtact.errors import UsageError
     from flowtact.params import did_you_mean
 
     pin_threads()
     available = suites()
     for n in names:
-        if n not in available:
-            print(f"flowtact: unknown benchmark suite '{n}'{did_you_mean(n, available)}", file=sys.stderr)
-            return 2
+        if n not in available:  # usage errors take the commands' one error path (exit 2)
+            raise UsageError(f"unknown benchmark suite '{n}'{did_you_mean(n, available)}")
     try:
         before = load_results(compare) if compare is not None else None
     except (OSError, ValueError) as e:
-        print(f"flowtact: --compare: {e}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--compare: {e}") from e
     chosen = list(dict.fromkeys(names)) or list(available)
     out.mkdir(parents=True, exist_ok=True)
     run: dict[str, Any] = {

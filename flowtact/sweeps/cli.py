@@ -14,7 +14,7 @@ import signal
 import sys
 from typing import Any
 
-from flowtact.limits import cli_positive_seconds
+from flowtact.limits import cli_duration_seconds
 
 __all__ = ["add_sweep_parser", "run_sweep_command"]
 
@@ -63,7 +63,7 @@ def add_sweep_parser(sub: Any) -> argparse.ArgumentParser:
     sp.add_argument(
         "--workers", type=_positive_int, metavar="N", help="worker processes (default: CPU count)"
     )
-    sp.add_argument("--duration", type=cli_positive_seconds, metavar="SECONDS", help="graph seconds per run")
+    sp.add_argument("--duration", type=cli_duration_seconds, metavar="SECONDS", help="graph seconds per run")
     sp.add_argument(
         "--plot", metavar="FILE.png", help="also plot spike rates across the grid (needs the plot extra)"
     )

@@ -213,7 +213,7 @@ def test_cli_plot_and_its_usage_errors(recording, tmp_path, capsys):
     assert (tmp_path / "a.png").stat().st_size > 10_000
     assert main(["plot", str(recording), "-o", str(tmp_path / "b.png"), "--streams", "nope"]) == 2
     assert "no stream 'nope'" in capsys.readouterr().err
-    assert main(["plot", str(tmp_path / "missing.h5"), "-o", str(tmp_path / "c.png")]) == 1
+    assert main(["plot", str(tmp_path / "missing.h5"), "-o", str(tmp_path / "c.png")]) == 2  # bad input
 
 
 # -- the paper figure ------------------------------------------------------------------------------

@@ -62,7 +62,7 @@ def test_char_windows_are_the_decoder_s_windows():
     [
         (["--speeds", "0"], "speeds must be in (0, 1000] mm/s"),
         (["--speeds", "fast"], "expected speeds in mm/s"),
-        (["--letters", "-3"], "must be > 0"),
+        (["--letters", "-3"], "argument --letters: must be an integer in [1, 10000]"),
         (["--layer", "third"], "invalid choice: 'third'"),
         (["--seed", str(HELDOUT_SEED)], "seeds from 100000 are held out"),
         (["--letters", "3", "--speeds", "80"], "never came up in the training text: raise --letters"),

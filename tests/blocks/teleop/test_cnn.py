@@ -325,5 +325,5 @@ def test_train_force_cli_writes_a_checkpoint_the_block_runs(tmp_path, capsys):
     assert meta["heldout"]["samples"] == 180 and set(meta["heldout"]["mae_n"]) == {"combined", *FINGERS}
     y = run_offline(CnnForce(checkpoint=str(out)), x=frames[:5], rate_hz=40.0, units={"x": "DN"})["y"]
     assert y.data.shape == (5, 3) and np.isfinite(y.data).all()
-    assert main([str(rec), "--frames-stream", "nope.frames", "--out", str(out), "--no-progress"]) == 1
+    assert main([str(rec), "--frames-stream", "nope.frames", "--out", str(out), "--no-progress"]) == 2
     assert "no stream 'nope.frames'" in capsys.readouterr().err

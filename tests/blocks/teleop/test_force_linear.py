@@ -177,9 +177,9 @@ def test_fit_force_command(tmp_path, capsys):
     assert "120 (SSIM, force) pairs" in text and "slope_n: [-18, -26, -13.5]" in text
     assert "intercept_n: [15.5, 22, 11]" in text
     assert json.loads(out.read_text())["pairs"] == 120
-    assert main([str(path), "--force", "nope.f"]) == 1
+    assert main([str(path), "--force", "nope.f"]) == 2  # a flag the recording cannot serve: usage
     assert "no stream 'nope.f'" in capsys.readouterr().err
-    assert main([str(tmp_path / "missing.h5")]) == 1
+    assert main([str(tmp_path / "missing.h5")]) == 2  # a missing input file: usage
 
 
 def test_docstring_examples():
