@@ -43,7 +43,10 @@ PLUGIN_MISUSE = [
     (["sim", "exo", "--object-stiffness", "nan"], "argument --object-stiffness: must be a finite number"),
     (["sim", "exo", "--object-closure", "2"], "argument --object-closure: must be a finite number in [0, 1]"),
     (["sim", "exo", "--user", "grasp", "idle"], "argument --user: takes 1 or 3 values"),
-    (["sim", "exo", "--log", "{tmp}"], "{tmp}: Is a directory"),
+    (
+        ["sim", "exo", "--log", "{tmp}"],
+        "--log {tmp}: is a folder; the log is only ever written to a new file",
+    ),
     # flowtact fit-force
     (["fit-force", "{tmp}/r.h5", "--json", "{tmp}"], "--json {tmp}: is a folder; give the file to write"),
     (["fit-force", "{tmp}/r.h5", "--tol-s", "nan"], "argument --tol-s: must be a finite number in [0, 1] s"),

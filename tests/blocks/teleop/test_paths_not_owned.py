@@ -44,8 +44,8 @@ def flowtact(*args: str, cwd: Path) -> subprocess.CompletedProcess:
         (["{f}"], "must hold flags of `flowtact sim exo` only"),
         (["--rate-hz", "5"], "must not hold --rate-hz: serial_io sets it (set rate_hz)"),
         (["--help"], "must not hold --help"),
-        (["--seed", "-1"], "--seed: must be >= 0"),
-        (["--drift-ppm", "nan"], "--drift-ppm: must be >= -5000 and <= 5000, got 'nan'"),
+        (["--seed", "-1"], "--seed: must be an integer in [0, 9223372036854775807], got '-1'"),
+        (["--drift-ppm", "nan"], "--drift-ppm: must be a finite number in [-10000, 10000] ppm, got 'nan'"),
         (["--user", "idle", "grasp"], "--user takes 1 or 3 values"),
         (["--truth=yes"], "--truth takes no value"),
         (["--jitter-ms"], "--jitter-ms needs a value"),
@@ -137,8 +137,10 @@ def test_sim_exo_never_links_over_an_existing_file_or_folder(tmp_path):
     for path, what in ((f, "a regular file"), (tmp_path / "folder", "a folder")):
         r = flowtact("sim", "exo", "--link", str(path), cwd=tmp_path)
         assert r.returncode == 2, r.stderr
-        assert r.stderr == f"flowtact sim exo: --link {path}: exists and is {what}; it is never replaced " + (
-            "(give a new path, or a stale pty link)\n"
+        assert (
+            r.stderr
+            == f"flowtact sim exo: error: --link {path}: exists and is {what}; it is never replaced "
+            + ("(give a new path, or a stale pty link)\n")
         )
     assert f.read_text() == PRECIOUS and (tmp_path / "folder").is_dir()
     assert sorted(os.listdir(tmp_path)) == ["data.csv", "folder"]
@@ -148,7 +150,7 @@ def test_sim_exo_writes_its_log_to_a_new_file_only(tmp_path, capsys):
     f = precious(tmp_path)
     assert sim_exo(["--log", str(f)]) == 2
     assert capsys.readouterr().err == (
-        f"flowtact sim exo: --log {f}: is an existing file; the log is only ever written to a new file\n"
+        f"flowtact sim exo: error: --log {f}: is an existing file; the log is only ever written to a new file\n"
     )
     assert sim_exo(["--log", str(tmp_path)]) == 2
     assert "is a folder" in capsys.readouterr().err
@@ -156,30 +158,3 @@ def test_sim_exo_writes_its_log_to_a_new_file_only(tmp_path, capsys):
     assert sim_exo(["--log", str(tmp_path / "to_new")]) == 2
     capsys.readouterr()
     assert f.read_text() == PRECIOUS and not (tmp_path / "new.log").exists()
-
-
-@pytest.mark.parametrize(
-    "argv,text",
-    [
-        (["--seed", "-1"], "argument --seed: must be >= 0 and <= 4294967295, got '-1'"),
-        (["--rate-hz", "0"], "argument --rate-hz: must be > 0 and <= 10000, got '0'"),
-        (["--rate-hz", "nan"], "argument --rate-hz: must be > 0"),
-        (["--rate-hz", "1e308"], "argument --rate-hz: must be > 0 and <= 10000, got '1e308'"),
-        (["--period-s", "-1"], "argument --period-s: must be > 0"),
-        (["--replug-s", "nan"], "argument --replug-s: must be >= 0 and <= 3600, got 'nan'"),
-        (["--link"], "argument --link: expected one argument"),
-    ],
-)
-def test_sim_exo_bad_flags_are_one_line_usage_errors(argv, text, capsys):
-    with pytest.raises(SystemExit) as e:
-        sim_exo(argv)
-    assert e.value.code == 2
-    err = capsys.readouterr().err
-    assert err == f"flowtact sim exo: {text}" + err[len(f"flowtact sim exo: {text}") :]
-    assert err.count("\n") == 1 and text in err
-
-
-def test_sim_exo_a_rule_across_flags_is_one_line(capsys):
-    assert sim_exo(["--period-s", "1"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("flowtact sim exo: period_s must cover") and err.count("\n") == 1
