@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
 TOUCH = str(files("flowtact.graphs") / "touch.yaml")
 
@@ -156,3 +157,81 @@ CASES: dict[str, Callable[[Path], tuple[list[str], str]]] = {
     )
 }
 """Every hostile case by name: folder -> (flowtact arguments, text the refusal must show)."""
+
+
+# == recordings and model files (issue 30): every reader bounded before it allocates ==================
+# Each case writes a small (or sparse) file whose headers promise far more than it holds, or a FIFO;
+# the refusal must name the file and the bound, exit 2, within the harness's time and memory.
+
+
+def _recording(folder: Path, name: str, build: Callable[[Any, Any], None]) -> str:
+    """A minimal recording (a /streams group, no checksums: format 1) with ``build(file, stream)``."""
+    import h5py
+
+    path = folder / name
+    with h5py.File(path, "w") as f:
+        build(f, f.create_group("streams/s.y"))
+    return str(path)
+
+
+def recording_huge_chunk(folder: Path) -> tuple[list[str], str]:
+    def build(_f: Any, g: Any) -> None:  # one 1 GiB chunk, never written: reading it fills 1 GiB
+        g.create_dataset("data", shape=(1 << 27,), dtype="f8", chunks=(1 << 27,))
+
+    path = _recording(folder, "chunk.h5", build)
+    return ["info", path], f"{path}: /streams/s.y/data: stored in chunks of 1.0 GiB (at most 16.0 MiB)"
+
+
+def recording_declared_samples(folder: Path) -> tuple[list[str], str]:
+    def build(_f: Any, g: Any) -> None:  # 2^40 samples declared, none stored
+        g.create_dataset("data", shape=(1 << 40,), dtype="f8", chunks=(8192,))
+
+    path = _recording(folder, "declared.h5", build)
+    return ["plot", path, "-o", str(folder / "p.png")], (
+        f"{path}: /streams/s.y/data: declares 1,099,511,627,776 values (8.0 TiB) but stores 0 B"
+    )
+
+
+def recording_big_attribute(folder: Path) -> tuple[list[str], str]:
+    def build(f: Any, _g: Any) -> None:  # 100 MB of text in one attribute (its heap is one piece)
+        f.attrs["command"] = "x" * (100 << 20)
+
+    path = _recording(folder, "attr.h5", build)
+    return ["info", path], f"{path}: /: attribute 'command' holds more than 1.0 MiB"
+
+
+def recording_many_streams(folder: Path) -> tuple[list[str], str]:
+    def build(f: Any, g: Any) -> None:  # 10 001 links to one stream: one more than the bound
+        for i in range(10_000):
+            f[f"streams/s{i}.y"] = g
+
+    path = _recording(folder, "many.h5", build)
+    return ["info", path], f"{path}: holds 10,001 streams (at most 10,000)"
+
+
+def recording_sparse_not_hdf5(folder: Path) -> tuple[list[str], str]:
+    path = folder / "sparse.h5"
+    with open(path, "wb") as f:
+        f.truncate(1 << 30)  # 1 GiB of nothing: only its first bytes may be read
+    return ["info", str(path)], f"{path}: not a readable HDF5 file (it has no HDF5 signature)"
+
+
+def recording_fifo(folder: Path) -> tuple[list[str], str]:
+    path = folder / "rec.h5"
+    os.mkfifo(path)  # nobody writes: h5py opening it would block forever
+    return ["run", str(path), "--duration", "1"], f"{path}:1:1: not a regular file (a FIFO)"
+
+
+CASES.update(
+    {
+        f.__name__: f
+        for f in (
+            recording_huge_chunk,
+            recording_declared_samples,
+            recording_big_attribute,
+            recording_many_streams,
+            recording_sparse_not_hdf5,
+            recording_fifo,
+        )
+    }
+)

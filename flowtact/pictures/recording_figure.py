@@ -14,8 +14,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from flowtact.pictures.bounded_read import StreamSource, open_recording
+from flowtact.pictures.bounded_read import StreamSource, label, open_recording
 from flowtact.pictures.panels import Panel, binned_rates, draw_frames, draw_panel, plan_panels
+from flowtact.safe_text import shown
 
 __all__ = ["DPI", "binned_rates", "need_matplotlib", "plot_recording", "recording_figure", "time_span"]
 
@@ -43,7 +44,8 @@ def _select(
         return sources
     missing = [n for n in streams if n not in sources]
     if missing:
-        raise KeyError(f"{path}: no stream {missing[0]!r} (available: {', '.join(sources) or 'none'})")
+        have = shown(", ".join(sources) or "none", limit=500)
+        raise KeyError(f"{shown(path)}: no stream '{shown(missing[0])}' (available: {have})")
     return {n: sources[n] for n in streams}
 
 
@@ -71,7 +73,7 @@ def _frames_height(p: Panel) -> float:
 
 def _title(path: Path, root: dict[str, Any], what: str) -> str:
     graph = root.get("graph_name")
-    title = path.name + (f" — graph {graph}" if graph else "") + what
+    title = label(path.name) + (f" — graph {label(graph)}" if graph else "") + what
     if "summary" not in root:
         title += " (incomplete: the run did not close the recording)"
     return title
@@ -91,7 +93,7 @@ def recording_figure(
     with f:
         sources = _select(sources, path, streams)
         if not sources:
-            raise ValueError(f"{path}: nothing to plot (the recording holds no streams)")
+            raise ValueError(f"{shown(path)}: nothing to plot (the recording holds no streams)")
         t0, t1 = time_span(sources, t_range)
         if paper:
             from flowtact.pictures.paper_figure import paper_figure
