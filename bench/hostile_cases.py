@@ -222,10 +222,43 @@ def recording_fifo(folder: Path) -> tuple[list[str], str]:
     return ["run", str(path), "--duration", "1"], f"{path}:1:1: not a regular file (a FIFO)"
 
 
+BRAILLE = str(files("flowtact.graphs") / "braille.yaml")
+TELEOP_CNN = str(files("flowtact.graphs") / "teleop_cnn.yaml")
+
+
+def nb_model_zip_bomb(folder: Path) -> tuple[list[str], str]:
+    import zipfile
+
+    import numpy as np
+
+    path = folder / "bomb.npz"  # about 4 MB on disk; its one member declares 1 GiB of zeros
+    header = {"descr": "<f8", "fortran_order": False, "shape": (1 << 27,)}
+    zf = zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, compresslevel=1)
+    with zf, zf.open("meta.npy", "w", force_zip64=True) as f:
+        np.lib.format.write_array_header_1_0(f, header)
+        block = bytes(16 << 20)
+        for _ in range(64):
+            f.write(block)
+    return ["validate", BRAILLE, "--set", f"decoder.model={path}"], (
+        f"{path}: not a readable naive Bayes model file (member meta.npy declares 1.0 GiB: over the "
+        "64.0 MiB budget"
+    )
+
+
+def nb_model_fifo(folder: Path) -> tuple[list[str], str]:
+    path = folder / "model.npz"
+    os.mkfifo(path)
+    return ["validate", BRAILLE, "--set", f"decoder.model={path}"], (
+        f"{path}: not a readable naive Bayes model file (not a regular file (a FIFO))"
+    )
+
+
 CASES.update(
     {
         f.__name__: f
         for f in (
+            nb_model_zip_bomb,
+            nb_model_fifo,
             recording_huge_chunk,
             recording_declared_samples,
             recording_big_attribute,
