@@ -253,10 +253,49 @@ def nb_model_fifo(folder: Path) -> tuple[list[str], str]:
     )
 
 
+def cnn_checkpoint_too_wide(folder: Path) -> tuple[list[str], str]:
+    import json
+
+    path = folder / "wide.pt"  # its metadata (the .json beside it) asks for 5000 filters per stage
+    path.write_bytes(b"")
+    meta = {
+        "format": "flowtact-force-cnn",
+        "format_version": 1,
+        "arch": {"n_conv": 4, "width": 5000, "fc": 128, "kernel": 3, "batch_norm": True},
+        "preprocess": {"input_hw": [90, 240], "crop": None, "downsample": 4},
+        "label_mean_n": 0.0,
+        "label_std_n": 1.0,
+    }
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    return ["validate", TELEOP_CNN, "--set", f"cnn.checkpoint={path}"], (
+        f"{path}: arch.width must be an integer in 1..1024; got 5000"
+    )
+
+
+def cnn_checkpoint_escapes(folder: Path) -> tuple[list[str], str]:
+    import types
+
+    import torch
+
+    path = folder / "evil.pt"  # pickles a class whose module name clears the screen and retitles
+    module = "evil\x1b[2J\x1b]0;pwned\x07"
+    sys.modules[module] = types.SimpleNamespace(Boom=type("Boom", (), {"__module__": module}))
+    try:
+        torch.save({"format": "flowtact-force-cnn", "x": sys.modules[module].Boom()}, path)
+    finally:
+        del sys.modules[module]
+    return ["validate", TELEOP_CNN, "--set", f"cnn.checkpoint={path}"], (
+        f"{path}: not a flowtact CNN checkpoint (torch refused it: Unsupported global: "
+        "GLOBAL evil\\x1b[2J\\x1b]0;pwned\\x07.Boom was not an allowed global by default.)"
+    )
+
+
 CASES.update(
     {
         f.__name__: f
         for f in (
+            cnn_checkpoint_too_wide,
+            cnn_checkpoint_escapes,
             nb_model_zip_bomb,
             nb_model_fifo,
             recording_huge_chunk,
