@@ -49,6 +49,7 @@ def _stored_graph(path: Path) -> str:
     from flowtact.record import read_recording
     from flowtact.record_integrity import NotARecording, RecordingRefused
     from flowtact.safe_text import shown
+    from flowtact.safe_yaml import MAX_GRAPH_BYTES
 
     where = shown(path)
     try:
@@ -58,6 +59,8 @@ def _stored_graph(path: Path) -> str:
         raise GraphErrors([GraphError(Loc(where), msg.removeprefix(f"{where}: "))]) from None
     if not isinstance(text, str):
         raise GraphErrors([GraphError(Loc(where), "the recording stores no graph (no 'graph_yaml' text)")])
+    if len(text.encode("utf-8", "surrogatepass")) > MAX_GRAPH_BYTES:
+        raise GraphErrors([GraphError(Loc(where), f"stored graph larger than {MAX_GRAPH_BYTES >> 20} MiB")])
     return text
 
 

@@ -24,6 +24,8 @@ WIDTH_IN = 11.0
 DPI = 110
 #: Tallest figure drawn (inches); panels shrink beyond it.
 MAX_HEIGHT_IN = 60.0
+#: Most streams drawn in one figure (a recording may hold up to 10 000): pick some with ``streams``.
+MAX_PLOT_STREAMS = 200
 
 
 def need_matplotlib() -> tuple[Any, Any]:
@@ -94,6 +96,11 @@ def recording_figure(
         sources = _select(sources, path, streams)
         if not sources:
             raise ValueError(f"{shown(path)}: nothing to plot (the recording holds no streams)")
+        if len(sources) > MAX_PLOT_STREAMS:
+            raise ValueError(
+                f"{shown(path)}: {len(sources):,} streams to plot (at most {MAX_PLOT_STREAMS} in one figure); "
+                "choose some with --streams"
+            )
         t0, t1 = time_span(sources, t_range)
         if paper:
             from flowtact.pictures.paper_figure import paper_figure
