@@ -197,7 +197,27 @@ def recording_big_attribute(folder: Path) -> tuple[list[str], str]:
         f.attrs["command"] = "x" * (100 << 20)
 
     path = _recording(folder, "attr.h5", build)
-    return ["info", path], f"{path}: /: attribute 'command' holds more than 1.0 MiB"
+    return [
+        "info",
+        path,
+    ], f"{path}: /: attribute 'command' is larger than 1.0 MiB (refused before it was read)"
+
+
+def recording_forged_attribute_length(folder: Path) -> tuple[list[str], str]:
+    import struct
+
+    def build(f: Any, _g: Any) -> None:
+        f.attrs["command"] = "q" * 12345
+
+    path = _recording(folder, "forged.h5", build)
+    raw = bytearray(Path(path).read_bytes())  # the text's stored length, 12345, becomes 1 GiB
+    at = raw.index(struct.pack("<I", 12345), raw.index(b"command"))
+    raw[at : at + 4] = struct.pack("<I", 1 << 30)
+    Path(path).write_bytes(raw)
+    return [
+        "info",
+        path,
+    ], f"{path}: /: attribute 'command' is larger than 1.0 MiB (refused before it was read)"
 
 
 def recording_many_streams(folder: Path) -> tuple[list[str], str]:
@@ -301,6 +321,7 @@ CASES.update(
             recording_huge_chunk,
             recording_declared_samples,
             recording_big_attribute,
+            recording_forged_attribute_length,
             recording_many_streams,
             recording_sparse_not_hdf5,
             recording_fifo,

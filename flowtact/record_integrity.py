@@ -16,6 +16,7 @@ import hashlib
 import io
 import json
 import math
+import os
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -66,6 +67,9 @@ MAX_READ_BYTES = MAX_CHUNK_BYTES + (1 << 20)
 holding a text attribute): a larger one is refused before it is done."""
 MAX_MANIFEST_BYTES = 32 << 20
 """Largest checksum manifest (about 1.3 kB per stream)."""
+ATTR_MEMORY_HEADROOM = 128 << 20
+"""Most memory (address space) one attribute read may add, on Linux: libhdf5 allocates a text
+attribute's declared length before reading it, and that length is whatever the file says."""
 MAX_COMPRESSION_RATIO = 1100
 """Most uncompressed bytes a dataset may declare per stored byte when it is compressed (deflate
 cannot exceed 1032:1); uncompressed, it must store every byte it declares (plus one chunk)."""
@@ -243,6 +247,42 @@ class _BoundedRaw(io.RawIOBase):
         if not self.closed:
             self._fh.close()
         super().close()
+
+
+def _address_space() -> int | None:
+    """Bytes of address space this process maps now (Linux), or None where that is unknown."""
+    try:
+        with open("/proc/self/statm", "rb") as fh:
+            return int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+@contextlib.contextmanager
+def _memory_headroom(nbytes: int) -> Iterator[None]:
+    """Within the block, allocations beyond ``nbytes`` more address space fail (``RLIMIT_AS``,
+    Linux): a libhdf5 allocation sized by a hostile length field becomes an error instead of
+    gigabytes. The limit is process-wide but held only for one attribute read, with ``nbytes`` of
+    room for other threads' small allocations; restored after. A no-op where the limit cannot be
+    read or set."""
+    try:
+        import resource
+
+        soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    except (ImportError, OSError, ValueError):
+        soft = hard = None
+    used = _address_space()
+    limit = None if used is None else used + nbytes
+    if soft is None or limit is None or (soft != resource.RLIM_INFINITY and soft <= limit):
+        yield
+        return
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
 
 
 def _open_h5(path: Path) -> tuple[h5py.File, _BoundedRaw]:
@@ -478,20 +518,25 @@ class CheckedFile:
             if stored > MAX_ATTR_BYTES:
                 raise self._attr_refused(obj, name, stored)
             try:
-                with self._raw.budget(MAX_ATTR_BYTES):
+                with self._raw.budget(MAX_ATTR_BYTES), _memory_headroom(ATTR_MEMORY_HEADROOM):
                     value = obj.attrs[name]
-            except OSError:
-                if self._raw.refused is None:
+            except MemoryError:
+                raise self._attr_too_long(obj, name) from None
+            except OSError as e:  # a read refused by the budget, or an allocation libhdf5 could not make
+                if self._raw.refused is None and "alloc" not in str(e):
                     raise
-                raise self._refused(
-                    f"{shown(obj.name, limit=200)}: attribute '{shown(name, limit=200)}' holds "
-                    f"{self._raw.refused} (at most {format_bytes(MAX_ATTR_BYTES)}; refused)"
-                ) from None
+                raise self._attr_too_long(obj, name) from None
             size = _value_bytes(value)
             if size > MAX_ATTR_BYTES:
                 raise self._attr_refused(obj, name, size)
             out[name] = value
         return out
+
+    def _attr_too_long(self, obj: h5py.HLObject, name: str) -> RecordingRefused:
+        return self._refused(
+            f"{shown(obj.name, limit=200)}: attribute '{shown(name, limit=200)}' is larger than "
+            f"{format_bytes(MAX_ATTR_BYTES)} (refused before it was read)"
+        )
 
     def _attr_refused(self, obj: h5py.HLObject, name: str, size: int) -> RecordingRefused:
         return self._refused(
@@ -504,9 +549,13 @@ class CheckedFile:
         """``ds[sel]``, each chunk's checksum verified by HDF5 on the way."""
         try:
             if ds.dtype.kind == "O":  # variable-length text: its heap is read under a budget
-                with self._raw.budget(MAX_READ_BYTES):
+                with self._raw.budget(MAX_READ_BYTES), _memory_headroom(ATTR_MEMORY_HEADROOM):
                     return ds[sel]
             return ds[sel]
+        except MemoryError:
+            raise self._refused(
+                f"{shown(ds.name, limit=200)}: declares text larger than memory allows (refused)"
+            ) from None
         except OSError as e:
             raise self._refusal(ds.name) or self._read_error(ds, e) from None
 
