@@ -17,6 +17,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.resources import files
+from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
@@ -314,8 +315,9 @@ CASES.update(
     {
         f.__name__: f
         for f in (
-            cnn_checkpoint_too_wide,
-            cnn_checkpoint_escapes,
+            *(
+                (cnn_checkpoint_too_wide, cnn_checkpoint_escapes) if find_spec("torch") else ()
+            ),  # the cnn extra
             nb_model_zip_bomb,
             nb_model_fifo,
             recording_huge_chunk,
