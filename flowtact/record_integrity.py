@@ -551,6 +551,8 @@ class CheckedFile:
             if ds.dtype.kind == "O":  # variable-length text: its heap is read under a budget
                 with self._raw.budget(MAX_READ_BYTES), _memory_headroom(ATTR_MEMORY_HEADROOM):
                     return ds[sel]
+            if ds.chunks is None and isinstance(sel, slice) and sel.step in (None, 1) and ds.ndim:
+                return _read_rows(ds, *sel.indices(ds.shape[0])[:2])
             return ds[sel]
         except MemoryError:
             raise self._refused(
@@ -649,6 +651,17 @@ def _value_bytes(value: Any) -> int:
     if a.dtype.hasobject:
         return sum(len(v) if isinstance(v, (str, bytes)) else 8 for v in a.ravel().tolist())
     return int(a.nbytes)
+
+
+def _read_rows(ds: h5py.Dataset, start: int, stop: int) -> np.ndarray:
+    """Rows ``[start, stop)`` of an unchunked dataset, read a few MB at a time (HDF5 would read a
+    contiguous selection in one piece, which the bounded reader refuses beyond MAX_READ_BYTES)."""
+    out = np.empty((max(0, stop - start), *ds.shape[1:]), ds.dtype)
+    for a, b in _row_blocks(ds, VERIFY_BYTES):
+        lo, hi = max(a, start), min(b, stop)
+        if lo < hi:
+            ds.read_direct(out, np.s_[lo:hi], np.s_[lo - start : hi - start])
+    return out
 
 
 def _chunk_rows(ds: h5py.Dataset) -> int:
