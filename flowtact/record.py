@@ -99,6 +99,7 @@ __all__ = [
     "open_verified",
     "package_versions",
     "read_recording",
+    "stream_count",
     "stream_header",
     "stream_kind",
     "stream_specs",
@@ -608,6 +609,12 @@ def stream_header(f: CheckedFile, name: str) -> StreamHeader:
             f.path, where, f"attributes do not describe a stream ({shown(e, limit=200)})"
         ) from None
     return StreamHeader(attrs, t, data, spec)
+
+
+def stream_count(path: str | Path) -> int:
+    """How many streams a recording holds, from its header (root attributes verified, no data)."""
+    with open_recording(path) as f:
+        return len(f.group("/streams"))
 
 
 def stream_specs(path: str | Path) -> dict[str, tuple[StreamSpec, int]]:

@@ -51,8 +51,9 @@ VERIFY_BYTES = 8 << 20
 _CORRUPT = "(the file is corrupted)"
 
 # -- the bounds every recording is checked against before it is read (docs/recordings.md) -----------
-MAX_STREAMS = 10_000
-"""Most streams a recording may hold (each is a group, two datasets and a dozen attributes)."""
+MAX_STREAMS = 4096
+"""Most streams a recording may hold (each is a group, two datasets and a dozen attributes; a graph
+records a few dozen): `flowtact info` verifies and describes that many in about 5 s."""
 MAX_OBJECTS = 4 * MAX_STREAMS + 64
 """Most groups and datasets a recording may hold (the streams' and a few more)."""
 MAX_ATTRS = 256

@@ -24,7 +24,7 @@ WIDTH_IN = 11.0
 DPI = 110
 #: Tallest figure drawn (inches); panels shrink beyond it.
 MAX_HEIGHT_IN = 60.0
-#: Most streams drawn in one figure (a recording may hold up to 10 000): pick some with ``streams``.
+#: Most streams drawn in one figure (a recording may hold up to 4096): pick some with ``streams``.
 MAX_PLOT_STREAMS = 200
 
 
@@ -49,6 +49,14 @@ def _select(
         have = shown(", ".join(sources) or "none", limit=500)
         raise KeyError(f"{shown(path)}: no stream '{shown(missing[0])}' (available: {have})")
     return {n: sources[n] for n in streams}
+
+
+def _check_count(path: Path, n: int) -> None:
+    if n > MAX_PLOT_STREAMS:
+        raise ValueError(
+            f"{shown(path)}: {n:,} streams to plot (at most {MAX_PLOT_STREAMS} in one figure); "
+            "choose some with --streams"
+        )
 
 
 def time_span(
@@ -91,16 +99,16 @@ def recording_figure(
     """The figure (a matplotlib Figure on an Agg canvas) of a recording or of its named streams."""
     Figure, FigureCanvasAgg = need_matplotlib()
     path = Path(source)
+    if streams is None:  # refuse a figure of thousands of panels before verifying them all
+        from flowtact.record import stream_count
+
+        _check_count(path, stream_count(path))
     f, sources, root = open_recording(path)
     with f:
         sources = _select(sources, path, streams)
         if not sources:
             raise ValueError(f"{shown(path)}: nothing to plot (the recording holds no streams)")
-        if len(sources) > MAX_PLOT_STREAMS:
-            raise ValueError(
-                f"{shown(path)}: {len(sources):,} streams to plot (at most {MAX_PLOT_STREAMS} in one figure); "
-                "choose some with --streams"
-            )
+        _check_count(path, len(sources))
         t0, t1 = time_span(sources, t_range)
         if paper:
             from flowtact.pictures.paper_figure import paper_figure
