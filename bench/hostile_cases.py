@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.resources import files
+from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
@@ -380,3 +381,175 @@ CASES: dict[str, Callable[[Path], tuple[list[str], str]]] = REPLAY_CASES | {
     )
 }
 """Every hostile case by name: folder -> (flowtact arguments, text the refusal must show)."""
+
+
+# == recordings and model files (issue 30): every reader bounded before it allocates ==================
+# Each case writes a small (or sparse) file whose headers promise far more than it holds, or a FIFO;
+# the refusal must name the file and the bound, exit 2, within the harness's time and memory.
+
+
+def _recording(folder: Path, name: str, build: Callable[[Any, Any], None]) -> str:
+    """A minimal recording (a /streams group, no checksums: format 1) with ``build(file, stream)``."""
+    import h5py
+
+    path = folder / name
+    with h5py.File(path, "w") as f:
+        build(f, f.create_group("streams/s.y"))
+    return str(path)
+
+
+def recording_huge_chunk(folder: Path) -> tuple[list[str], str]:
+    def build(_f: Any, g: Any) -> None:  # one 1 GiB chunk, never written: reading it fills 1 GiB
+        g.create_dataset("data", shape=(1 << 27,), dtype="f8", chunks=(1 << 27,))
+
+    path = _recording(folder, "chunk.h5", build)
+    return ["info", path], f"{path}: /streams/s.y/data: stored in chunks of 1.0 GiB (at most 16.0 MiB)"
+
+
+def recording_declared_samples(folder: Path) -> tuple[list[str], str]:
+    def build(_f: Any, g: Any) -> None:  # 2^40 samples declared, none stored
+        g.create_dataset("data", shape=(1 << 40,), dtype="f8", chunks=(8192,))
+
+    path = _recording(folder, "declared.h5", build)
+    return ["plot", path, "-o", str(folder / "p.png")], (
+        f"{path}: /streams/s.y/data: declares 1,099,511,627,776 values (8.0 TiB) but stores 0 B"
+    )
+
+
+def recording_big_attribute(folder: Path) -> tuple[list[str], str]:
+    def build(f: Any, _g: Any) -> None:  # 100 MB of text in one attribute (its heap is one piece)
+        f.attrs["command"] = "x" * (100 << 20)
+
+    path = _recording(folder, "attr.h5", build)
+    return [
+        "info",
+        path,
+    ], f"{path}: /: attribute 'command' is larger than 1.0 MiB (refused before it was read)"
+
+
+def recording_forged_attribute_length(folder: Path) -> tuple[list[str], str]:
+    import struct
+
+    def build(f: Any, _g: Any) -> None:
+        f.attrs["command"] = "q" * 12345
+
+    path = _recording(folder, "forged.h5", build)
+    raw = bytearray(Path(path).read_bytes())  # the text's stored length, 12345, becomes 1 GiB
+    at = raw.index(struct.pack("<I", 12345), raw.index(b"command"))
+    raw[at : at + 4] = struct.pack("<I", 1 << 30)
+    Path(path).write_bytes(raw)
+    return [
+        "info",
+        path,
+    ], f"{path}: /: attribute 'command' is larger than 1.0 MiB (refused before it was read)"
+
+
+def recording_many_streams(folder: Path) -> tuple[list[str], str]:
+    def build(f: Any, g: Any) -> None:  # 4097 links to one stream: one more than the bound
+        for i in range(4096):
+            f[f"streams/s{i}.y"] = g
+
+    path = _recording(folder, "many.h5", build)
+    return ["info", path], f"{path}: holds 4,097 streams (at most 4,096)"
+
+
+def recording_sparse_not_hdf5(folder: Path) -> tuple[list[str], str]:
+    path = folder / "sparse.h5"
+    with open(path, "wb") as f:
+        f.truncate(1 << 30)  # 1 GiB of nothing: only its first bytes may be read
+    return ["info", str(path)], f"{path}: not a readable HDF5 file (it has no HDF5 signature)"
+
+
+def recording_fifo(folder: Path) -> tuple[list[str], str]:
+    path = folder / "rec.h5"
+    os.mkfifo(path)  # nobody writes: h5py opening it would block forever
+    return ["run", str(path), "--duration", "1"], f"{path}:1:1: not a regular file (a FIFO)"
+
+
+BRAILLE = str(files("flowtact.graphs") / "braille.yaml")
+TELEOP_CNN = str(files("flowtact.graphs") / "teleop_cnn.yaml")
+
+
+def nb_model_zip_bomb(folder: Path) -> tuple[list[str], str]:
+    import zipfile
+
+    import numpy as np
+
+    path = folder / "bomb.npz"  # about 4 MB on disk; its one member declares 1 GiB of zeros
+    header = {"descr": "<f8", "fortran_order": False, "shape": (1 << 27,)}
+    zf = zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, compresslevel=1)
+    with zf, zf.open("meta.npy", "w", force_zip64=True) as f:
+        np.lib.format.write_array_header_1_0(f, header)
+        block = bytes(16 << 20)
+        for _ in range(64):
+            f.write(block)
+    return ["validate", BRAILLE, "--set", f"decoder.model={path}"], (
+        f"{path}: not a readable naive Bayes model file (member meta.npy declares 1.0 GiB: over the "
+        "64.0 MiB budget"
+    )
+
+
+def nb_model_fifo(folder: Path) -> tuple[list[str], str]:
+    path = folder / "model.npz"
+    os.mkfifo(path)
+    return ["validate", BRAILLE, "--set", f"decoder.model={path}"], (
+        f"{path}: not a readable naive Bayes model file (not a regular file (a FIFO))"
+    )
+
+
+def cnn_checkpoint_too_wide(folder: Path) -> tuple[list[str], str]:
+    import json
+
+    path = folder / "wide.pt"  # its metadata (the .json beside it) asks for 5000 filters per stage
+    path.write_bytes(b"")
+    meta = {
+        "format": "flowtact-force-cnn",
+        "format_version": 1,
+        "arch": {"n_conv": 4, "width": 5000, "fc": 128, "kernel": 3, "batch_norm": True},
+        "preprocess": {"input_hw": [90, 240], "crop": None, "downsample": 4},
+        "label_mean_n": 0.0,
+        "label_std_n": 1.0,
+    }
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    return ["validate", TELEOP_CNN, "--set", f"cnn.checkpoint={path}"], (
+        f"{path}: arch.width must be an integer in 1..1024; got 5000"
+    )
+
+
+def cnn_checkpoint_escapes(folder: Path) -> tuple[list[str], str]:
+    import types
+
+    import torch
+
+    path = folder / "evil.pt"  # pickles a class whose module name clears the screen and retitles
+    module = "evil\x1b[2J\x1b]0;pwned\x07"
+    sys.modules[module] = types.SimpleNamespace(Boom=type("Boom", (), {"__module__": module}))
+    try:
+        torch.save({"format": "flowtact-force-cnn", "x": sys.modules[module].Boom()}, path)
+    finally:
+        del sys.modules[module]
+    return ["validate", TELEOP_CNN, "--set", f"cnn.checkpoint={path}"], (
+        f"{path}: not a flowtact CNN checkpoint (torch refused it: Unsupported global: "
+        "GLOBAL evil\\x1b[2J\\x1b]0;pwned\\x07.Boom was not an allowed global by default.)"
+    )
+
+
+CASES.update(
+    {
+        f.__name__: f
+        for f in (
+            *(
+                (cnn_checkpoint_too_wide, cnn_checkpoint_escapes) if find_spec("torch") else ()
+            ),  # the cnn extra
+            nb_model_zip_bomb,
+            nb_model_fifo,
+            recording_huge_chunk,
+            recording_declared_samples,
+            recording_big_attribute,
+            recording_forged_attribute_length,
+            recording_many_streams,
+            recording_sparse_not_hdf5,
+            recording_fifo,
+        )
+    }
+)

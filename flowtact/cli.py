@@ -389,6 +389,7 @@ def _cmd_graph(args: argparse.Namespace) -> int:
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     from flowtact.pictures.recording_figure import plot_recording
+    from flowtact.record_integrity import NotARecording, RecordingRefused
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     try:
@@ -397,14 +398,20 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         )
     except KeyError as e:  # an unknown --streams name: a usage error
         raise UsageError(str(e.args[0])) from e
+    except (RecordingRefused, NotARecording) as e:  # bad input, refused before reading: exit 2
+        raise UsageError(str(e)) from e
     print(f"wrote {out}")
     return 0
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    from flowtact.record_integrity import NotARecording, RecordingRefused
     from flowtact.recording_info import format_info, inspect_recording
 
-    info = inspect_recording(args.recording)
+    try:
+        info = inspect_recording(args.recording)
+    except (RecordingRefused, NotARecording) as e:  # bad input, refused before reading: exit 2
+        raise UsageError(str(e)) from e
     print(json.dumps(info.to_dict(), indent=2) if args.json else format_info(info))
     return 0 if info.ok else EXIT_RUN_ERROR
 

@@ -41,9 +41,7 @@ def load_plan(
     imported (:func:`flowtact.graph.load_graph`); a recording's stored graph never widens them."""
     path = Path(source)
     if path.suffix in (".h5", ".hdf5"):
-        from flowtact.record import read_recording
-
-        text = read_recording(path, streams=()).provenance["graph_yaml"]
+        text = _stored_graph(path)
         graph = load_graph(
             f"{path}#graph", text=text, overrides=overrides, replays=replays, allow_modules=allow_modules
         )
@@ -52,6 +50,28 @@ def load_plan(
             resolve_graph_path(source), overrides=overrides, replays=replays, allow_modules=allow_modules
         )
     return compile_graph(graph)
+
+
+def _stored_graph(path: Path) -> str:
+    """The resolved graph a recording stores; a file refused as input (not a regular file, not a
+    recording, beyond the reader's bounds, no stored graph) is a located graph error (exit 2)."""
+    from flowtact.located import GraphError, GraphErrors, Loc
+    from flowtact.record import read_recording
+    from flowtact.record_integrity import NotARecording, RecordingRefused
+    from flowtact.safe_text import shown
+    from flowtact.safe_yaml import MAX_GRAPH_BYTES
+
+    where = shown(path)
+    try:
+        text = read_recording(path, streams=()).provenance.get("graph_yaml")
+    except (RecordingRefused, NotARecording) as e:
+        msg = str(e)
+        raise GraphErrors([GraphError(Loc(where), msg.removeprefix(f"{where}: "))]) from None
+    if not isinstance(text, str):
+        raise GraphErrors([GraphError(Loc(where), "the recording stores no graph (no 'graph_yaml' text)")])
+    if len(text.encode("utf-8", "surrogatepass")) > MAX_GRAPH_BYTES:
+        raise GraphErrors([GraphError(Loc(where), f"stored graph larger than {MAX_GRAPH_BYTES >> 20} MiB")])
+    return text
 
 
 def resolved_graph(plan: Plan) -> dict[str, Any]:

@@ -77,7 +77,15 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.record_integrity import CheckedFile, Manifest, NotARecording, RecordingCorrupted
+from flowtact.record_integrity import (
+    MAX_CHUNK_BYTES,
+    CheckedFile,
+    Manifest,
+    NotARecording,
+    RecordingCorrupted,
+    RecordingRefused,
+)
+from flowtact.safe_text import shown
 
 __all__ = [
     "FORMAT",
@@ -91,6 +99,7 @@ __all__ = [
     "open_verified",
     "package_versions",
     "read_recording",
+    "stream_count",
     "stream_header",
     "stream_kind",
     "stream_specs",
@@ -103,6 +112,8 @@ FORMAT_VERSION = 2  # 2: Fletcher-32 on every dataset and the /integrity manifes
 CHUNK_BYTES = 64 * 1024
 #: Longest text stored as an attribute; longer provenance values become /provenance datasets.
 MAX_ATTR_BYTES = 60_000
+#: Longest provenance text read back from a /provenance dataset (a resolved graph is far shorter).
+MAX_PROVENANCE_BYTES = 16 << 20
 _VERSIONED = ("numpy", "numba", "h5py", "pyzmq", "msgpack", "pyyaml", "scipy", "matplotlib")
 
 
@@ -269,9 +280,15 @@ class Recorder:
         self.path = Path(path)
         if self.path.is_dir():
             raise IsADirectoryError(f"cannot record to {self.path}: it is a directory")
-        for name in streams:
+        for name, spec in streams.items():
             if not name or "/" in name or name in (".", ".."):
                 raise ValueError(f"invalid stream name {name!r}: use '<node>.<port>' without '/'")
+            row = np.dtype(spec.dtype).itemsize * math.prod(spec.shape)
+            if row > MAX_CHUNK_BYTES:
+                raise ValueError(
+                    f"{name}: one sample of {row:,} bytes is larger than a recording's chunks may be "
+                    f"({MAX_CHUNK_BYTES:,} bytes: the readers refuse larger ones)"
+                )
         self.flush_interval_s = float(flush_interval_s)
         self.compression = compression
         self._bufs = {name: _Buffer(spec) for name, spec in streams.items()}
@@ -530,7 +547,7 @@ def open_recording(path: str | Path) -> CheckedFile:
     f = CheckedFile(path)
     try:
         if "streams" not in f.file:
-            raise NotARecording(f"{f.path}: not a flowtact recording (no /streams group)")
+            raise NotARecording(f"{shown(f.path)}: not a flowtact recording (no /streams group)")
         f.attrs(f.file)
     except BaseException:
         f.close()
@@ -561,7 +578,8 @@ def _select(f: CheckedFile, streams: Iterable[str] | None) -> list[str]:
     names = list(streams)
     for name in names:
         if name not in available:
-            raise KeyError(f"{f.path}: no stream '{name}' (available: {', '.join(available) or 'none'})")
+            have = shown(", ".join(available) or "none", limit=500)
+            raise KeyError(f"{shown(f.path)}: no stream '{shown(name)}' (available: {have})")
     return names
 
 
@@ -586,9 +604,17 @@ def stream_header(f: CheckedFile, name: str) -> StreamHeader:
     t, data = f.group(f"{where}/t"), f.group(f"{where}/data")
     try:
         spec = _spec_from_attrs(attrs, data)
-    except (ValueError, TypeError, KeyError) as e:  # only unchecksummed (old) files get here
-        raise RecordingCorrupted(f.path, where, f"attributes do not describe a stream ({e})") from None
+    except (ValueError, TypeError, KeyError, RecursionError) as e:  # only unchecksummed (old) files get here
+        raise RecordingCorrupted(
+            f.path, where, f"attributes do not describe a stream ({shown(e, limit=200)})"
+        ) from None
     return StreamHeader(attrs, t, data, spec)
+
+
+def stream_count(path: str | Path) -> int:
+    """How many streams a recording holds, from its header (root attributes verified, no data)."""
+    with open_recording(path) as f:
+        return len(f.group("/streams"))
 
 
 def stream_specs(path: str | Path) -> dict[str, tuple[StreamSpec, int]]:
@@ -643,6 +669,11 @@ def read_recording(path: str | Path, streams: Iterable[str] | None = None) -> Re
         if "provenance" in f.file:
             for key in f.group("/provenance"):
                 ds = f.group(f"/provenance/{key}")
+                if ds.size * ds.dtype.itemsize > MAX_PROVENANCE_BYTES:
+                    raise RecordingRefused(
+                        f"{shown(f.path)}: /provenance/{shown(key, limit=200)}: {ds.size * ds.dtype.itemsize:,} "
+                        f"bytes of text (at most {MAX_PROVENANCE_BYTES:,})"
+                    )
                 text = _provenance_text(f.read(ds))
                 provenance[key] = json.loads(text) if int(f.attrs(ds).get("json", 0)) else text
     return Recording(Path(path), out, provenance, json.loads(summary) if summary is not None else None)

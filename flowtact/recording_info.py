@@ -11,6 +11,7 @@ from typing import Any
 
 from flowtact.record import FORMAT, stream_header, stream_kind
 from flowtact.record_integrity import CheckedFile, NotARecording, RecordingCorrupted
+from flowtact.safe_text import shown
 
 __all__ = ["RecordingInfo", "StreamInfo", "format_info", "inspect_recording"]
 
@@ -54,8 +55,8 @@ class RecordingInfo:
 
     @property
     def ok(self) -> bool:
-        """False when any part of the file is damaged."""
-        return not self.problems
+        """False when any part of the file is damaged (a stream that cannot be described included)."""
+        return not self.problems and not self.damaged_streams
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form (``flowtact info --json``)."""
@@ -73,7 +74,7 @@ def inspect_recording(path: str | Path) -> RecordingInfo:
     with CheckedFile(p, strict=False) as f:
         problems = f.problems()
         if "streams" not in f.file:
-            raise NotARecording(f"{p}: not a flowtact recording (no /streams group)")
+            raise NotARecording(f"{shown(p)}: not a flowtact recording (no /streams group)")
         info = RecordingInfo(str(p), p.stat().st_size, None, problems=[str(x) for x in problems])
         info.datasets_checked = f.datasets_checked
         bad = {x.where for x in problems}
@@ -81,16 +82,18 @@ def inspect_recording(path: str | Path) -> RecordingInfo:
         info.format_version = _int(root.get("format_version"))
         info.provenance = {k: _plain(root[k]) for k in PROVENANCE_KEYS if k in root}
         if isinstance(root.get("summary"), str):
-            info.summary = json.loads(root["summary"])
+            info.summary = _summary(root["summary"], info.problems)
         if "/streams" not in bad:
             for name in f.file["streams"]:
                 s = _stream(f, name, bad)
-                if s is None:
+                if isinstance(s, str):
                     info.damaged_streams.append(name)
+                    if not any(x.where.startswith(f"/streams/{name}") for x in problems):
+                        info.problems.append(f"/streams/{shown(name, limit=200)}: {s}")
                 else:
                     info.streams.append(s)
         checksummed = f.checksummed
-    info.integrity = "CORRUPTED" if info.problems else ("ok" if checksummed else "no checksums")
+    info.integrity = "CORRUPTED" if not info.ok else ("ok" if checksummed else "no checksums")
     return info
 
 
@@ -101,21 +104,38 @@ def _int(value: Any) -> int | None:
         return None
 
 
-def _stream(f: CheckedFile, name: str, bad: set[str]) -> StreamInfo | None:
-    """A stream's description, or None when its header is damaged (reported as a problem)."""
+def _summary(text: str, problems: list[str]) -> dict[str, Any] | None:
+    """The stored run summary, or None (and a problem) when it is not a JSON object."""
+    try:
+        value = json.loads(text)
+    except (ValueError, RecursionError) as e:
+        problems.append(f"/: attribute 'summary' is not JSON ({shown(e, limit=200)})")
+        return None
+    if not isinstance(value, dict):
+        problems.append("/: attribute 'summary' is not a JSON object")
+        return None
+    return value
+
+
+def _stream(f: CheckedFile, name: str, bad: set[str]) -> StreamInfo | str:
+    """A stream's description, or why it cannot be described (its header is damaged)."""
     where = f"/streams/{name}"
     if where in bad:
-        return None
+        return "attributes damaged"
     try:
         h = stream_header(f, name)
-    except (RecordingCorrupted, KeyError):
-        return None
-    n = h.n
-    t_first = t_last = None
-    if n and f"{where}/t" not in bad:
-        t_first, t_last = float(f.read(h.t, 0)), float(f.read(h.t, n - 1))
-    end = h.attrs.get("end_s")
-    end_s = float(end) if end is not None and math.isfinite(float(end)) else None
+        n = h.n
+        t_first = t_last = None
+        if n and f"{where}/t" not in bad:
+            t_first, t_last = float(f.read(h.t, 0)), float(f.read(h.t, n - 1))
+        end = h.attrs.get("end_s")
+        end_s = float(end) if end is not None and math.isfinite(float(end)) else None
+    except RecordingCorrupted as e:
+        return e.what
+    except KeyError as e:
+        return f"cannot be described (missing {shown(e, limit=200)})"
+    except (ValueError, TypeError) as e:
+        return f"cannot be described ({shown(e, limit=200)})"
     spec = h.spec
     return StreamInfo(
         name=name,
@@ -167,6 +187,28 @@ def _table(rows: list[list[str]]) -> list[str]:
     return ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
 
 
+#: Longest text of one field shown (names, units, provenance values); the rest is cut, its length said.
+FIELD_CHARS = 200
+#: Longest stored command shown.
+COMMAND_CHARS = 1000
+
+
+def _t(value: Any, limit: int = FIELD_CHARS) -> str:
+    """A value that came from the file, as data: control characters escaped, long text cut."""
+    return shown(value, limit=limit)
+
+
+def _num(value: Any, spec: str) -> str:
+    """A number from the file formatted with ``spec``, or the value shown as text if it is none."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return format(value, spec)
+    return _t(value)
+
+
+def _items(value: Any) -> list[tuple[Any, Any]]:
+    return list(value.items()) if isinstance(value, dict) else []
+
+
 def _run_lines(summary: dict[str, Any] | None) -> list[str]:
     if summary is None:
         return ["run:        no summary: the run was killed before it closed the recording"]
@@ -174,58 +216,75 @@ def _run_lines(summary: dict[str, Any] | None) -> list[str]:
     if "duration_s" in summary:
         wall = summary.get("wall_s")
         parts.append(
-            f"{summary['duration_s']:.3f} s of graph time" + (f" in {wall:.2f} s wall" if wall else "")
+            f"{_num(summary['duration_s'], '.3f')} s of graph time"
+            + (f" in {_num(wall, '.2f')} s wall" if wall else "")
         )
     if summary.get("stopped_by"):
-        parts.append(f"stopped by {summary['stopped_by']}")
+        parts.append(f"stopped by {_t(summary['stopped_by'])}")
     if summary.get("realtime") is False:
         parts.append("NOT real time")
     lines = [f"run:        {', '.join(parts) or 'summary stored'}"]
-    lines.append(f"error:      {summary['error']}" if summary.get("error") else "error:      none")
+    lines.append(
+        f"error:      {_t(summary['error'], COMMAND_CHARS)}" if summary.get("error") else "error:      none"
+    )
     restarts = {
-        n: p.get("restarts") for n, p in (summary.get("processes") or {}).items() if p.get("restarts")
+        n: p.get("restarts")
+        for n, p in _items(summary.get("processes"))
+        if isinstance(p, dict) and p.get("restarts")
     }
     if restarts:
-        lines.append("restarts:   " + ", ".join(f"{n} {k}" for n, k in restarts.items()))
+        lines.append("restarts:   " + ", ".join(f"{_t(n)} {_t(k)}" for n, k in restarts.items()))
     counters = [
-        f"{node}.{name} {value}"
-        for node, c in (summary.get("counters") or {}).items()
-        for name, value in (c or {}).items()
+        f"{_t(node)}.{_t(name)} {_t(value)}"
+        for node, c in _items(summary.get("counters"))
+        for name, value in _items(c)
         if value
     ]
     if counters:
-        lines.append("counters:   " + ", ".join(counters))
+        lines.append("counters:   " + _t(", ".join(counters), COMMAND_CHARS))
     return lines
 
 
 def format_info(info: RecordingInfo) -> str:
-    """The human-readable report of ``flowtact info``."""
+    """The human-readable report of ``flowtact info``: every text that came from the file is shown
+    as data (:func:`flowtact.safe_text.shown`: control characters escaped, long values cut)."""
     version = f"format {info.format_version}" if info.format_version is not None else "format ?"
-    lines = [f"{info.path}: {FORMAT} ({version}), {_size(info.file_bytes)}"]
+    lines = [f"{shown(info.path)}: {FORMAT} ({version}), {_size(info.file_bytes)}"]
     p = info.provenance
     if p:
-        seed = f" (seed {p['graph_seed']})" if "graph_seed" in p else ""
+        seed = f" (seed {_t(p['graph_seed'])})" if "graph_seed" in p else ""
         lines.append(
-            f"graph:      {p.get('graph_name', '?')}{seed}, flowtact {p.get('flowtact_version', '?')}"
+            f"graph:      {_t(p.get('graph_name', '?'))}{seed}, flowtact {_t(p.get('flowtact_version', '?'))}"
         )
-        lines.append(f"recorded:   {p.get('created_utc', '?')} on {p.get('host', '?')}")
+        lines.append(f"recorded:   {_t(p.get('created_utc', '?'))} on {_t(p.get('host', '?'))}")
         if p.get("command"):
-            lines.append(f"command:    {p['command']}")
+            lines.append(f"command:    {_t(p['command'], COMMAND_CHARS)}")
     lines += _run_lines(info.summary)
     if info.streams:
         rows = [["stream", "kind", "shape", "dtype", "units", "rate", "samples", "span", "size"]]
         for s in info.streams:
             shape = "(" + ", ".join(map(str, s.shape)) + ("," if len(s.shape) == 1 else "") + ")"
             rows.append(
-                [s.name, s.kind, shape, s.dtype, s.units, _rate(s), str(s.samples), _span(s), _size(s.bytes)]
+                [
+                    _t(s.name),
+                    _t(s.kind),
+                    _t(shape),
+                    _t(s.dtype),
+                    _t(s.units),
+                    _t(_rate(s)),
+                    str(s.samples),
+                    _span(s),
+                    _size(s.bytes),
+                ]
             )
         lines.append(f"streams ({len(info.streams)}):")
         lines += _table(rows)
     if info.damaged_streams:
-        lines.append(f"damaged streams (not described): {', '.join(info.damaged_streams)}")
-    if info.problems:
+        names = ", ".join(_t(n) for n in info.damaged_streams)
+        lines.append(f"damaged streams (not described): {_t(names, COMMAND_CHARS)}")
+    if not info.ok:
         lines.append(f"integrity:  CORRUPTED ({len(info.problems)} damaged):")
-        lines += [f"  CORRUPTED: {x}" for x in info.problems]
+        lines += [f"  CORRUPTED: {_t(x, COMMAND_CHARS)}" for x in info.problems]
     elif info.integrity == "ok":
         lines.append(
             f"integrity:  ok (every checksum of {info.datasets_checked} datasets and their attributes)"

@@ -1,4 +1,26 @@
-"""Text that came from a file or a library, made safe to print: control characters shown escaped."""
+"""Text that came from a file, shown as data: control characters escaped, long text cut.
+
+A recording, model or table may hold any text: stream names, units, a stored command, a library's
+error message quoting the file. Printed raw, an escape sequence in it can retitle the terminal,
+clear the screen or forge a line ("integrity: ok"); a bidirectional override can reorder what the
+reader sees. :func:`shown` makes such text inert before it reaches a terminal or a figure:
+
+- C0 and C1 control characters, DEL, line and paragraph separators and lone surrogates (bytes that
+  were not UTF-8) become ``\\x1b``, ``\\n``, ``\\u009b``, ``\\u2028``, ``\\udcff`` (so a field stays
+  one line);
+- bidirectional controls (U+061C, U+200E, U+200F, U+202A-U+202E, U+2066-U+2069) become ``\\u202e``;
+- with ``limit``, text longer than ``limit`` characters is cut and says how long it was.
+
+Everything else (accents, CJK, emoji, backslashes) is left as it is: ``shown`` is for display,
+not a reversible encoding. JSON output needs none of this: ``json.dumps`` escapes control
+characters itself (and, with the default ``ensure_ascii=True``, every non-ASCII character).
+
+Example:
+    >>> shown("sensor\\x1b]0;pwned\\x07.r")
+    'sensor\\\\x1b]0;pwned\\\\x07.r'
+    >>> shown("x" * 10, limit=4)
+    'xxxx… (10 characters)'
+"""
 
 from __future__ import annotations
 
@@ -23,8 +45,8 @@ def _escape(m: re.Match[str]) -> str:
 
 
 def shown(text: Any, limit: int | None = None) -> str:
-    """``text`` safe to print on one line: C0/C1 controls, line separators and bidi overrides
-    escaped (``\\x1b``, ``\\u202e``); cut to ``limit`` characters when given."""
+    """``text`` (any object; bytes decoded as UTF-8) safe to print on one line: control, separator
+    and bidirectional-override characters escaped; cut to ``limit`` characters when given."""
     if isinstance(text, (bytes, bytearray, memoryview)):
         s = bytes(text).decode("utf-8", "surrogateescape")
     else:

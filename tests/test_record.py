@@ -393,3 +393,12 @@ def test_committed_file_is_never_opened_for_writing(tmp_path, monkeypatch):
     writes = [m for p, m in opened if p == os.path.realpath(path) and m != "r"]
     assert writes == [], writes
     assert sum(m == "r+" for _, m in opened) >= 6  # the appends went to the work copy
+
+
+def test_the_recorder_refuses_a_sample_its_readers_would_refuse(tmp_path):
+    from flowtact.record_integrity import MAX_CHUNK_BYTES
+
+    side = int((MAX_CHUNK_BYTES // 8) ** 0.5) + 1  # one float64 frame just over the chunk bound
+    with pytest.raises(ValueError, match=r"one sample of .* is larger than a recording's chunks may be"):
+        Recorder(tmp_path / "r.h5", {"cam.x": StreamSpec(dtype="float64", shape=(side, side))}, {})
+    assert not (tmp_path / "r.h5").exists()

@@ -286,3 +286,16 @@ def test_raw_file_for_readers_that_walk_it_is_verified_first(good, tmp_path):
         RecordingCorrupted, match=r"bad\.h5: /streams/cam\.frame/data: checksum mismatch in samples"
     ):
         open_verified(bad)
+
+
+def test_a_large_unchunked_dataset_is_read_in_bounded_pieces(tmp_path):
+    from flowtact.record import read_recording
+    from flowtact.record_integrity import MAX_READ_BYTES
+
+    n = MAX_READ_BYTES // 16 + 1000  # (n, 2) float64: more than one read may fetch
+    with h5py.File(tmp_path / "c.h5", "w") as f:  # written by another tool: contiguous, no checksums
+        g = f.create_group("streams/s.y")
+        g.create_dataset("t", data=np.arange(n) / 1000.0)
+        g.create_dataset("data", data=np.ones((n, 2)))
+    s = read_recording(tmp_path / "c.h5").streams["s.y"]
+    assert s.data.shape == (n, 2) and s.data.sum() == 2 * n and s.t[-1] == (n - 1) / 1000.0

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 
 from flowtact.cli import main
@@ -150,7 +151,7 @@ def test_truncated_and_foreign_files_one_line(touch, tmp_path, capsys):
     assert captured.out == ""
     assert captured.err.count("\n") == 1 and "cut.h5: truncated:" in captured.err
     (tmp_path / "notes.h5").write_text("just text\n")
-    assert main(["info", str(tmp_path / "notes.h5")]) == 1
+    assert main(["info", str(tmp_path / "notes.h5")]) == 2  # refused as input, not damage
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err.startswith(
@@ -158,7 +159,7 @@ def test_truncated_and_foreign_files_one_line(touch, tmp_path, capsys):
     )
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f["x"] = 1
-    assert main(["info", str(tmp_path / "other.h5")]) == 1
+    assert main(["info", str(tmp_path / "other.h5")]) == 2
     assert "not a flowtact recording (no /streams group)" in capsys.readouterr().err
     assert main(["info", str(tmp_path / "missing.h5")]) == 2  # a missing input file: bad input
     assert "recording not found" in capsys.readouterr().err
@@ -190,3 +191,58 @@ def test_format_info_lists_run_errors_and_counters(touch):
     assert "error:      node 'sa1' (nlif) failed at t=1.2 s: boom" in text
     assert "counters:   sa1_stim.dropped_rate 4" in text and "clipped_charge" not in text
     assert "restarts:   afferents 2" in text
+
+
+ESC = "\x1b]0;pwned\x07\x1b[2J\x1b[H"  # retitle the terminal, clear the screen, cursor home
+FORGED = "\nintegrity:  ok\u202e"
+
+
+def _hostile_names(path):
+    """A checksummed recording whose stream name, units, labels, command, host and an attribute
+    name carry terminal escapes and a forged line."""
+    from flowtact.chunk import Chunk, StreamSpec
+    from flowtact.record import Recorder
+
+    spec = StreamSpec(dtype="float64", shape=(2,), units=f"N{ESC}", rate_hz=10.0, labels=(f"a{ESC}", "b"))
+    prov = {"graph_name": f"g{ESC}", "command": f"flowtact run {ESC}{FORGED}", "host": f"h{ESC}"}
+    with Recorder(path, {f"s{ESC}.y": spec}, prov) as rec:
+        rec.write(f"s{ESC}.y", Chunk(np.arange(3) / 10.0, np.zeros((3, 2))))
+    return path
+
+
+def test_info_shows_text_from_the_file_as_data(tmp_path, capsys):
+    path = _hostile_names(tmp_path / "esc.h5")
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and "\x07" not in out and "\u202e" not in out  # no raw control character
+    assert "s\\x1b]0;pwned\\x07\\x1b[2J\\x1b[H.y" in out  # the name, escaped, on its row
+    assert "command:    flowtact run \\x1b]0;pwned" in out and "\\nintegrity:  ok\\u202e" in out
+    assert sum(line.startswith("integrity:") for line in out.splitlines()) == 1  # no forged line
+    assert main(["info", str(path), "--json"]) == 0
+    raw = capsys.readouterr().out
+    assert "\x1b" not in raw and json.loads(raw)["provenance"]["host"] == f"h{ESC}"  # JSON escapes itself
+
+
+def test_info_cuts_long_text(tmp_path, capsys):
+    from flowtact.chunk import StreamSpec
+    from flowtact.record import Recorder
+
+    with Recorder(
+        tmp_path / "long.h5", {"s.y": StreamSpec(dtype="float64", shape=(1,))}, {"host": "h" * 5000}
+    ):
+        pass
+    assert main(["info", str(tmp_path / "long.h5")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("recorded:"))
+    assert line.endswith("h… (5,000 characters)") and len(line) < 300
+
+
+def test_a_stream_that_cannot_be_described_fails_info(tmp_path, capsys):
+    from test_record_integrity import write_format1
+
+    path = write_format1(tmp_path / "old.h5")
+    with h5py.File(path, "r+") as f:
+        del f["streams/force.f/data"]  # an unchecksummed file: nothing else notices
+    assert main(["info", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert "damaged streams (not described): force.f" in out
+    assert "CORRUPTED: /streams/force.f: cannot be described (missing" in out

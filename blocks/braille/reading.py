@@ -89,11 +89,18 @@ def graph_text(
     """The graph file's path and its YAML with the seed, the scan's text and speed, node
     parameters (node → {param: value}), the tick and the recorded streams replaced."""
     from flowtact.graph import resolve_graph_path
+    from flowtact.safe_text import shown
+    from flowtact.safe_yaml import SafeYamlError, load_value, read_graph_text
 
     path = resolve_graph_path(graph)
-    if not path.is_file():
-        raise ValueError(f"{graph}: no such graph file")
-    doc = yaml.safe_load(path.read_text())
+    if not path.exists():
+        raise ValueError(f"{shown(graph)}: no such graph file")
+    try:  # bounded like any graph file: a regular file of at most 1 MiB, YAML within the loader's limits
+        doc = load_value(read_graph_text(path))
+    except SafeYamlError as e:
+        raise ValueError(f"{shown(path)}:{e}") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("nodes"), dict) or "scan" not in doc["nodes"]:
+        raise ValueError(f"{shown(path)}: not a Braille reading graph (no 'scan' node)")
     doc["seed"] = int(seed)
     if tick_s is not None:
         doc["tick_s"] = tick_s

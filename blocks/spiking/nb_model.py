@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +32,9 @@ from typing import Any, Literal
 
 import numpy as np
 
+from flowtact.bounded_files import FileRefused, read_npz_bounded
 from flowtact.errors import FlowtactError
+from flowtact.safe_text import shown
 
 __all__ = [
     "FORMAT",
@@ -51,6 +52,16 @@ __all__ = [
 #: Format tag written in every model file's meta (bumped when the layout changes).
 FORMAT = "flowtact-naive-bayes/1"
 FeatureKind = Literal["counts", "latency"]
+MAX_MODEL_BYTES = 64 << 20
+"""Most bytes of arrays a model file may hold (checked from its headers before reading; the Braille
+models are a few hundred kB)."""
+MAX_CLASSES = 10_000
+"""Most classes a model may have."""
+MAX_UNITS = 1_000_000
+"""Most input units a model may expect."""
+MAX_BINS = 10_000
+"""Most sub-bins per window a counts model may use."""
+_META_CHARS = 1 << 20
 _ARRAYS = {
     "multinomial": ("class_log_prior", "feature_log_prob"),
     "gaussian": ("class_log_prior", "theta", "var"),
@@ -231,45 +242,93 @@ def save_model(path: str | Path, model: NaiveBayesModel, provenance: Mapping[str
 
 
 def load_model(path: str | Path) -> NaiveBayesModel:
-    """Read and check a model file; raise :class:`ModelError` saying what is wrong with it."""
+    """Read and check a model file; raise :class:`ModelError` saying what is wrong with it.
+
+    The file is read within bounds (:func:`flowtact.bounded_files.read_npz_bounded`: a regular
+    file, members checked against :data:`MAX_MODEL_BYTES` from their headers, no pickles), then
+    every field is range-checked (classes, units, bins, finite probabilities) before use.
+    """
     path = Path(path)
     try:
-        with path.open("rb") as f, np.load(f, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            stored = {k: np.array(z[k], np.float64) for k in z.files if k != "meta"}
+        z = read_npz_bounded(path, MAX_MODEL_BYTES)
     except FileNotFoundError:
-        raise ModelError(f"{path}: no such model file") from None
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as e:
-        raise ModelError(f"{path}: not a readable naive Bayes model file ({e})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise ModelError(f"{shown(path)}: no such model file") from None
+    except FileRefused as e:
+        raise ModelError(f"{shown(path)}: not a readable naive Bayes model file ({e.reason})") from None
+    except OSError as e:
+        raise ModelError(f"{shown(path)}: cannot be read ({shown(e.strerror or e, limit=200)})") from None
+    meta = _meta(path, z.pop("meta", None))
+    if meta.get("format") != FORMAT:
         raise ModelError(
-            f"{path}: format {meta.get('format') if isinstance(meta, dict) else '?'!r}, expected {FORMAT!r}"
+            f"{shown(path)}: format {shown(repr(meta.get('format')), limit=80)}, expected {FORMAT!r}"
         )
+    stored = {}
+    for k, a in z.items():
+        if a.dtype.kind not in "fiu":
+            raise ModelError(f"{shown(path)}: array {shown(k, limit=80)} holds {a.dtype}, not numbers")
+        stored[k] = np.asarray(a, np.float64)
     return _checked(path, meta, stored)
+
+
+def _meta(path: Path, value: np.ndarray | None) -> dict[str, Any]:
+    """The model's meta (a JSON object in a text array), or :class:`ModelError`."""
+    if value is None or value.dtype.kind != "U" or value.size != 1:
+        raise ModelError(f"{shown(path)}: not a naive Bayes model file (no 'meta' text)")
+    text = str(value.reshape(-1)[0])
+    if len(text) > _META_CHARS:
+        raise ModelError(f"{shown(path)}: meta text of {len(text):,} characters (at most {_META_CHARS:,})")
+    try:
+        meta = json.loads(text)
+    except (ValueError, RecursionError) as e:
+        raise ModelError(f"{shown(path)}: meta is not JSON ({shown(e, limit=200)})") from None
+    if not isinstance(meta, dict):
+        raise ModelError(f"{shown(path)}: meta is not a JSON object")
+    return meta
+
+
+def _count(path: Path, meta: Mapping[str, Any], key: str, most: int) -> int:
+    """An integer field of the meta in ``1..most``, or :class:`ModelError`."""
+    value = meta.get(key)
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= most:
+        raise ModelError(
+            f"{shown(path)}: {key} must be an integer in 1..{most:,}; got {shown(repr(value), limit=80)}"
+        )
+    return value
 
 
 def _checked(path: Path, meta: dict[str, Any], stored: dict[str, np.ndarray]) -> NaiveBayesModel:
     likelihood, features = meta.get("likelihood"), meta.get("features")
     if (likelihood, features) not in {("multinomial", "counts"), ("gaussian", "latency")}:
-        raise ModelError(f"{path}: unknown likelihood/features {likelihood!r}/{features!r}")
+        raise ModelError(
+            f"{shown(path)}: unknown likelihood/features {shown(repr(likelihood), limit=80)}/"
+            f"{shown(repr(features), limit=80)}"
+        )
     names = _ARRAYS[likelihood]
     if set(stored) != set(names):
-        raise ModelError(f"{path}: arrays {sorted(stored)}, expected {sorted(names)}")
+        raise ModelError(f"{shown(path)}: arrays {sorted(stored)}, expected {sorted(names)}")
     if _digest(stored, _fields(meta)) != meta.get("sha256"):
-        raise ModelError(f"{path}: checksum mismatch: the model was changed or damaged")
-    classes = tuple(str(c) for c in meta.get("classes", ()))
-    n_units, n_bins = int(meta.get("n_units", 0)), int(meta.get("n_bins", 0))
-    tau = float(meta.get("running_temperature", 1.0))
-    model = NaiveBayesModel(features, classes, n_units, n_bins, stored, meta.get("provenance", {}), tau)
-    if not 0 < tau <= 1:
-        raise ModelError(f"{path}: running_temperature must be in (0, 1]; got {tau}")
+        raise ModelError(f"{shown(path)}: checksum mismatch: the model was changed or damaged")
+    raw_classes = meta.get("classes")
+    if not isinstance(raw_classes, list) or not 1 <= len(raw_classes) <= MAX_CLASSES:
+        raise ModelError(f"{shown(path)}: classes must be a list of 1..{MAX_CLASSES:,} names")
+    classes = tuple(str(c) for c in raw_classes)
+    n_units = _count(path, meta, "n_units", MAX_UNITS)
+    n_bins = _count(path, meta, "n_bins", MAX_BINS)
+    tau = meta.get("running_temperature", 1.0)
+    if isinstance(tau, bool) or not isinstance(tau, (int, float)) or not 0 < tau <= 1:
+        raise ModelError(
+            f"{shown(path)}: running_temperature must be in (0, 1]; got {shown(repr(tau), limit=80)}"
+        )
+    tau = float(tau)
+    provenance = meta.get("provenance", {})
+    model = NaiveBayesModel(features, classes, n_units, n_bins, stored, provenance, tau)
     want = {"class_log_prior": (len(classes),)} | {k: (len(classes), model.n_features) for k in names[1:]}
     for k, shape in want.items():
         if stored[k].shape != shape:
-            raise ModelError(f"{path}: array {k} has shape {stored[k].shape}, expected {shape}")
-    if not classes or n_units < 1 or n_bins < 1 or len(set(classes)) != len(classes):
-        raise ModelError(f"{path}: needs distinct classes, n_units >= 1 and n_bins >= 1")
+            raise ModelError(f"{shown(path)}: array {k} has shape {stored[k].shape}, expected {shape}")
+    if len(set(classes)) != len(classes):
+        raise ModelError(f"{shown(path)}: needs distinct classes")
     bad = [k for k, a in stored.items() if not np.isfinite(a).all()]
     if bad or (likelihood == "gaussian" and not (stored["var"] > 0).all()):
-        raise ModelError(f"{path}: non-finite or non-positive values in {bad or ['var']}")
+        raise ModelError(f"{shown(path)}: non-finite or non-positive values in {bad or ['var']}")
     return model

@@ -30,6 +30,9 @@ from typing import Any
 import numpy as np
 
 from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
+from flowtact.bounded_files import open_regular, regular_file
+from flowtact.limits import STATE_BUDGET_BYTES, format_bytes
+from flowtact.safe_text import shown
 
 from .hand import FINGERS
 from .image import example_frames
@@ -56,6 +59,28 @@ CHECKPOINT_VERSION = 1
 #: File name of the checkpoint shipped in the package (flowtact/blocks/teleop/models/).
 SHIPPED_CHECKPOINT = "force_cnn_w16.pt"
 TORCH_HINT = "the CNN force estimator needs PyTorch: pip install 'flowtact[cnn]'"
+
+# -- bounds on what a checkpoint may ask for (checked before torch reads it or a network is built) --
+MAX_CHECKPOINT_BYTES = 256 << 20
+"""Largest checkpoint file read (the shipped w16 is 60 kB, the thesis's network about 10 MB)."""
+MAX_META_BYTES = 1 << 20
+"""Largest metadata (.json beside the checkpoint, or embedded) read."""
+MAX_CONV = 8
+"""Most conv/pool stages."""
+MAX_WIDTH = 1024
+"""Most filters per conv stage (the thesis uses 256)."""
+MAX_FC = 4096
+"""Widest fully connected layer."""
+MAX_KERNEL = 15
+"""Largest convolution kernel side."""
+MAX_INPUT_SIDE = 4096
+"""Largest frame side (pixels) a checkpoint may declare."""
+MAX_DOWNSAMPLE = 64
+"""Largest average-pooling factor."""
+MAX_CNN_BYTES = STATE_BUDGET_BYTES
+"""Most memory a network may need (float32 parameters twice, as built and as loaded, plus two
+activations of one 3-image call): a block's state budget (1 GiB), checked from the metadata
+before the network is built."""
 
 
 def import_torch() -> Any:
@@ -288,29 +313,137 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
 
 
-def _check_meta(meta: Mapping[str, Any], path: Path) -> dict[str, Any]:
-    if meta.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a flowtact force-CNN checkpoint (format {meta.get('format')!r})")
-    if int(meta.get("format_version", -1)) > CHECKPOINT_VERSION:
+def _check_meta(meta: Any, path: Path) -> dict[str, Any]:
+    """The metadata, after checking its format and every architecture field against the bounds
+    above (a checkpoint cannot make flowtact build a network of gigabytes); ValueError otherwise."""
+    if not isinstance(meta, Mapping):
         raise ValueError(
-            f"{path}: checkpoint format version {meta['format_version']} is newer than this flowtact"
+            f"{shown(path)}: not a flowtact force-CNN checkpoint (metadata is not a JSON object)"
         )
+    if meta.get("format") != CHECKPOINT_FORMAT:
+        got = shown(repr(meta.get("format")), limit=80)
+        raise ValueError(f"{shown(path)}: not a flowtact force-CNN checkpoint (format {got})")
+    version = meta.get("format_version", -1)
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise ValueError(f"{shown(path)}: format_version must be an integer")
+    if version > CHECKPOINT_VERSION:
+        raise ValueError(f"{shown(path)}: checkpoint format version {version} is newer than this flowtact")
+    _check_shape(meta, path)
     return dict(meta)
 
 
+def _int_in(value: Any, low: int, high: int, what: str, path: Path) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ValueError(
+            f"{shown(path)}: {what} must be an integer in {low}..{high}; got {shown(repr(value), limit=80)}"
+        )
+    return value
+
+
+def _check_shape(meta: Mapping[str, Any], path: Path) -> None:
+    """Range-check the architecture and preprocessing, then the memory the network would need."""
+    arch, pre = meta.get("arch"), meta.get("preprocess")
+    if not isinstance(arch, Mapping) or not isinstance(pre, Mapping):
+        raise ValueError(f"{shown(path)}: metadata needs 'arch' and 'preprocess' objects")
+    n_conv = _int_in(arch.get("n_conv", 4), 1, MAX_CONV, "arch.n_conv", path)
+    width = _int_in(arch.get("width", 16), 1, MAX_WIDTH, "arch.width", path)
+    fc = _int_in(arch.get("fc", 128), 1, MAX_FC, "arch.fc", path)
+    kernel = _int_in(arch.get("kernel", 3), 1, MAX_KERNEL, "arch.kernel", path)
+    hw = pre.get("input_hw")
+    if not isinstance(hw, (list, tuple)) or len(hw) != 2:
+        raise ValueError(f"{shown(path)}: preprocess.input_hw must be [height, width]")
+    h, w = (_int_in(v, 1, MAX_INPUT_SIDE, "preprocess.input_hw", path) for v in hw)
+    crop = pre.get("crop")
+    if crop is not None:
+        if not isinstance(crop, (list, tuple)) or len(crop) != 4:
+            raise ValueError(f"{shown(path)}: preprocess.crop must be null or [x0, y0, w, h]")
+        _, _, cw, ch = (_int_in(v, 0, MAX_INPUT_SIDE, "preprocess.crop", path) for v in crop)
+        h, w = ch, cw
+    down = _int_in(pre.get("downsample", 1), 1, MAX_DOWNSAMPLE, "preprocess.downsample", path)
+    h, w = h // down, w // down
+    params = acts = 0
+    channels = 1
+    for _ in range(n_conv):
+        params += channels * width * kernel * kernel + 4 * width
+        acts = max(acts, 2 * 3 * width * h * w)  # conv and batch-norm outputs of 3 images
+        channels, h, w = width, h // 2, w // 2
+    params += channels * h * w * fc + 2 * fc + 1
+    need = 4 * (2 * params + acts)
+    if need > MAX_CNN_BYTES:
+        raise ValueError(
+            f"{shown(path)}: the network it describes would need about {format_bytes(need)} "
+            f"(at most {format_bytes(MAX_CNN_BYTES)}): width {width}, {n_conv} stages, fc {fc}"
+        )
+
+
+def _read_json(path: Path) -> Any:
+    """A JSON file of at most :data:`MAX_META_BYTES` (a regular file), or ValueError."""
+    with open_regular(path) as fh:
+        raw = fh.read(MAX_META_BYTES + 1)
+    if len(raw) > MAX_META_BYTES:
+        raise ValueError(f"{shown(path)}: metadata larger than {format_bytes(MAX_META_BYTES)}")
+    return _loads(raw, path)
+
+
+def _loads(raw: str | bytes, path: Path) -> Any:
+    try:
+        return json.loads(raw)
+    except (ValueError, RecursionError) as e:
+        raise ValueError(f"{shown(path)}: metadata is not JSON ({shown(e, limit=200)})") from None
+
+
+def _checkpoint_file(path: Path) -> None:
+    """Refuse a missing, non-regular or too large checkpoint before torch opens it."""
+    try:
+        size = regular_file(path).st_size
+    except FileNotFoundError:
+        raise FileNotFoundError(f"checkpoint not found: {shown(path)}") from None
+    if size > MAX_CHECKPOINT_BYTES:
+        raise ValueError(
+            f"{shown(path)}: checkpoint of {format_bytes(size)} (at most {format_bytes(MAX_CHECKPOINT_BYTES)})"
+        )
+
+
+def _torch_reason(e: BaseException) -> str:
+    """torch's refusal in one line: the unpickler's own reason when it gives one, else its first line."""
+    text = str(e) if not isinstance(e, KeyError) else f"{type(e).__name__}: {e}"
+    marker = "WeightsUnpickler error:"
+    if marker in text:
+        text = text.split(marker, 1)[1].split(" Please use", 1)[0]
+    return shown(text.strip().splitlines()[0] if text.strip() else type(e).__name__, limit=200)
+
+
+def _torch_load(path: Path) -> dict[str, Any]:
+    """The checkpoint's dict, read by torch with ``weights_only=True`` (no pickled code); any
+    refusal is one line naming the file (torch's own text is several lines and advises
+    ``weights_only=False``, which flowtact never does)."""
+    torch = import_torch()
+    _checkpoint_file(path)
+    with open_regular(path) as fh:
+        try:
+            blob = torch.load(fh, map_location="cpu", weights_only=True)
+        except Exception as e:  # noqa: BLE001 - torch raises many types for a foreign file
+            raise ValueError(
+                f"{shown(path)}: not a flowtact CNN checkpoint (torch refused it: {_torch_reason(e)})"
+            ) from None
+    if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{shown(path)}: not a flowtact force-CNN checkpoint")
+    if not isinstance(blob.get("meta"), str) or len(blob["meta"]) > MAX_META_BYTES:
+        raise ValueError(f"{shown(path)}: not a flowtact force-CNN checkpoint (no metadata text)")
+    return blob
+
+
 def read_meta(path: str | Path) -> dict[str, Any]:
-    """A checkpoint's metadata: from the .json beside it (no torch), else from the .pt itself."""
+    """A checkpoint's metadata: from the .json beside it (no torch), else from the .pt itself;
+    range-checked (:func:`_check_meta`) before anything uses it."""
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"checkpoint not found: {path}")
+    _checkpoint_file(path)
     side = _sidecar(path)
     if side.exists() and side != path:
-        return _check_meta(json.loads(side.read_text()), path)
+        return _check_meta(_read_json(side), path)
     if path.suffix == ".json":
-        raise ValueError(f"{path}: give the .pt checkpoint, not its metadata")
-    torch = import_torch()
-    blob = torch.load(path, map_location="cpu", weights_only=True)
-    return _check_meta(json.loads(blob["meta"]), path)
+        raise ValueError(f"{shown(path)}: give the .pt checkpoint, not its metadata")
+    return _check_meta(_loads(_torch_load(path)["meta"], path), path)
 
 
 def model_from_meta(meta: Mapping[str, Any]) -> Any:
@@ -328,16 +461,13 @@ def model_from_meta(meta: Mapping[str, Any]) -> Any:
 def load_checkpoint(path: str | Path) -> tuple[Any, dict[str, Any]]:
     """``(model in eval mode, metadata)`` from a checkpoint written by :func:`save_checkpoint`.
 
-    The metadata embedded in the .pt is authoritative (the .json beside it is a copy for tools).
+    The metadata embedded in the .pt is authoritative (the .json beside it is a copy for tools);
+    it is range-checked before the network is built, and the file is read by torch with
+    ``weights_only=True``.
     """
-    torch = import_torch()
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"checkpoint not found: {path}")
-    blob = torch.load(path, map_location="cpu", weights_only=True)
-    if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a flowtact force-CNN checkpoint")
-    meta = _check_meta(json.loads(blob["meta"]), path)
+    blob = _torch_load(path)
+    meta = _check_meta(_loads(blob["meta"], path), path)
     model = model_from_meta(meta)
     model.load_state_dict(blob["state_dict"])
     model.eval()
@@ -445,8 +575,8 @@ class CnnForce(Block):
         if self._meta is None:
             try:
                 self._meta = read_meta(self.checkpoint_path())
-            except (FileNotFoundError, ValueError, KeyError) as e:
-                raise SpecError(None, f"{self.node} ({self.name}): checkpoint: {e}") from None
+            except (FileNotFoundError, ValueError, KeyError, TypeError, OSError) as e:
+                raise SpecError(None, f"{self.node} ({self.name}): checkpoint: {shown(e)}") from None
         return self._meta
 
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
@@ -485,8 +615,11 @@ class CnnForce(Block):
         path = self.checkpoint_path()
         try:
             self._model, meta = load_checkpoint(path)
-        except (FileNotFoundError, ValueError, KeyError, RuntimeError) as e:
-            raise SpecError(None, f"{self.node} ({self.name}): cannot load checkpoint {path}: {e}") from None
+        except (FileNotFoundError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
+            raise SpecError(
+                None,
+                f"{self.node} ({self.name}): cannot load checkpoint {shown(path)}: {shown(e, limit=500)}",
+            ) from None
         self._meta = meta
 
     def reset(self) -> None:

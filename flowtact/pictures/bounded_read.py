@@ -7,6 +7,7 @@ of frames), so plotting a recording takes the same memory whatever its size.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -17,6 +18,8 @@ import numpy as np
 
 from flowtact.chunk import StreamSpec
 from flowtact.record import _spec_from_attrs, open_verified
+from flowtact.record_integrity import RecordingCorrupted
+from flowtact.safe_text import shown
 
 __all__ = [
     "BLOCK_BYTES",
@@ -27,6 +30,7 @@ __all__ = [
     "event_points",
     "frames_at",
     "index_range",
+    "label",
     "open_recording",
     "sample_envelope",
 ]
@@ -52,16 +56,49 @@ class StreamSource:
         return float(self.t[self.n - 1]) if self.n else None
 
 
+#: Longest text from the file drawn in a title, label or tick (the rest is cut, its length said).
+LABEL_CHARS = 80
+
+
+def label(text: object) -> str:
+    """Text from the file as matplotlib draws it, as data: control characters escaped (no glyph
+    warnings carrying them to the terminal), cut to :data:`LABEL_CHARS`, ``$`` escaped (no mathtext)."""
+    return shown(text, limit=LABEL_CHARS).replace("$", r"\$")
+
+
+def _shown_spec(spec: StreamSpec) -> StreamSpec:
+    """``spec`` with its texts (units, labels, categories) made safe to draw."""
+
+    def names(values: tuple[object, ...] | None) -> tuple[str, ...] | None:
+        return None if values is None else tuple(label(v) for v in values)
+
+    return dataclasses.replace(
+        spec, units=label(spec.units), labels=names(spec.labels), categories=names(spec.categories)
+    )
+
+
 def open_recording(path: str | Path) -> tuple[h5py.File, dict[str, StreamSource], dict[str, object]]:
-    """The open file, its streams (in recorded order) and its root attributes; the caller closes it."""
+    """The open file, its streams (in recorded order, keyed by their names as recorded) and its
+    root attributes; every text a stream carries (name, units, labels) is made safe to draw
+    (:func:`label`). The caller closes the file."""
     f = open_verified(path)
-    out = {}
-    for name, g in f["streams"].items():
-        n = int(min(g["t"].shape[0], g["data"].shape[0]))
-        end = g.attrs.get("end_s")
-        end_s = None if end is None or not math.isfinite(float(end)) else float(end)
-        out[name] = StreamSource(name, _spec_from_attrs(g.attrs, g["data"]), n, end_s, g["t"], g["data"])
-    root = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+    try:
+        out = {}
+        for name, g in f["streams"].items():
+            n = int(min(g["t"].shape[0], g["data"].shape[0]))
+            end = g.attrs.get("end_s")
+            end_s = None if end is None or not math.isfinite(float(end)) else float(end)
+            spec = _shown_spec(_spec_from_attrs(g.attrs, g["data"]))
+            out[name] = StreamSource(label(name), spec, n, end_s, g["t"], g["data"])
+        root = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+    except (ValueError, TypeError, KeyError, RecursionError) as e:
+        f.close()
+        raise RecordingCorrupted(
+            path, "/streams", f"a stream cannot be described ({shown(e, limit=200)})"
+        ) from None
+    except BaseException:
+        f.close()
+        raise
     return f, out, root
 
 

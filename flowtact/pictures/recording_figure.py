@@ -14,8 +14,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from flowtact.pictures.bounded_read import StreamSource, open_recording
+from flowtact.pictures.bounded_read import StreamSource, label, open_recording
 from flowtact.pictures.panels import Panel, binned_rates, draw_frames, draw_panel, plan_panels
+from flowtact.safe_text import shown
 
 __all__ = ["DPI", "binned_rates", "need_matplotlib", "plot_recording", "recording_figure", "time_span"]
 
@@ -23,6 +24,8 @@ WIDTH_IN = 11.0
 DPI = 110
 #: Tallest figure drawn (inches); panels shrink beyond it.
 MAX_HEIGHT_IN = 60.0
+#: Most streams drawn in one figure (a recording may hold up to 4096): pick some with ``streams``.
+MAX_PLOT_STREAMS = 200
 
 
 def need_matplotlib() -> tuple[Any, Any]:
@@ -43,8 +46,17 @@ def _select(
         return sources
     missing = [n for n in streams if n not in sources]
     if missing:
-        raise KeyError(f"{path}: no stream {missing[0]!r} (available: {', '.join(sources) or 'none'})")
+        have = shown(", ".join(sources) or "none", limit=500)
+        raise KeyError(f"{shown(path)}: no stream '{shown(missing[0])}' (available: {have})")
     return {n: sources[n] for n in streams}
+
+
+def _check_count(path: Path, n: int) -> None:
+    if n > MAX_PLOT_STREAMS:
+        raise ValueError(
+            f"{shown(path)}: {n:,} streams to plot (at most {MAX_PLOT_STREAMS} in one figure); "
+            "choose some with --streams"
+        )
 
 
 def time_span(
@@ -71,7 +83,7 @@ def _frames_height(p: Panel) -> float:
 
 def _title(path: Path, root: dict[str, Any], what: str) -> str:
     graph = root.get("graph_name")
-    title = path.name + (f" — graph {graph}" if graph else "") + what
+    title = label(path.name) + (f" — graph {label(graph)}" if graph else "") + what
     if "summary" not in root:
         title += " (incomplete: the run did not close the recording)"
     return title
@@ -87,11 +99,16 @@ def recording_figure(
     """The figure (a matplotlib Figure on an Agg canvas) of a recording or of its named streams."""
     Figure, FigureCanvasAgg = need_matplotlib()
     path = Path(source)
+    if streams is None:  # refuse a figure of thousands of panels before verifying them all
+        from flowtact.record import stream_count
+
+        _check_count(path, stream_count(path))
     f, sources, root = open_recording(path)
     with f:
         sources = _select(sources, path, streams)
         if not sources:
-            raise ValueError(f"{path}: nothing to plot (the recording holds no streams)")
+            raise ValueError(f"{shown(path)}: nothing to plot (the recording holds no streams)")
+        _check_count(path, len(sources))
         t0, t1 = time_span(sources, t_range)
         if paper:
             from flowtact.pictures.paper_figure import paper_figure

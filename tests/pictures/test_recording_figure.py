@@ -437,3 +437,30 @@ def test_too_many_events_for_ticks_become_counts_that_add_up(recording, monkeypa
     assert ax.get_title(loc="left").startswith(
         "pop.spikes — spike raster as counts per 1 ms bin (white 0, black"
     )
+
+
+def test_text_from_the_file_is_drawn_escaped_and_warns_nothing(tmp_path):
+    esc = "\x1b]0;pwned\x07\x1b[2J"
+    spec = StreamSpec(
+        dtype="float64", shape=(2,), units=f"N{esc}", rate_hz=10.0, labels=(f"a{esc}", "$\\frac{")
+    )
+    cats = StreamSpec(dtype="int64", shape=(), units="1", rate_hz=10.0, categories=(f"x{esc}", "y"))
+    path = tmp_path / "esc.h5"
+    with Recorder(path, {f"s{esc}.y": spec, "c.k": cats}, {"graph_name": f"g{esc}"}) as rec:
+        rec.write(f"s{esc}.y", Chunk(np.arange(5) / 10.0, np.ones((5, 2))))
+        rec.write("c.k", Chunk(np.arange(5) / 10.0, np.array([0, 1, 0, 1, 0])))
+    code = textwrap.dedent(
+        f"""
+        import warnings
+        warnings.simplefilter("always")
+        from flowtact.pictures.recording_figure import plot_recording
+        plot_recording({str(path)!r}, {str(tmp_path / "esc.png")!r})
+        """
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "\x1b" not in r.stderr and "\x07" not in r.stderr  # no glyph warning carries them raw
+    fig = recording_figure(path)
+    text = " ".join(_all_text(fig))
+    assert "\x1b" not in text and "\x07" not in text
+    assert "s\\x1b]0;pwned\\x07\\x1b[2J.y — " in text and "g\\x1b]0;pwned" in text
