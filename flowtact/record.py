@@ -658,14 +658,14 @@ def read_recording(path: str | Path, streams: Iterable[str] | None = None) -> Re
                 f.read(h.t, slice(0, h.n)), f.read(h.data, slice(0, h.n)), h.spec, h.attrs
             )
         root = f.attrs(f.file)
-        json_keys = set(json.loads(root.pop("json_attrs", "[]")))
+        json_keys = set(_json(f, "/ json_attrs", root.pop("json_attrs", "[]")))
         summary = root.pop("summary", None)
         root.pop("error", None)  # the summary's error, repeated as plain text for MATLAB
         provenance: dict[str, Any] = {}
         for key, value in root.items():
             if isinstance(value, np.generic):
                 value = value.item()
-            provenance[key] = json.loads(value) if key in json_keys else value
+            provenance[key] = _json(f, f"/ {key}", value) if key in json_keys else value
         if "provenance" in f.file:
             for key in f.group("/provenance"):
                 ds = f.group(f"/provenance/{key}")
@@ -675,8 +675,19 @@ def read_recording(path: str | Path, streams: Iterable[str] | None = None) -> Re
                         f"bytes of text (at most {MAX_PROVENANCE_BYTES:,})"
                     )
                 text = _provenance_text(f.read(ds))
-                provenance[key] = json.loads(text) if int(f.attrs(ds).get("json", 0)) else text
-    return Recording(Path(path), out, provenance, json.loads(summary) if summary is not None else None)
+                provenance[key] = (
+                    _json(f, f"/provenance/{key}", text) if int(f.attrs(ds).get("json", 0)) else text
+                )
+        summary = _json(f, "/ summary", summary) if summary is not None else None
+    return Recording(Path(path), out, provenance, summary)
+
+
+def _json(f: CheckedFile, where: str, text: Any) -> Any:
+    """``text`` (JSON from the file at ``where``) parsed; text that does not parse is damage, named."""
+    try:
+        return json.loads(text)
+    except (ValueError, TypeError, RecursionError) as e:
+        raise RecordingCorrupted(f.path, where, f"not valid JSON ({shown(e, limit=200)})") from None
 
 
 def _provenance_text(value: Any) -> str:

@@ -299,3 +299,20 @@ def test_a_large_unchunked_dataset_is_read_in_bounded_pieces(tmp_path):
         g.create_dataset("data", data=np.ones((n, 2)))
     s = read_recording(tmp_path / "c.h5").streams["s.y"]
     assert s.data.shape == (n, 2) and s.data.sum() == 2 * n and s.t[-1] == (n - 1) / 1000.0
+
+
+@pytest.mark.parametrize(
+    "attr,value,where",
+    [
+        ("json_attrs", "[", "/ json_attrs"),
+        ("summary", "{bad", "/ summary"),
+        ("summary", "[" * 100_000, "/ summary"),
+    ],
+)
+def test_provenance_that_is_not_json_is_named_damage(tmp_path, attr, value, where):
+    path = write_format1(tmp_path / "old.h5")  # no checksums: a forged file's text reaches the parser
+    with h5py.File(path, "r+") as f:
+        f.attrs[attr] = value
+    with pytest.raises(RecordingCorrupted, match=rf"old\.h5: {where}: not valid JSON") as e:
+        read_recording(path)
+    assert "\n" not in str(e.value)
