@@ -18,6 +18,7 @@ pytest.importorskip("cryptography")
 
 from distributed import Client
 from distributed.security import Security
+from runs import TEST_BLOCKS
 
 from flowtact.sweeps.executors import DaskRows, local_cluster
 
@@ -101,7 +102,7 @@ def test_the_sweep_runs_on_it_and_a_hung_row_there_times_out(client, tmp_path: P
     toy.write_text(TOY)
     flag.touch()
     rows = DaskRows(client, restart_workers=True)  # as dask_executor makes it for its own cluster
-    df = flowtact.sweep(toy, grid=["probe.mode=ok,hang"], overrides=[f"probe.flag={flag}", f"probe.log={log}"],
+    df = flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=["probe.mode=ok,hang"], overrides=[f"probe.flag={flag}", f"probe.log={log}"],
                         executor=rows, workers=2, row_timeout_s=3)  # fmt: skip
     by = df.set_index("probe.mode")
     assert by.loc["ok", "status"] == "ok", by.loc["ok", "error"]

@@ -9,11 +9,18 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from runs import TEST_BLOCKS, allow_args
 
 import flowtact
-from flowtact.cli import main
+from flowtact.cli import main as cli_main
 from flowtact.sweeps import store
 from flowtact.sweeps.grid import SweepSpecError
+
+
+def main(argv: list[str]) -> int:
+    """The ``flowtact`` command with the test blocks' modules allowed (docs/security.md)."""
+    return cli_main(allow_args(argv))
+
 
 TOY = """
 name: toy
@@ -43,7 +50,9 @@ def runs_logged(log: Path) -> int:
 def test_a_table_from_another_setup_is_refused_and_left_as_it_was(toy: Path, tmp_path: Path, capsys) -> None:
     out, log = tmp_path / "sa1.parquet", tmp_path / "opens.log"
     fixed = [f"probe.log={log}"]
-    first = flowtact.sweep(toy, grid=GRID, overrides=fixed, duration_s=0.3, workers=1, out=out)
+    first = flowtact.sweep(
+        toy, allow_modules=TEST_BLOCKS, grid=GRID, overrides=fixed, duration_s=0.3, workers=1, out=out
+    )
     assert (first["status"] == "ok").all() and first["setup"].nunique() == 1
     before, opened = out.read_bytes(), runs_logged(log)
 
@@ -54,7 +63,7 @@ def test_a_table_from_another_setup_is_refused_and_left_as_it_was(toy: Path, tmp
     }
     for says, kwargs in others.items():
         with pytest.raises(SweepSpecError) as e:
-            flowtact.sweep(toy, grid=GRID, workers=1, out=out, **kwargs)
+            flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=GRID, workers=1, out=out, **kwargs)
         assert str(e.value) == f"{out}: made by another setup ({says}); use another --out or --fresh"
     toy.write_text(TOY.replace("gain: 2.0", "gain: 3.0"))  # another graph, the same grid
     assert main(["sweep", str(toy), "--set-grid", "src.noise=0,0.1", "--set", fixed[0], "--duration", "0.3",
@@ -66,10 +75,21 @@ def test_a_table_from_another_setup_is_refused_and_left_as_it_was(toy: Path, tmp
     )
     assert out.read_bytes() == before and runs_logged(log) == opened  # nothing ran, nothing was touched
 
-    again = flowtact.sweep(toy, grid=GRID, overrides=fixed, duration_s=0.3, workers=1, out=out, fresh=True)
+    again = flowtact.sweep(
+        toy,
+        allow_modules=TEST_BLOCKS,
+        grid=GRID,
+        overrides=fixed,
+        duration_s=0.3,
+        workers=1,
+        out=out,
+        fresh=True,
+    )
     assert again.attrs == {"executed": 2, "kept": 0}
     assert (pd.read_parquet(out)["setup"] != first["setup"].iloc[0]).all()
-    resumed = flowtact.sweep(toy, grid=GRID, overrides=fixed, duration_s=0.3, workers=1, out=out)
+    resumed = flowtact.sweep(
+        toy, allow_modules=TEST_BLOCKS, grid=GRID, overrides=fixed, duration_s=0.3, workers=1, out=out
+    )
     assert resumed.attrs == {"executed": 0, "kept": 2}
 
 
@@ -78,7 +98,7 @@ def test_a_table_without_a_setup_record_is_refused(toy: Path, tmp_path: Path) ->
     key = '{"params":{"src.noise":0},"recordings":{}}'
     pd.DataFrame([{"src.noise": 0, "key": key, "status": "ok", "error": ""}]).to_parquet(out)
     with pytest.raises(SweepSpecError, match=r"old\.parquet: made by another setup \(it records none"):
-        flowtact.sweep(toy, grid=["src.noise=0"], workers=1, out=out)
+        flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=["src.noise=0"], workers=1, out=out)
 
 
 def test_a_changed_replayed_file_is_another_setup(toy: Path, tmp_path: Path) -> None:
@@ -86,10 +106,10 @@ def test_a_changed_replayed_file_is_another_setup(toy: Path, tmp_path: Path) -> 
     log.write_text("t,y\n" + "".join(f"{i / 1000},{i}\n" for i in range(200)))
     out = tmp_path / "r.parquet"
     kwargs = dict(grid=["dbl.gain=2,3"], replay={"src": str(log)}, workers=1, out=out)
-    assert (flowtact.sweep(toy, **kwargs)["status"] == "ok").all()
+    assert (flowtact.sweep(toy, allow_modules=TEST_BLOCKS, **kwargs)["status"] == "ok").all()
     log.write_text(log.read_text().replace(",5\n", ",7\n"))  # the same name, other data
     with pytest.raises(SweepSpecError, match="a row's setup differs: a file it replayed has changed"):
-        flowtact.sweep(toy, **kwargs)
+        flowtact.sweep(toy, allow_modules=TEST_BLOCKS, **kwargs)
 
 
 @pytest.mark.parametrize("where", ["missing-folder", "folder", "fifo", "unwritable-folder"])
@@ -124,7 +144,14 @@ def test_a_hung_row_times_out_its_process_is_killed_and_the_others_finish(toy: P
     flag.touch()
     fixed = [f"probe.flag={flag}", f"probe.log={log}"]
     # one worker: the hung row comes first, so the rows after it run only if the pool recovers
-    df = flowtact.sweep(toy, grid=["probe.mode=hang,ok,raise"], overrides=fixed, workers=1, row_timeout_s=2)
+    df = flowtact.sweep(
+        toy,
+        allow_modules=TEST_BLOCKS,
+        grid=["probe.mode=hang,ok,raise"],
+        overrides=fixed,
+        workers=1,
+        row_timeout_s=2,
+    )
     by = df.set_index("probe.mode")
     assert by.loc["hang", "status"] == "failed"
     assert by.loc["hang", "error"] == "timed out after 2 s (--row-timeout)"
@@ -149,7 +176,7 @@ def test_a_hung_row_times_out_its_process_is_killed_and_the_others_finish(toy: P
 )
 def test_numbers_are_range_checked(toy: Path, kwargs: dict, says: str) -> None:
     with pytest.raises(SweepSpecError) as e:
-        flowtact.sweep(toy, grid=GRID, **kwargs)
+        flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=GRID, **kwargs)
     assert str(e.value) == says
 
 
@@ -166,10 +193,10 @@ def test_a_table_over_budget_is_refused_before_its_rows_are_read(
     toy: Path, tmp_path: Path, monkeypatch
 ) -> None:
     out = tmp_path / "big.parquet"
-    flowtact.sweep(toy, grid=GRID, workers=1, out=out)
+    flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=GRID, workers=1, out=out)
     monkeypatch.setattr(store, "MAX_TABLE_ROWS", 1)
     with pytest.raises(SweepSpecError, match=r"big\.parquet: cannot resume from it, it declares 2 rows"):
-        flowtact.sweep(toy, grid=GRID, workers=1, out=out)
+        flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=GRID, workers=1, out=out)
 
 
 def hostile_table(path: Path, rows: int, setup_of: str | None) -> None:
