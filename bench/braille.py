@@ -152,7 +152,7 @@ def _constant_speeds(
             v, a = zip(*pts, strict=True)
             ax.plot(v, np.array(a) * 100, "o-", label=LAYER_NAMES[layer])
         ax.axhline(98, color="0.5", ls=":", lw=1, label="98 % (the bar)")
-        ax.axvspan(10, 80, color="0.93", zorder=0, label="10–80 mm/s (the issue's range)")
+        ax.axvspan(10, 80, color="0.93", zorder=0, label="10–80 mm/s (the target range)")
         ax.set_xscale("log")
         ax.set_xticks([10, 20, 30, 50, 80, 150, 300], ["10", "20", "30", "50", "80", "150", "300"])
         ax.set_xlabel("scanning speed (mm/s, log scale)")

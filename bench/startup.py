@@ -21,7 +21,7 @@ from flowtact.bench.transport import CHAIN, CHAIN_STREAM, parse_summary
 from flowtact.benchmark import Context, Suite
 
 MAX_RATIO = 2.0
-"""The first seconds' p99 may be at most this many times the steady state's (issue 14)."""
+"""The first seconds' p99 may be at most this many times the steady state's (set in issue 14)."""
 COMPILED = re.compile(r"(\d+) kernels? compiled in ([\d.]+) s")
 
 
