@@ -22,7 +22,7 @@ RATIO_CONVENTION = (
     "takes twice as long (or does half as much)."
 )
 """The one ratio convention of the report, stated in its header."""
-NAME_CHARS = 60
+NAME_CHARS = 100
 """A failed check's name is cut to this many characters in the summary (the suite's section has it whole)."""
 
 
