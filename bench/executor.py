@@ -216,6 +216,7 @@ def bench_touch(ctx: Context, seconds: float) -> None:
 
 
 def run(ctx: Context) -> None:
+    ctx.headline("executor, chunk 1000")  # the executor against the same blocks' steps called directly
     rows = [
         bench_overhead(ctx, chunk, 10, ticks // (2 if ctx.quick else 1))
         for chunk, ticks in ((1, 2000), (1000, 2000))

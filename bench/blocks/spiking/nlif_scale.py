@@ -182,6 +182,7 @@ def draw(rows: list[dict]):  # type: ignore[no-untyped-def]
 
 
 def run(ctx: Context) -> None:
+    ctx.headline("N=17000, sigma=0")  # about a whole hand's afferents, against the bare kernel
     sizes = [24, 1_000, 4_000, HAND, 100_000] if ctx.quick else [24, 100, 1_000, 4_000, HAND, 100_000]
     old, cpu = pin_one_core()
     try:

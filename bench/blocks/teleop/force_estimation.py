@@ -385,6 +385,7 @@ def settings_table(ctx: Context, res: dict) -> None:
 
 
 def run(ctx: Context) -> None:
+    ctx.headline("CNN w16 (shipped)")  # the shipped CNN's time per frame against the SSIM pipeline's
     import torch
 
     from flowtact.blocks.teleop.cnn import ARCHS
