@@ -424,7 +424,7 @@ SUITE = Suite(
     "89 % at 30 mm/s; the bar: ≥ 98 %)",
     run=run,
     needs=("matplotlib",),
-    minutes_quick=1.0,
+    minutes_quick=0.8,
     minutes_full=5.0,
     processes=(1, 1),  # recognition and reading speed: the same in every process, no timing ratios
 )

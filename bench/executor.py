@@ -255,6 +255,6 @@ SUITE = Suite(
     baseline="the same blocks' step() called directly in a plain Python loop (no executor), and a plain "
     "Python call chain",
     run=run,
-    minutes_quick=0.5,
+    minutes_quick=0.2,
     minutes_full=1.5,
 )

@@ -15,6 +15,7 @@ import pytest
 
 from flowtact.bench import transport
 from flowtact.benchmark import Suite, registry
+from flowtact.benchmark.runner import estimate_minutes
 from flowtact.benchmark.report import RATIO_CONVENTION, RATIO_HEADER, write_report
 from flowtact.benchmark.suite import Context
 from flowtact.cli import main
@@ -280,3 +281,37 @@ def test_list_adds_up_the_budgets(capsys):
     assert main(["bench", "--list"]) == 0
     out = capsys.readouterr().out
     assert "(every suite)      ~1 min quick, ~4 min full" in out  # 2 × 0.5 and 2 × 2.0 (defaults)
+
+
+# -- the time a run takes, as the pages state it ----------------------------------------------------
+
+STATED = re.compile(r"about\s+(\d+)\s+min(?:utes)?\b.*?about\s+(\d+)", re.DOTALL)
+
+
+def _stated(text: str) -> tuple[int, int]:
+    """The quick and full run times a text states ("about 10 minutes ... about 40")."""
+    m = STATED.search(text)
+    assert m, f"no 'about N minutes ... about M' in {text[:200]!r}"
+    return int(m.group(1)), int(m.group(2))
+
+
+def _text(where: str, capsys) -> str:
+    if where == "README":
+        readme = (ROOT / "README.md").read_text()
+        return readme[readme.index("## Speed") :][:600]
+    if where == "bench/README":
+        return (ROOT / "bench" / "README.md").read_text()[:400]
+    with pytest.raises(SystemExit):
+        main(["bench", "--help"])
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize("where", ["README", "bench/README", "bench --help"])
+def test_the_stated_run_times_are_what_the_suites_estimates_add_up_to(where, capsys):
+    """--list's estimates are measured budgets on an idle 2-core machine; each page states their sum,
+    rounded up by less than 3 minutes (a time far above them would hide a slow suite)."""
+    suites = list(registry.suites().values())
+    quick, full = estimate_minutes(suites, True), estimate_minutes(suites, False)
+    said_quick, said_full = _stated(_text(where, capsys))
+    assert quick <= said_quick < quick + 3
+    assert full <= said_full < full + 5

@@ -376,6 +376,6 @@ SUITE = Suite(
     "`scipy.signal.savgol_filter` on the same whole run (cost vs error)",
     run=run,
     needs=("scipy",),
-    minutes_quick=0.3,
+    minutes_quick=0.2,
     minutes_full=1.0,
 )

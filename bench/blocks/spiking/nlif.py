@@ -481,6 +481,6 @@ SUITE = Suite(
     baseline="the block's bare numba kernel on the same chunks (block / kernel: what the block's "
     "bookkeeping costs); with --peers, Brian2's cython target",
     run=run,
-    minutes_quick=1.5,
+    minutes_quick=0.5,
     minutes_full=6.0,
 )

@@ -302,6 +302,6 @@ SUITE = Suite(
     baseline="the shipped default, exp at dt = 1 ms (cost ratios > 1: cheaper than the default); errors "
     "against the exact oracle (`lif_reference`), never against the block",
     run=run,
-    minutes_quick=0.4,
+    minutes_quick=0.2,
     minutes_full=1.0,
 )

@@ -492,6 +492,6 @@ SUITE = Suite(
     baseline="SSIM + linear fit on the same frames (the thesis's baseline method), timed per 3-frame stack",
     run=run,
     needs=("torch",),
-    minutes_quick=0.7,
+    minutes_quick=0.5,
     minutes_full=5.0,
 )

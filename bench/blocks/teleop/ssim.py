@@ -278,6 +278,6 @@ SUITE = Suite(
     "on the same frames",
     run=run,
     needs=("skimage", "cv2"),
-    minutes_quick=0.5,
+    minutes_quick=0.3,
     minutes_full=1.5,
 )
