@@ -15,8 +15,8 @@ import pytest
 
 from flowtact.bench import transport
 from flowtact.benchmark import Suite, registry
-from flowtact.benchmark.runner import estimate_minutes
 from flowtact.benchmark.report import RATIO_CONVENTION, RATIO_HEADER, write_report
+from flowtact.benchmark.runner import estimate_minutes
 from flowtact.benchmark.suite import Context
 from flowtact.cli import main
 
