@@ -315,3 +315,24 @@ def test_the_stated_run_times_are_what_the_suites_estimates_add_up_to(where, cap
     said_quick, said_full = _stated(_text(where, capsys))
     assert quick <= said_quick < quick + 3
     assert full <= said_full < full + 5
+
+
+def _interrupt(_ctx: Context) -> None:
+    raise KeyboardInterrupt
+
+
+@pytest.mark.usefixtures("installed_suites")
+def test_ctrl_c_during_a_suite_still_writes_the_report_of_what_ran(tmp_path, monkeypatch):
+    eps = [
+        _EntryPoint("alpha_good", Suite("alpha_good", "good", "M.", "B.", _good, processes=(1, 1))),
+        _EntryPoint(
+            "beta_stopped", Suite("beta_stopped", "stopped", "M.", "B.", _interrupt, processes=(1, 1))
+        ),
+        _EntryPoint("gamma_later", Suite("gamma_later", "later", "M.", "B.", _good, processes=(1, 1))),
+    ]
+    monkeypatch.setattr(registry, "entry_points", lambda **_: eps)
+    assert main(["bench", "--quick", "--out", str(tmp_path)]) == 130
+    summary = _summary((tmp_path / "REPORT.md").read_text())
+    assert "| [alpha_good](#alpha_good) | ok |" in summary
+    assert "**FAILED**: interrupted (Ctrl-C); not run: gamma_later" in summary
+    assert json.loads((tmp_path / "results" / "alpha_good.json").read_text())["status"] == "ok"

@@ -141,10 +141,10 @@ def run_suites(
     bar: bool | None = None,
     compare: Path | None = None,
 ) -> int:
-    """Run the named suites (all when none) into ``out``; 0 all ran (a check may FAIL: REPORT.md's
-    summary lists those), 1 a suite failed to run (stderr names it, the others' results and the report
-    are written all the same), 2 an unknown name or an unreadable ``compare`` folder (an earlier run
-    whose ratios this one is held to)."""
+    """Run the named suites (all when none) into ``out``. Exit status: 0 all ran (a check may FAIL:
+    REPORT.md's summary lists those); 1 a suite failed to run (stderr names it; the others' results
+    and the report are written all the same); 130 stopped by Ctrl-C (the report holds what ran); 2 an
+    unknown name or an unreadable ``compare`` folder (an earlier run whose ratios this one is held to)."""
     from flowtact.benchmark.compare import compare_records, load_results, report_lines, shift_percentiles
     from flowtact.benchmark.report import write_report
     from flowtact.errors import UsageError
@@ -173,10 +173,16 @@ def run_suites(
     t0 = time.perf_counter()
     records = []
     stream = sys.stderr if as_json else sys.stdout
+    interrupted = False
     with Progress(len(chosen), stream, bar) as progress:
-        for n in chosen:
+        for i, n in enumerate(chosen):
             progress.begin(n)
-            records.append(run_one(available[n], quick, peers, out, progress))
+            try:
+                records.append(run_one(available[n], quick, peers, out, progress))
+            except KeyboardInterrupt:  # Ctrl-C: what ran so far still gets its report
+                records.append(_interrupted(n, chosen[i + 1 :], quick, peers))
+                interrupted = True
+                break
     run["wall_s"] = round(time.perf_counter() - t0, 3)
     run["load_after"] = load_average()
     run["suites"] = {r["suite"]: r["status"] for r in records}
@@ -208,7 +214,18 @@ def run_suites(
     failed = [r for r in records if r["status"] == "failed"]
     for r in failed:  # the exit code says that a suite failed; this line says which and why
         print(f"flowtact bench: suite '{r['suite']}' failed: {r['error'].splitlines()[0]}", file=sys.stderr)
-    return 1 if failed else 0
+    return INTERRUPTED if interrupted else 1 if failed else 0
+
+
+INTERRUPTED = 130
+"""Exit status of a run stopped by Ctrl-C (128 + SIGINT, as a shell reports it); its report is written."""
+
+
+def _interrupted(name: str, not_run: Sequence[str], quick: bool, peers: bool) -> dict[str, Any]:
+    """The record of the suite Ctrl-C stopped: failed, naming the suites that did not run."""
+    rest = f"; not run: {', '.join(not_run)}" if not_run else ""
+    return {"suite": name, "status": "failed", "error": f"interrupted (Ctrl-C){rest}", "wall_s": 0.0,
+            "load_before": None, "load_after": load_average(), "command": command_line([name], quick, peers)}  # fmt: skip
 
 
 def estimate_minutes(chosen: Sequence[Suite | Unavailable], quick: bool) -> float:
