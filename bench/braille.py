@@ -6,7 +6,7 @@
 * Held-out text: permutations of the alphabet drawn from seed ``HELDOUT_SEED`` (each letter equally
   often), read with graph seeds from ``HELDOUT_SEED`` up, which training refuses: nothing here is
   tuned on it (the controller's setting was chosen on a validation text, seed 500).
-* Recognition rate against constant speed (10–80 mm/s as the issue asks, and on to 300 mm/s with
+* Recognition rate against constant speed (10–80 mm/s, the target range, and on to 300 mm/s with
   the scan's speed limit raised, where reading starts to fail), per letter and the confusion matrix at 30 mm/s;
   robustness to a lateral (±Y) offset at 30 mm/s (models trained on centred lines).
 * Information (the paper's Fig. 4A): spike counts per neuron in windows growing from the moment

@@ -198,6 +198,18 @@ def test_no_report_text_in_the_bench_sources_names_an_issue_or_writes_a_ratio_th
     assert not found, "\n".join(found)
 
 
+def test_no_suite_introduces_itself_with_an_issue_number():
+    """A suite's title, what it measures and its baseline open its section of the report (some come
+    from a module docstring, which the source scan above leaves out)."""
+    texts = {
+        name: " ".join((s.title, s.measures, s.baseline))
+        for name, s in registry.suites().items()
+        if isinstance(s, Suite)
+    }
+    assert len(texts) >= 16
+    assert not {name: t for name, t in texts.items() if ISSUE.search(t) or OTHER_CONVENTIONS.search(t)}
+
+
 def test_one_ratio_convention_in_a_generated_report(tmp_path):
     report = _report(tmp_path)
     assert RATIO_CONVENTION in _summary(report)  # stated once, at the top

@@ -70,7 +70,7 @@ def headline(r: dict[str, Any]) -> str:
     if pick is None:
         return "—"
     key, f = pick
-    return f"**{fmt(f['ratio'])}×** {key}, vs {f['baseline']}"
+    return f"**{fmt(f['ratio'])}×** {_cut(key, NAME_CHARS // 2)}, vs {_cut(f['baseline'], NAME_CHARS // 2)}"
 
 
 def _suite_row(r: dict[str, Any]) -> list[str]:

@@ -463,6 +463,7 @@ def run_accuracy(ctx: Context) -> None:
 
 
 def run(ctx: Context) -> None:
+    ctx.headline("block exp, sigma=0, N=1000")  # the shipped integrator, a touch-sized population
     run_throughput(ctx)
     run_accuracy(ctx)
     if ctx.peers:
