@@ -64,7 +64,7 @@ SUITE = Suite(
     "against its own criterion (analytic references, scipy, scikit-image).",
     baseline="each case's own criterion (an analytic value or an independent implementation); no speed ratio",
     run=run,
-    minutes_quick=0.7,
+    minutes_quick=0.3,
     minutes_full=2,
     processes=(1, 1),  # outcomes, not timings
 )
