@@ -278,7 +278,7 @@ def test_a_failing_suite_leaves_the_others_and_the_report_and_the_exit_code_name
 
 
 @pytest.mark.usefixtures("installed_suites")
-def test_only_good_suites_exit_zero_even_when_a_check_fails(tmp_path, monkeypatch):
+def test_only_good_suites_exit_zero_even_when_a_check_fails(tmp_path, monkeypatch, capsys):
     def failing_check(ctx: Context) -> None:
         ctx.check("a bar this machine misses", False, "too busy")
 
@@ -286,6 +286,7 @@ def test_only_good_suites_exit_zero_even_when_a_check_fails(tmp_path, monkeypatc
     monkeypatch.setattr(registry, "entry_points", lambda **_: [_EntryPoint("alpha_good", good)])
     assert main(["bench", "--quick", "--out", str(tmp_path)]) == 0  # a FAIL is a finding, not a crash
     assert "**1 FAIL**: a bar this machine misses" in _summary((tmp_path / "REPORT.md").read_text())
+    assert "1 failed check: see its summary" in capsys.readouterr().out
 
 
 @pytest.mark.usefixtures("installed_suites")

@@ -146,7 +146,7 @@ def run_suites(
     and the report are written all the same); 130 stopped by Ctrl-C (the report holds what ran); 2 an
     unknown name or an unreadable ``compare`` folder (an earlier run whose ratios this one is held to)."""
     from flowtact.benchmark.compare import compare_records, load_results, report_lines, shift_percentiles
-    from flowtact.benchmark.report import write_report
+    from flowtact.benchmark.report import duration_text, write_report
     from flowtact.errors import UsageError
     from flowtact.params import did_you_mean
 
@@ -203,7 +203,14 @@ def run_suites(
     if as_json:
         print(json.dumps({**run, "report": str(report), "results": str(out / "results")}, indent=1))
     else:
-        print(f"report: {report} ({run['wall_s']:.0f} s)")
+        n_fail = sum(not c["passed"] for r in records for c in r.get("checks") or [])
+        load = (
+            f"load {run['load_before'][0]:.1f} → {run['load_after'][0]:.1f}"
+            if run["load_before"] and run["load_after"]
+            else "load n/a"
+        )
+        print(f"report: {report} ({duration_text(run['wall_s'])}, {load}; "
+              f"{n_fail} failed check{'s' * (n_fail != 1)}: see its summary)")  # fmt: skip
         if "reproducibility" in run:
             r = run["reproducibility"]
             print(
