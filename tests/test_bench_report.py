@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ISSUE = re.compile(r"\bissues?\s*#?\d+|\bthe issue\b", re.IGNORECASE)
 """An internal issue reference: 'issue 14', 'issues 3', 'the issue's range'."""
 OTHER_CONVENTIONS = re.compile(
-    r"_over_raw|flowtact\s*/\s*raw|\w+ / (?:raw|plain|steps)\b|> 1:[^)]*\b(?:slower|worse)\b"
+    r"_over_raw|flowtact\s*/\s*raw|\w+ / (?:raw|plain|steps|kernel)\b|> 1:[^)]*\b(?:slower|worse)\b"
 )
 """A ratio written the other way round (flowtact ÷ reference: 'flowtact_over_raw', 'executor / plain'),
 or a '> 1' that means flowtact is worse."""
