@@ -132,7 +132,7 @@ def test_the_report_opens_with_a_summary_of_every_suite_and_every_failed_check(t
     assert "**FAILED**: RuntimeError: it broke |" in summary  # the error's first line, not the rest
     assert "skipped: needs brian2" in summary
     assert "Took 22 min 47 s" in summary and "add to 10 min" in summary
-    assert "1.50 before, 7.50 after, 7.5 at the busiest" in summary
+    assert "1.50 before, 7.50 after, 7.5 at the busiest: above 2 the machine was busy" in summary
     assert "Toy CPU 3000, 2 cores" in summary and "abc123" in summary
     # the named headline, not the first figure: 15 000 against 20 000 msg/s
     assert "**0.75×** flowtact msg/s, vs raw msg/s" in summary
@@ -153,6 +153,7 @@ def test_a_suite_without_a_named_headline_shows_its_first_ratio_against_an_outsi
     summary = _summary(write_report(tmp_path, run, [_record("s", measure)]).read_text())
     assert "**0.25×** block, vs scipy" in summary and "other setting" not in summary
     assert "load average (1 min) n/a before" in summary
+    assert "6.2 at the busiest: above 2" in summary  # the suites' own load figures still count
 
 
 def test_no_internal_issue_number_in_a_generated_report(tmp_path):

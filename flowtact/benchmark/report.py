@@ -12,7 +12,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["RATIO_CONVENTION", "RATIO_HEADER", "fmt", "headline", "summary_lines", "write_report"]
+__all__ = [
+    "RATIO_CONVENTION",
+    "RATIO_HEADER",
+    "duration_text",
+    "fmt",
+    "headline",
+    "summary_lines",
+    "write_report",
+]
 
 RATIO_HEADER = "speed-up vs baseline (> 1: flowtact better)"
 """The column header of every ratio in the report."""
@@ -110,7 +118,7 @@ def summary_lines(run: dict[str, Any], records: list[dict[str, Any]]) -> list[st
         + (f" (the suites' estimates for an idle {m['cores']}-core machine add to {estimate:g} min)" if estimate else "")
         + f"; load average (1 min) {_one(run['load_before'])} before, {_one(run['load_after'])} after"
         + (f", {peak:.1f} at the busiest" if peak is not None else "")
-        + f": above {m['cores']} the machine was busy and every time is pessimistic.",
+        + _busy(peak, m["cores"]),
         f"- Machine: {m['cpu']}, {m['cores']} cores ({m['cores_usable']} usable), {m['platform']}, python {py}; "
         f"git commit {m['git_commit'] or 'n/a'}.",
         f"- {len(records)} suites: {sum(r['status'] == 'ok' for r in records)} ran"
@@ -124,6 +132,15 @@ def summary_lines(run: dict[str, Any], records: list[dict[str, Any]]) -> list[st
         "",
     ]  # fmt: skip
     return lines
+
+
+def _busy(peak: float | None, cores: int) -> str:
+    """What the load says about the times: above the core count the machine was oversubscribed."""
+    if peak is None:
+        return "."
+    if peak > cores:
+        return f": above {cores} the machine was busy, and every time here is pessimistic."
+    return f": at most {cores}, the machine was not oversubscribed."
 
 
 def _one(v: list[float] | None) -> str:
