@@ -60,7 +60,7 @@ SUITE = Suite(
     "input of tests/test_hostile_input.py, and whether each was refused with exit 2 at its place.",
     baseline="the same child validating the shipped graphs/touch.yaml",
     run=run,
-    minutes_quick=0.5,
+    minutes_quick=0.7,
     minutes_full=1.5,
     processes=(1, 1),  # every sample already comes from fresh processes
 )

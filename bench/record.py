@@ -142,6 +142,6 @@ SUITE = Suite(
     baseline="plain h5py appending the same chunks to resizable datasets and calling `File.flush()` "
     "(no checksums, not crash-safe)",
     run=run,
-    minutes_quick=0.2,
+    minutes_quick=0.3,
     minutes_full=0.5,
 )

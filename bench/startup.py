@@ -21,7 +21,7 @@ from flowtact.bench.transport import CHAIN, CHAIN_STREAM, parse_summary
 from flowtact.benchmark import Context, Suite
 
 MAX_RATIO = 2.0
-"""The first seconds' p99 may be at most this many times the steady state's (issue 14)."""
+"""The first seconds' p99 may be at most this many times the steady state's (set in issue 14)."""
 COMPILED = re.compile(r"(\d+) kernels? compiled in ([\d.]+) s")
 
 
@@ -77,9 +77,9 @@ def run(ctx: Context) -> None:
     ratios = sorted(f / s for f, s in zip(p99_first, p99_steady, strict=True))
     ratio = ratios[len(ratios) // 2]
     ctx.check(
-        f"first {seconds:g} s of a first real-time run: p99 within {MAX_RATIO:g}x of the steady state",
-        ratio <= MAX_RATIO,
-        f"median ratio {ratio:.2f} (p99 {sorted(p99_first)[len(p99_first) // 2]:.0f} µs against "
+        f"first {seconds:g} s of a first real-time run: p99 speed-up vs the steady state >= {1 / MAX_RATIO:.2f}",
+        ratio <= MAX_RATIO,  # the report's convention: the steady p99 over the first run's (> 1: better)
+        f"median speed-up {1 / ratio:.2f} (p99 {sorted(p99_first)[len(p99_first) // 2]:.0f} µs against "
         f"{sorted(p99_steady)[len(p99_steady) // 2]:.0f} µs)",
     )
     late = [r["stderr"] for r in first + steady if "after the start" in r["stderr"]]

@@ -11,8 +11,9 @@ Measures, in one run, the same source -> stage -> sink pipeline (each in its own
      throw-away venv under ~/.cache/flowtact-bench/ (made on first use, then reused);
   e. tick x samples per message in real time, flowtact's fast.yaml and raw pyzmq side by side:
      latency p50/p99 and CPU per process against tick (bench/transport_sweep.py).
-Records every figure with its ratio to raw pyzmq, and issue 3's and issue 14's targets as pass/fail
-(issue 14's as ratios to raw's round: :data:`ISSUE14_BARS`).
+Records every figure with its ratio to raw pyzmq (a speed-up, > 1: flowtact better), and the
+project's targets as pass/fail (those relative to raw's round: :data:`SPEEDUP_BARS`; they were set
+in issues 3 and 14, which the report does not name).
 """
 
 from __future__ import annotations
@@ -55,9 +56,11 @@ ROUNDS = 3
 measured in the same run (a single run's p99 is one scheduling hiccup away from the next run's)."""
 
 
-ISSUE14_BARS = {"p50": 1.3, "p99": 1.3, "cpu_per_message": 1.5, "small": 0.7}
-"""Issue 14's bars as flowtact / raw in the same round: latency and CPU per message (supervisor
-included) at most these, the --fast small rate at least its bar (frames: issue 3's 80 % target)."""
+SPEEDUP_BARS = {"p50": 1 / 1.3, "p99": 1 / 1.3, "cpu_per_message": 1 / 1.5, "small": 0.7}
+"""The least speed-up over raw pyzmq in the same round (the report's one convention: raw's latency or
+CPU per message over flowtact's, flowtact's rate over raw's; > 1: flowtact better). Latency within
+1.3× raw's, CPU per message (supervisor included) within 1.5×, the --fast small rate at least 70 %
+of raw's (issue 14; frames: issue 3's 80 % target)."""
 
 
 class ContractError(RuntimeError):
@@ -383,31 +386,33 @@ def _peer_versions(py: Path, name: str) -> dict[str, str]:
 # -- report -----------------------------------------------------------------------------------
 
 
-def _at_most(ratio: float, bar: float) -> dict[str, Any]:
-    return {"flowtact_over_raw": ratio, "bar": bar, "pass": ratio <= bar}
+def _at_least(speedup: float, bar: float) -> dict[str, Any]:
+    return {"speedup_vs_raw": speedup, "bar": round(bar, 2), "pass": speedup >= bar}
 
 
 def ratios_and_targets(res: dict[str, Any]) -> dict[str, Any]:
-    """flowtact/raw ratios, and issue 3's and issue 14's targets (left out where a part was not run)."""
+    """Speed-ups over raw pyzmq (> 1: flowtact better), and the targets (left out where a part was
+    not run). Check names are what a user reads: no issue numbers (see :data:`SPEEDUP_BARS`)."""
     rw, chain, fast, peers = res.get("raw"), res.get("chain"), res.get("fast"), res.get("peers") or {}
     ratios: dict[str, float] = {}
     targets: dict[str, dict[str, Any]] = {}
     raw_cpu = (rw or {}).get("small_1khz", {}).get("cpu_pct") or {}
     if rw and chain:
         for q in ("p50", "p99"):
-            ratios[f"{q}_latency_flowtact_over_raw"] = r = (
-                chain["latency_us"][q] / rw["small_1khz"]["latency_us"][q]
+            ratios[f"{q}_latency_speedup_vs_raw"] = r = (
+                rw["small_1khz"]["latency_us"][q] / chain["latency_us"][q]
             )
-            targets[f"{q} latency <= {ISSUE14_BARS[q]:g} x raw's (issue 14)"] = _at_most(r, ISSUE14_BARS[q])
+            bar = SPEEDUP_BARS[q]
+            targets[f"{q} latency speed-up vs raw pyzmq >= {bar:.2f}"] = _at_least(r, bar)
         raw_msg = cpu_per_message_us(raw_cpu.values())
         our_msg = cpu_per_message_us([*chain["cpu_pct"].values(), chain.get("supervisor_cpu_pct")])
         if raw_msg and our_msg is not None:
-            ratios["cpu_per_message_flowtact_over_raw"] = r = our_msg / raw_msg
-            bar = ISSUE14_BARS["cpu_per_message"]
-            targets[f"CPU per message, supervisor included, <= {bar:g} x raw's (issue 14)"] = {
+            ratios["cpu_per_message_speedup_vs_raw"] = r = raw_msg / our_msg
+            bar = SPEEDUP_BARS["cpu_per_message"]
+            targets[f"CPU per message (supervisor included) speed-up vs raw pyzmq >= {bar:.2f}"] = {
                 "value_us": our_msg,
                 "raw_us": raw_msg,
-                **_at_most(r, bar),
+                **_at_least(r, bar),
             }
         bound = 3 * rw["floor_small_1khz"]["latency_us"]["p99"] + 100
         peer_p99 = {
@@ -444,15 +449,11 @@ def ratios_and_targets(res: dict[str, Any]) -> dict[str, Any]:
         }
         if rw:
             raw_img = rw["image_flat"]["throughput"]["bytes_s"]
-            ratios["throughput_small_flowtact_over_raw"] = r = small / raw_small
-            bar = ISSUE14_BARS["small"]
-            targets[f"--fast small >= {bar:g} x raw's msg/s (issue 14)"] = {
-                "flowtact_over_raw": r,
-                "bar": bar,
-                "pass": r >= bar,
-            }
-            ratios["frame_bytes_s_flowtact_over_raw"] = fast["image"]["bytes_s"] / raw_img
-            targets["frames >= 80 % of raw bytes/s"] = {
+            ratios["throughput_small_speedup_vs_raw"] = r = small / raw_small
+            bar = SPEEDUP_BARS["small"]
+            targets[f"--fast small msg/s speed-up vs raw pyzmq >= {bar:.2f}"] = _at_least(r, bar)
+            ratios["frame_bytes_s_speedup_vs_raw"] = fast["image"]["bytes_s"] / raw_img
+            targets["--fast frames bytes/s speed-up vs raw pyzmq >= 0.80"] = {
                 "value_bytes_s": fast["image"]["bytes_s"],
                 "raw_bytes_s": raw_img,
                 "pass": fast["image"]["bytes_s"] >= 0.8 * raw_img,
@@ -461,19 +462,20 @@ def ratios_and_targets(res: dict[str, Any]) -> dict[str, Any]:
 
 
 def round_by_round(rounds: list[dict[str, Any]]) -> str:
-    """Issue 14's ratios and both sides' worst latency in each round: how far one run's rounds spread
-    on this machine (the checks judge the median round only)."""
+    """The speed-ups over raw pyzmq and both sides' worst latency in each round: how far one run's
+    rounds spread on this machine (the checks judge the median round only)."""
     parts = []
     for i, r in enumerate(rounds, 1):
         rt = ratios_and_targets(judged_round(rounds, r))["ratios"]
-        cpu = rt.get("cpu_per_message_flowtact_over_raw")
+        cpu = rt.get("cpu_per_message_speedup_vs_raw")
         parts.append(
-            f"round {i}: p50 {rt['p50_latency_flowtact_over_raw']:.2f}, p99 {rt['p99_latency_flowtact_over_raw']:.2f}, "
+            f"round {i}: p50 {rt['p50_latency_speedup_vs_raw']:.2f}, p99 {rt['p99_latency_speedup_vs_raw']:.2f}, "
             f"CPU per message {'not measured' if cpu is None else f'{cpu:.2f}'}; worst latency "
             f"{r['chain']['latency_us']['max'] / 1e3:.1f} ms (raw {r['raw']['small_1khz']['latency_us']['max'] / 1e3:.1f})"
         )
     return (
-        "Issue 14's ratios round by round (flowtact / raw pyzmq in the same round): " + "; ".join(parts) + "."
+        "Speed-ups over raw pyzmq round by round (raw's latency or CPU over flowtact's in the same round; "
+        "> 1: flowtact better): " + "; ".join(parts) + "."
     )
 
 
@@ -629,7 +631,7 @@ FLOWTACT_VS_PEER = {
     "small msg/s": ("flowtact --fast, small", "small, flat out"),
     "frames MB/s": ("flowtact --fast, image", "image, flat out"),
 }  # fmt: skip
-"""Issue 14's "ahead of ezmsg and Timeflux on every figure": flowtact's figure and the peer's, by label."""
+"""The target "ahead of ezmsg and Timeflux on every figure": flowtact's figure and the peer's, by label."""
 
 
 def check_versus_peers(ctx: Context, peers: dict[str, Any]) -> None:
@@ -665,7 +667,7 @@ def record_sweep(ctx: Context, sw: dict[str, Any]) -> None:
             "measured samples/msg",
             "p50 (µs)",
             "p99 (µs)",
-            "p99 / raw p99",
+            "p99 speed-up vs raw (raw p99 ÷ flowtact's)",
             *(f"CPU {r} (% core)" for r in sweep.ROLES),
         ],
         sweep.sweep_rows(pts),

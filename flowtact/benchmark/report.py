@@ -1,5 +1,9 @@
-"""REPORT.md of a bench run: per suite what it measures, its figures with spread and ratios, its
-tables, plots and verdicts, the command that reproduces it, and where flowtact is slower."""
+"""REPORT.md of a bench run: a one-screen summary (per suite its headline ratio, the checks that
+failed, the time taken and the load), then per suite what it measures, its figures with spread and
+ratios, its tables, plots and verdicts, the command that reproduces it, and where flowtact is slower.
+
+Every ratio follows one convention, :data:`RATIO_CONVENTION`: a speed-up, > 1 when flowtact does
+better than the figure it is compared with."""
 
 from __future__ import annotations
 
@@ -8,7 +12,26 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["fmt", "write_report"]
+__all__ = [
+    "RATIO_CONVENTION",
+    "RATIO_HEADER",
+    "duration_text",
+    "fmt",
+    "headline",
+    "summary_lines",
+    "write_report",
+]
+
+RATIO_HEADER = "speed-up vs baseline (> 1: flowtact better)"
+"""The column header of every ratio in the report."""
+RATIO_CONVENTION = (
+    "Every ratio in this report is a **speed-up**: the reference's time (latency, CPU, error) over "
+    "flowtact's, or flowtact's rate over the reference's. **> 1: flowtact is better**; 0.5: flowtact "
+    "takes twice as long (or does half as much)."
+)
+"""The one ratio convention of the report, stated in its header."""
+NAME_CHARS = 100
+"""A failed check's name is cut to this many characters in the summary (the suite's section has it whole)."""
 
 
 def fmt(x: Any) -> str:
@@ -31,6 +54,104 @@ def _md_table(header: list[str], rows: list[list[Any]]) -> list[str]:
     lines = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(cell(v) for v in r) + " |" for r in rows]
     return lines
+
+
+def duration_text(seconds: float) -> str:
+    """``22 min 47 s`` or ``48 s``: a wall time a person reads at a glance."""
+    m, sec = divmod(round(seconds), 60)
+    return f"{m} min {sec} s" if m else f"{sec} s"
+
+
+def _cut(text: str, n: int) -> str:
+    return text if len(text) <= n else text[: n - 1].rstrip() + "…"
+
+
+def headline(r: dict[str, Any]) -> str:
+    """A suite's headline ratio: the figure it names (``ctx.headline``), else its first figure
+    against an outside reference, else its first with a ratio; "—" when it has none."""
+    figures = r.get("figures") or {}
+    rated = [(k, f) for k, f in figures.items() if f.get("ratio") is not None]
+    named = r.get("headline")
+    pick = next(((k, f) for k, f in rated if k == named), None)
+    pick = pick or next(((k, f) for k, f in rated if figures.get(f["baseline"], {}).get("reference")), None)
+    pick = pick or (rated[0] if rated else None)
+    if pick is None:
+        return "—"
+    key, f = pick
+    return f"**{fmt(f['ratio'])}×** {_cut(key, NAME_CHARS // 2)}, vs {_cut(f['baseline'], NAME_CHARS // 2)}"
+
+
+def _suite_row(r: dict[str, Any]) -> list[str]:
+    checks = r.get("checks") or []
+    failed = [c["name"] for c in checks if not c["passed"]]
+    if r["status"] == "failed":
+        result = f"**FAILED**: {_cut(r['error'].splitlines()[0], 100)}"
+    elif r["status"] == "skipped":
+        result = f"skipped: {_cut(r['reason'].splitlines()[0], 80)}"
+    else:
+        result = "ok"
+    verdicts = f"{len(checks) - len(failed)} pass" + (
+        f", **{len(failed)} FAIL**: " + "; ".join(_cut(n, NAME_CHARS) for n in failed) if failed else ""
+    )
+    return [f"[{r['suite']}](#{r['suite']})", result, headline(r), verdicts if checks else "—",
+            duration_text(r["wall_s"])]  # fmt: skip
+
+
+def _peak_load(run: dict[str, Any], records: list[dict[str, Any]]) -> float | None:
+    ones = [v[0] for r in (run, *records) for v in (r.get("load_before"), r.get("load_after")) if v]
+    return max(ones) if ones else None
+
+
+def summary_lines(run: dict[str, Any], records: list[dict[str, Any]]) -> list[str]:
+    """The report's first screen: time and load, machine, ratio convention, one row per suite."""
+    m = run["machine"]
+    py = m["versions"].get("python", "?")
+    estimate = run.get("estimate_min")
+    failed = [r["suite"] for r in records if r["status"] == "failed"]
+    checks = [c for r in records for c in r.get("checks") or []]
+    n_fail = sum(not c["passed"] for c in checks)
+    peak = _peak_load(run, records)
+    lines = [
+        "## Summary",
+        "",
+        f"- **Took {duration_text(run['wall_s'])}**"
+        + (f" (the suites' estimates for an idle {m['cores']}-core machine add to {estimate:g} min)" if estimate else "")
+        + f"; load average (1 min) {_one(run['load_before'])} before, {_one(run['load_after'])} after"
+        + (f", {peak:.1f} at the busiest" if peak is not None else "")
+        + _busy(peak, m["cores"]),
+        f"- Machine: {m['cpu']}, {m['cores']} cores ({m['cores_usable']} usable), {m['platform']}, python {py}; "
+        f"git commit {m['git_commit'] or 'n/a'}.",
+        f"- {len(records)} suites: {sum(r['status'] == 'ok' for r in records)} ran"
+        + (f", **{len(failed)} failed to run ({', '.join(failed)})**" if failed else "")
+        + (f", {sum(r['status'] == 'skipped' for r in records)} skipped" if any(r["status"] == "skipped" for r in records) else "")
+        + f"; checks: {len(checks) - n_fail} pass, {n_fail} FAIL.",
+        f"- {RATIO_CONVENTION}",
+        "",
+        *_md_rows(["suite", "result", "headline ratio (> 1: flowtact better)", "checks", "wall"],
+                  [_suite_row(r) for r in records]),
+        "",
+    ]  # fmt: skip
+    return lines
+
+
+def _busy(peak: float | None, cores: int) -> str:
+    """What the load says about the times: above the core count the machine was oversubscribed."""
+    if peak is None:
+        return "."
+    if peak > cores:
+        return f": above {cores} the machine was busy, and every time here is pessimistic."
+    return f": at most {cores}, the machine was not oversubscribed."
+
+
+def _one(v: list[float] | None) -> str:
+    return "n/a" if not v else f"{v[0]:.2f}"
+
+
+def _md_rows(header: list[str], rows: list[list[str]]) -> list[str]:
+    """A Markdown table of text cells (already formatted)."""
+    cell = lambda v: str(v).replace("|", "\\|")  # noqa: E731
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return lines + ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
 
 
 def _figure_rows(figures: dict[str, dict[str, Any]]) -> list[list[Any]]:
@@ -107,7 +228,7 @@ def _suite_section(r: dict[str, Any]) -> list[str]:
     figures = r.get("figures") or {}
     if figures:
         lines += [
-            "| figure | median | unit | IQR | min–max | n | vs baseline (> 1: flowtact better) |",
+            f"| figure | median | unit | IQR | min–max | n | {RATIO_HEADER} |",
             "|---|---|---|---|---|---|---|",
         ]
         lines += [
@@ -122,7 +243,7 @@ def _suite_section(r: dict[str, Any]) -> list[str]:
         if own:
             lines += ["Settings slower or worse than the flowtact setting they are measured against (trade-offs, "
                       "not shortfalls):", "", *own, ""]  # fmt: skip
-    for c in r.get("checks") or []:
+    for c in sorted(r.get("checks") or [], key=lambda c: c["passed"]):  # failures first
         lines.append(
             f"- {'PASS' if c['passed'] else '**FAIL**'} {c['name']}"
             + (f": {c['detail']}" if c["detail"] else "")
@@ -148,35 +269,33 @@ def _suite_section(r: dict[str, Any]) -> list[str]:
 def write_report(
     out: Path, run: dict[str, Any], records: list[dict[str, Any]], extra: Sequence[str] = ()
 ) -> Path:
-    """Write OUT/REPORT.md and return its path; ``extra`` lines (a comparison) follow the summary table."""
+    """Write OUT/REPORT.md and return its path: the summary first, then how to read it, ``extra``
+    lines (a comparison), and one section per suite."""
     m = run["machine"]
     v = ", ".join(f"{k} {x}" for k, x in m["versions"].items())
     lines = [
         "# flowtact benchmark report",
         "",
-        f"Made by `{run['command']}` ({'quick' if run['quick'] else 'full'} run) on {run['started']}, "
-        f"{run['wall_s']:.0f} s wall. Generated: do not edit; rerun the command instead.",
+        f"Made by `{run['command']}` ({'quick' if run['quick'] else 'full'} run) on {run['started']}. "
+        "Generated: do not edit; rerun the command instead.",
         "",
-        f"- Machine: {m['cpu']}, {m['cores']} cores ({m['cores_usable']} usable), {m['platform']}",
+        *summary_lines(run, records),
+        "## How to read it",
+        "",
         f"- Software: {v}; git commit {m['git_commit'] or 'n/a (not a source checkout)'}",
         f"- Threads: {', '.join(f'{k}={x}' for k, x in m['threads'].items())} (every figure is one core's)",
-        f"- Load average (1/5/15 min): {_load(run['load_before'])} before, {_load(run['load_after'])} after. "
-        f"Above {m['cores']} the machine was oversubscribed and timings are pessimistic.",
+        f"- Load average (1/5/15 min): {_load(run['load_before'])} before, {_load(run['load_after'])} after.",
         "",
         "Each speed figure is the median of its repeats (after warm-up), with its interquartile range and "
         "extremes; ratios compare it with a baseline measured in the same run, so they survive a "
         "busy machine better than absolute figures. A ratio's range spans its paired ratios, or every pairing of the two "
         "figures' samples (worst to best); a rerun reproduces a ratio when its median lands inside that range. A suite "
         "timed in this process shares its repeats out over several fresh processes (2 in a quick run, 3 in a full "
-        "one): what moves from one process to the next (memory layout, compiled code, the core) is in the spread.",
+        "one): what moves from one process to the next (memory layout, compiled code, the core) is in the spread. "
+        "A check that FAILs is a finding about this machine and this run, not a crash: the suite's section says "
+        "what it measured against what bar.",
         "",
-        "| suite | status | wall s | load before → after |",
-        "|---|---|---|---|",
     ]
-    for r in records:
-        lines.append(f"| [{r['suite']}](#{r['suite']}) | {r['status']} | {r['wall_s']:.1f} | "
-                     f"{_load(r['load_before'])} → {_load(r['load_after'])} |")  # fmt: skip
-    lines.append("")
     lines += extra
     for r in records:
         lines += _suite_section(r)

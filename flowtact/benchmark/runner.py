@@ -38,8 +38,10 @@ def command_line(names: Sequence[str], quick: bool, peers: bool) -> str:
 
 
 def list_suites(out: Any = None) -> int:
+    """One line per suite with its budgets on an idle 2-core machine, and their sum."""
     out = out or sys.stdout
-    for name, s in suites().items():
+    found = suites()
+    for name, s in found.items():
         if isinstance(s, Unavailable):
             print(f"{name:<18} (unavailable: {s.reason})", file=out)
         else:
@@ -47,6 +49,10 @@ def list_suites(out: Any = None) -> int:
                 f"{name:<18} {s.title}  [~{s.minutes_quick:g} min quick, ~{s.minutes_full:g} min full]",
                 file=out,
             )
+    quick, full = estimate_minutes(list(found.values()), True), estimate_minutes(list(found.values()), False)
+    print(
+        f"{'(every suite)':<18} ~{quick:g} min quick, ~{full:g} min full on an idle 2-core machine", file=out
+    )
     return 0
 
 
@@ -135,10 +141,12 @@ def run_suites(
     bar: bool | None = None,
     compare: Path | None = None,
 ) -> int:
-    """Run the named suites (all when none) into ``out``; 0 all ran, 1 one failed, 2 an unknown name
-    or an unreadable ``compare`` folder (an earlier run whose ratios this one is held to)."""
+    """Run the named suites (all when none) into ``out``. Exit status: 0 all ran (a check may FAIL:
+    REPORT.md's summary lists those); 1 a suite failed to run (stderr names it; the others' results
+    and the report are written all the same); 130 stopped by Ctrl-C (the report holds what ran); 2 an
+    unknown name or an unreadable ``compare`` folder (an earlier run whose ratios this one is held to)."""
     from flowtact.benchmark.compare import compare_records, load_results, report_lines, shift_percentiles
-    from flowtact.benchmark.report import write_report
+    from flowtact.benchmark.report import duration_text, write_report
     from flowtact.errors import UsageError
     from flowtact.params import did_you_mean
 
@@ -157,6 +165,7 @@ def run_suites(
         "command": command_line(names, quick, peers),
         "quick": quick,
         "peers": peers,
+        "estimate_min": estimate_minutes([available[n] for n in chosen], quick),
         "machine": machine_info(),
         "load_before": load_average(),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
@@ -164,10 +173,16 @@ def run_suites(
     t0 = time.perf_counter()
     records = []
     stream = sys.stderr if as_json else sys.stdout
+    interrupted = False
     with Progress(len(chosen), stream, bar) as progress:
-        for n in chosen:
+        for i, n in enumerate(chosen):
             progress.begin(n)
-            records.append(run_one(available[n], quick, peers, out, progress))
+            try:
+                records.append(run_one(available[n], quick, peers, out, progress))
+            except KeyboardInterrupt:  # Ctrl-C: what ran so far still gets its report
+                records.append(_interrupted(n, chosen[i + 1 :], quick, peers))
+                interrupted = True
+                break
     run["wall_s"] = round(time.perf_counter() - t0, 3)
     run["load_after"] = load_average()
     run["suites"] = {r["suite"]: r["status"] for r in records}
@@ -188,7 +203,14 @@ def run_suites(
     if as_json:
         print(json.dumps({**run, "report": str(report), "results": str(out / "results")}, indent=1))
     else:
-        print(f"report: {report} ({run['wall_s']:.0f} s)")
+        n_fail = sum(not c["passed"] for r in records for c in r.get("checks") or [])
+        load = (
+            f"load {run['load_before'][0]:.1f} → {run['load_after'][0]:.1f}"
+            if run["load_before"] and run["load_after"]
+            else "load n/a"
+        )
+        print(f"report: {report} ({duration_text(run['wall_s'])}, {load}; "
+              f"{n_fail} failed check{'s' * (n_fail != 1)}: see its summary)")  # fmt: skip
         if "reproducibility" in run:
             r = run["reproducibility"]
             print(
@@ -196,7 +218,26 @@ def run_suites(
                 f"{compare} ({r['ranges_overlap']} ranges overlap; ratios moved {r['shift']['median']:.1%} "
                 f"median, {r['shift']['p90']:.1%} at the 90th percentile)"
             )
-    return 1 if any(r["status"] == "failed" for r in records) else 0
+    failed = [r for r in records if r["status"] == "failed"]
+    for r in failed:  # the exit code says that a suite failed; this line says which and why
+        print(f"flowtact bench: suite '{r['suite']}' failed: {r['error'].splitlines()[0]}", file=sys.stderr)
+    return INTERRUPTED if interrupted else 1 if failed else 0
+
+
+INTERRUPTED = 130
+"""Exit status of a run stopped by Ctrl-C (128 + SIGINT, as a shell reports it); its report is written."""
+
+
+def _interrupted(name: str, not_run: Sequence[str], quick: bool, peers: bool) -> dict[str, Any]:
+    """The record of the suite Ctrl-C stopped: failed, naming the suites that did not run."""
+    rest = f"; not run: {', '.join(not_run)}" if not_run else ""
+    return {"suite": name, "status": "failed", "error": f"interrupted (Ctrl-C){rest}", "wall_s": 0.0,
+            "load_before": None, "load_after": load_average(), "command": command_line([name], quick, peers)}  # fmt: skip
+
+
+def estimate_minutes(chosen: Sequence[Suite | Unavailable], quick: bool) -> float:
+    """The suites' own budgets added up (``--list`` shows each): what the run should take on an idle machine."""
+    return round(sum(s.minutes_quick if quick else s.minutes_full for s in chosen if isinstance(s, Suite)), 1)
 
 
 def _json_default(x: Any) -> Any:

@@ -8,6 +8,7 @@ in the same run), and ``run(ctx)``. ``run`` measures through its :class:`Context
   unit (µs per call, ...); ``ctx.figure(...)`` records values measured some other way (latencies
   of a subprocess). A figure naming a ``baseline`` (another figure of the suite) also carries the
   ratio to it, oriented so that > 1 means flowtact does better;
+* ``ctx.headline(key)`` names the figure whose ratio heads the report's summary;
 * ``ctx.table``, ``ctx.note``, ``ctx.check`` (a bar or target, pass/fail), ``ctx.plot`` (a
   matplotlib drawing function) and ``ctx.tradeoff`` (run time against error, one point per
   setting, the shipped default marked).
@@ -61,7 +62,8 @@ class Suite:
     """Importable modules the suite needs; without one it is skipped with a line saying so."""
     minutes_quick: float = 0.5
     minutes_full: float = 2.0
-    """Rough budgets on 2 cores, shown by ``--list``."""
+    """Budgets on an idle 2-core machine, shown by ``--list`` and summed in the report's summary
+    (measured: keep them honest when a suite's settings change)."""
     processes: tuple[int, int] = (2, 3)
     """Fresh processes the figures are measured in, quick and full (:mod:`process_rounds`): a spread
     from one process misses what moves between processes. (1, 1) for a suite whose every sample
@@ -193,6 +195,8 @@ class Context:
         self.checks: list[Check] = []
         self.plots: list[Plot] = []
         self.tradeoffs: list[Tradeoff] = []
+        self.headline_key: str | None = None
+        """The figure whose ratio the report's summary shows for this suite (:meth:`headline`)."""
         self.data: dict[str, Any] = {}
         """Anything else worth keeping in results/<suite>.json (raw rows, configurations)."""
         self._on_step = on_step
@@ -216,6 +220,11 @@ class Context:
     def note(self, text: str) -> None:
         """A plain statement for the report (a limitation, a reading hint, a part not run)."""
         self.notes.append(text)
+
+    def headline(self, key: str) -> None:
+        """Show figure ``key``'s ratio as this suite's headline in the report's summary (without
+        one, the summary takes the first figure measured against an outside reference)."""
+        self.headline_key = key
 
     def check(self, name: str, passed: bool, detail: str = "") -> None:
         self.checks.append(Check(name, bool(passed), detail))
@@ -402,6 +411,7 @@ class Context:
 
     def to_dict(self) -> dict[str, Any]:
         return {
+            "headline": self.headline_key,
             "figures": {k: asdict(f) for k, f in self.figures.items()},
             "tables": [asdict(t) for t in self.tables],
             "notes": list(self.notes),

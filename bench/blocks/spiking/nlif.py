@@ -325,13 +325,13 @@ def run_throughput(ctx: Context) -> None:
                 if integ == "exp" and (n >= 1000 or (n == 1 and sigma == 0.0)):
                     check_rate(ctx, label, sigma, n)
     ctx.table("Throughput, 1000-sample chunks at 1 kHz", ["integrator", "σ", "N", "neuron-steps/s (block)",
-              "block / kernel", "spikes per neuron-s"], rows)  # fmt: skip
+              "speed-up vs kernel", "spikes per neuron-s"], rows)  # fmt: skip
     for h in ((), H_WEIGHTS):
         spike_rate = throughput(ctx, f"post-spike current {'on' if h else 'off'}, exp, N=1000", 1000, "exp",
                                 0.0, 2.0 if ctx.quick else 10.0, 1000, h=h)  # fmt: skip
     on, off = (ctx.figures[f"post-spike current {w}, exp, N=1000"].median for w in ("on", "off"))
-    ctx.check("post-spike current costs <= 2x the plain update (exp, N=1000)", off / on <= 2.0,
-              f"{off / on:.2f}x ({on:.3g} on, {off:.3g} off neuron-steps/s)")  # fmt: skip
+    ctx.check("post-spike current: speed-up vs the plain update >= 0.50 (exp, N=1000)", off / on <= 2.0,
+              f"{on / off:.2f} ({on:.3g} on, {off:.3g} off neuron-steps/s)")  # fmt: skip
     history_parts(ctx, spike_rate / RATE_HZ, off)
     normal_draw_rate(ctx)
     for chunk in (1, 10, 100, 1000) if ctx.quick else (1, 10, 100, 1000, 10_000):
@@ -463,6 +463,7 @@ def run_accuracy(ctx: Context) -> None:
 
 
 def run(ctx: Context) -> None:
+    ctx.headline("block exp, sigma=0, N=1000")  # the shipped integrator, a touch-sized population
     run_throughput(ctx)
     run_accuracy(ctx)
     if ctx.peers:
@@ -478,9 +479,9 @@ SUITE = Suite(
     measures="Neuron-steps/s of the `nlif` block for N = 1 … 100 000, every integrator, with and without "
     "noise, against chunk size and with a post-spike current; spike-time error against an analytic "
     "oracle and CPU per neuron-second for each integrator and dt; membrane noise sd vs dt.",
-    baseline="the block's bare numba kernel on the same chunks (block / kernel: what the block's "
-    "bookkeeping costs); with --peers, Brian2's cython target",
+    baseline="the block's bare numba kernel on the same chunks (a speed-up below 1: what the "
+    "block's bookkeeping costs); with --peers, Brian2's cython target",
     run=run,
-    minutes_quick=1.5,
+    minutes_quick=0.5,
     minutes_full=6.0,
 )
