@@ -31,6 +31,7 @@ from flowtact.bounded_files import FileRefused, NpyHeader, NpzArchive, check_hdf
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.limits import MAX_TICK_S, format_bytes
 from flowtact.params import Config, did_you_mean, param
+from flowtact.safe_text import shown
 
 __all__ = ["Replay", "ReplayConfig"]
 
@@ -205,14 +206,8 @@ class Replay(Source):
         return SpecError("y", f"{self._where()}: {reason}", where=(display(path), 1, 1))
 
     def _inspect_h5(self, path: Path) -> _Source:
-        from flowtact.record import stream_specs
-
         c = self.config
-        check_h5_file(path)
-        try:
-            streams = stream_specs(path)
-        except (OSError, ValueError) as e:
-            raise c.error("path", str(e)) from None
+        streams = h5_streams(path)
         available = listing(list(streams))
         name = c.stream
         if name is None:
@@ -576,6 +571,18 @@ def check_h5_file(path: Path) -> None:
         return  # record.py names the problem
     if count > MAX_STREAMS:
         raise FileRefused(path, f"{count} streams; a replayed recording may hold at most {MAX_STREAMS}")
+
+
+def h5_streams(path: Path) -> dict[str, tuple[StreamSpec, int]]:
+    """The streams of a recording to replay, from its header (:func:`check_h5_file`, then
+    :func:`flowtact.record.stream_specs`); any refusal a :class:`FileRefused` naming the file once."""
+    from flowtact.record import stream_specs
+
+    check_h5_file(path)
+    try:
+        return stream_specs(path)
+    except (OSError, ValueError, KeyError) as e:
+        raise FileRefused(path, str(e).removeprefix(f"{shown(path)}: ")) from None
 
 
 def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> None:

@@ -18,7 +18,7 @@ import numpy as np
 
 from flowtact.block import Block, Example, Source, SpecError, example_folder
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
-from flowtact.blocks.signal.replay import SUFFIXES, Replay, check_h5_file
+from flowtact.blocks.signal.replay import SUFFIXES, Replay, h5_streams
 from flowtact.blocks.signal.replay_limits import MAX_STREAMS, listing
 from flowtact.bounded_files import FileRefused, open_npz, refusal
 from flowtact.chunk import Chunk, StreamSpec
@@ -190,14 +190,7 @@ class ReplayPorts:
         if suffix == ".npz":
             with open_npz(path, MAX_STREAMS) as z:
                 return [n for n in z.names if n != "t"]
-        from flowtact.record import stream_specs
-
-        check_h5_file(path)
-
-        try:
-            return list(stream_specs(path))
-        except (OSError, ValueError, KeyError) as e:
-            raise SpecError(None, f"{self._file()}: {e}") from None
+        return list(h5_streams(path))
 
     def _by_name(self, port: str, suffix: str, names: set[str]) -> str | tuple[str, ...] | None:
         if suffix in (".h5", ".hdf5"):
