@@ -7,11 +7,15 @@ graph, or in a worker process, unchanged. The runtime owns the loop and the cloc
 
 from __future__ import annotations
 
+import atexit
+import functools
 import math
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 
@@ -20,6 +24,9 @@ from flowtact.errors import FlowtactError
 from flowtact.finite import all_finite
 from flowtact.params import Config, param
 from flowtact.presets import apply_preset
+
+if TYPE_CHECKING:
+    from flowtact.runtime.rundir import RunFolder
 
 __all__ = [
     "BadDataConfig",
@@ -30,6 +37,7 @@ __all__ = [
     "Port",
     "Source",
     "SpecError",
+    "example_folder",
     "nonfinite_counter_docs",
     "screen_nonfinite",
 ]
@@ -123,6 +131,29 @@ class Example:
     rate_hz: float = 1000.0
     units: Mapping[str, str] = field(default_factory=dict)
     duration_s: float = 1.0
+
+
+def example_folder() -> Path:
+    """This process's private folder for the files a block's ``example()`` writes (a replay's
+    file, a camera's frames). Made by :func:`flowtact.runtime.rundir.make_run_folder`: 0700 under a
+    random name, so no name another local user could plant in the shared temp directory (a symlink
+    to a file of ours) is ever written through; removed at exit, swept by a later run after a kill."""
+    return Path(_example_run_folder(os.getpid()).path)
+
+
+@functools.cache
+def _example_run_folder(pid: int) -> RunFolder:
+    """One folder per process (``pid`` keys the cache: a forked child makes its own)."""
+    from flowtact.runtime.rundir import make_run_folder
+
+    folder = make_run_folder("example")
+    atexit.register(_remove_example_folder, folder, pid)
+    return folder
+
+
+def _remove_example_folder(folder: RunFolder, pid: int) -> None:
+    if os.getpid() == pid:  # not from a forked child: the folder is its parent's
+        folder.close()
 
 
 def _snake(name: str) -> str:

@@ -2,6 +2,7 @@
 checked (declared size, .npy header, no pickles) before anything is allocated."""
 
 import os
+import struct
 import tracemalloc
 import zipfile
 
@@ -11,6 +12,7 @@ import pytest
 from flowtact.bounded_files import (
     FileRefused,
     check_hdf5_signature,
+    open_npz,
     open_regular,
     read_npz_bounded,
     regular_file,
@@ -51,10 +53,12 @@ def test_a_zip_bomb_is_refused_from_its_declared_size_before_reading(tmp_path):
 
 def test_a_header_that_promises_more_than_the_member_holds_is_refused(tmp_path):
     path = _npz_with_header(tmp_path / "lie.npz", (1 << 40,), bytes(80))
-    with pytest.raises(FileRefused, match=r"declares shape \(1099511627776,\) of float64 \(8.0 TiB\): over"):
+    with pytest.raises(
+        FileRefused, match=r"declares shape \(1099511627776,\) of float64 \(8.0 TiB\) but holds 80"
+    ):
         read_npz_bounded(path)
     path = _npz_with_header(tmp_path / "short.npz", (100,), bytes(80))
-    with pytest.raises(FileRefused, match=r"declares shape \(100,\) of float64 but holds 80 bytes"):
+    with pytest.raises(FileRefused, match=r"declares shape \(100,\) of float64 \(800 B\) but holds 80 bytes"):
         read_npz_bounded(path)
 
 
@@ -100,3 +104,76 @@ def test_the_hdf5_signature_is_checked_from_a_few_bytes(tmp_path):
         check_hdf5_signature(tmp_path / "e.h5")
     (tmp_path / "ub.h5").write_bytes(b"\0" * 512 + b"\x89HDF\r\n\x1a\n" + b"\0" * 100)
     assert check_hdf5_signature(tmp_path / "ub.h5").st_size == 620  # after a 512-byte user block
+
+
+def test_an_archive_is_inspected_header_by_header_then_read_within_a_budget(tmp_path):
+    big = np.arange(1 << 20, dtype="<f8")  # 8 MiB
+    np.savez(tmp_path / "two.npz", t=np.arange(3.0), data=big.reshape(-1, 4))
+    tracemalloc.start()
+    try:
+        with open_npz(tmp_path / "two.npz") as npz:
+            assert npz.names == ("data", "t") and npz.others == ()
+            head = npz.header("data")  # the header alone: no data read
+            assert (head.shape, head.dtype, head.nbytes) == ((1 << 18, 4), np.dtype("<f8"), 8 << 20)
+            assert tracemalloc.get_traced_memory()[1] < 1 << 20
+            with pytest.raises(
+                FileRefused, match=r"member data.npy declares 8.0 MiB: over the 4.0 MiB budget"
+            ):
+                npz.read("data", 4 << 20)
+            assert np.array_equal(npz.read("data", 8 << 20), big.reshape(-1, 4))
+    finally:
+        tracemalloc.stop()
+
+
+def _forge_zip64_end(path, entries: int) -> None:
+    """Make the zip's classic end record claim one member while a zip64 end record, which zipfile
+    reads instead, tells the truth: a check of the classic record alone lets zipfile list them all."""
+    raw = path.read_bytes()
+    end = raw[-22:]
+    _, _, _, _, _, cd_size, cd_offset, _ = struct.unpack("<4s4H2LH", end)
+    at = len(raw) - 22
+    record = struct.pack("<4sQ2H2L4Q", b"PK\x06\x06", 44, 45, 45, 0, 0, entries, entries, cd_size, cd_offset)
+    locator = struct.pack("<4sLQL", b"PK\x06\x07", 0, at, 1)
+    classic = struct.pack("<4s4H2LH", b"PK\x05\x06", 0, 0, 1, 1, 50, cd_offset, 0)
+    path.write_bytes(raw[:at] + record + locator + classic)
+
+
+def test_the_zip64_end_record_zipfile_reads_is_checked_too(tmp_path):
+    path = tmp_path / "z64.npz"
+    with zipfile.ZipFile(path, "w") as z:
+        for i in range(400):
+            z.writestr(f"{i}.npy", b"")
+    _forge_zip64_end(path, 400)
+    with pytest.raises(FileRefused, match=r"lists 400 members in a \d+-byte directory \(at most 16\)"):
+        read_npz_bounded(path, max_members=16)
+
+
+def test_a_npy_header_length_is_checked_before_the_header_is_read(tmp_path):
+    path = tmp_path / "longhead.npz"
+    declared = 48 << 20  # a version 2.0 header may declare up to 4 GiB; numpy reads it all first
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z, z.open("x.npy", "w") as f:
+        f.write(b"\x93NUMPY\x02\x00" + struct.pack("<I", declared))
+        for _ in range(48):
+            f.write(b" " * (1 << 20))
+    tracemalloc.start()
+    try:
+        with pytest.raises(
+            FileRefused, match=f"member x.npy has a {declared}-byte header; a .npy header is at most"
+        ):
+            read_npz_bounded(path)
+        assert tracemalloc.get_traced_memory()[1] < 4 << 20
+    finally:
+        tracemalloc.stop()
+
+
+def test_a_damaged_deflate_stream_is_a_refusal_not_a_traceback(tmp_path):
+    path = tmp_path / "bad.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as z:
+        z.writestr("x.npy", b"\xff" * 200)  # as deflate: a block of the reserved type 3
+    raw = bytearray(path.read_bytes())
+    for sig, at in ((b"PK\x03\x04", 8), (b"PK\x01\x02", 10)):  # mark it deflated in both headers
+        pos = raw.find(sig) + at
+        raw[pos : pos + 2] = struct.pack("<H", zipfile.ZIP_DEFLATED)
+    path.write_bytes(bytes(raw))
+    with pytest.raises(FileRefused, match=r"member x.npy cannot be read \(Error -3 while decompressing"):
+        read_npz_bounded(path)

@@ -5,8 +5,8 @@ Accepted: UTF-8 text (a byte-order mark is fine), columns separated by commas, s
 spaces (whichever the header uses), ``#`` comments and blank lines, ``nan``/``inf`` in data columns.
 Refused, each with ``file:line:col``: a binary or non-UTF-8 file, a header without ``t``, duplicate
 or empty column names, a row with too few or too many values, a cell that is not a number, a time
-that is not finite or that goes back; and, before they are read (:mod:`.replay_limits`), anything
-but a regular file, a file over ``MAX_TEXT_BYTES``, a line over ``MAX_LINE_BYTES``, a header of
+that is not finite or that goes back; and, before they are read (:mod:`.replay_limits`,
+:func:`flowtact.bounded_files.open_regular`), anything but a regular file, a file over ``MAX_TEXT_BYTES``, a line over ``MAX_LINE_BYTES``, a header of
 more than ``MAX_COLUMNS`` columns. The text is streamed: checked a block at a time, then parsed
 by numpy line by line, so memory is the table plus a block.
 """
@@ -25,14 +25,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from flowtact.blocks.signal.replay_limits import (
-    MAX_COLUMNS,
-    MAX_LINE_BYTES,
-    MAX_TEXT_BYTES,
-    ReplayFileError,
-    listing,
-    open_regular,
-)
+from flowtact.blocks.signal.replay_limits import MAX_COLUMNS, MAX_LINE_BYTES, MAX_TEXT_BYTES, listing
+from flowtact.bounded_files import FileRefused, open_regular, refusal
 from flowtact.errors import FlowtactError
 from flowtact.limits import format_bytes
 
@@ -88,24 +82,26 @@ def read_csv_log(path: str | Path) -> CsvLog:
     Bounded before anything is read: a regular file only, at most :data:`MAX_TEXT_BYTES`, lines of
     at most :data:`MAX_LINE_BYTES`, at most :data:`MAX_COLUMNS` columns; the text is streamed.
     """
-    name = display(path)
-    try:
-        with open_regular(path, name) as f:
-            st = os.fstat(f.fileno())
-    except ReplayFileError as e:
-        raise CsvError(name, 1, 1, str(e).removeprefix(f"{name}: ")) from None
+    with _open(path) as f:
+        st = os.fstat(f.fileno())
     return _read(str(path), st.st_mtime_ns, st.st_size)
+
+
+def _open(path: str | Path) -> BinaryIO:
+    """``path`` opened if a regular file, else :class:`CsvError` at its first line."""
+    try:
+        return open_regular(path)
+    except OSError as e:
+        raise CsvError(display(path), 1, 1, refusal(path, e).reason) from None
+    except FileRefused as e:
+        raise CsvError(display(path), 1, 1, e.reason) from None
 
 
 @functools.lru_cache(maxsize=4)
 def _read(path: str, _mtime_ns: int, _size: int) -> CsvLog:
     """One parse per file version: the replay of each port of a node reads the same table."""
     name = display(path)
-    try:
-        raw = open_regular(path, name)
-    except ReplayFileError as e:
-        raise CsvError(name, 1, 1, str(e).removeprefix(f"{name}: ")) from None
-    with raw:
+    with _open(path) as raw:
         size = os.fstat(raw.fileno()).st_size
         if size > MAX_TEXT_BYTES:
             raise CsvError(

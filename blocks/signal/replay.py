@@ -8,39 +8,30 @@ runs unchanged. CSV logs are read by :mod:`.csv_log`; see docs/your-own-data.md.
 
 from __future__ import annotations
 
-import atexit
-import contextlib
-import io
 import math
-import os
-import tempfile
-import zipfile
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source, SpecError
+from flowtact.block import Example, Port, Source, SpecError, example_folder
 from flowtact.blocks.signal.csv_log import CsvError, CsvLog, display, read_csv_log, row_place
 from flowtact.blocks.signal.replay_limits import (
     MAX_CHUNK_BYTES,
-    MAX_NPY_HEADER_BYTES,
     MAX_RATE_HZ,
     MAX_STREAMS,
     REPLAY_BUDGET_BYTES,
-    ReplayFileError,
     budget_text,
-    has_hdf5_signature,
     listing,
-    open_regular,
     rate_problem,
     time_problem,
 )
+from flowtact.bounded_files import FileRefused, NpyHeader, NpzArchive, check_hdf5_signature, open_npz, refusal
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.limits import MAX_TICK_S, format_bytes
 from flowtact.params import Config, did_you_mean, param
+from flowtact.safe_text import shown
 
 __all__ = ["Replay", "ReplayConfig"]
 
@@ -48,6 +39,7 @@ H5_SUFFIXES = (".h5", ".hdf5")
 SUFFIXES = (*H5_SUFFIXES, ".npz", ".csv")
 #: Relative mismatch allowed between a configured rate_hz and the median step of a file's t.
 RATE_TOLERANCE = 0.01
+_DENSITY_BLOCK = 1 << 20  # time stamps searched at a time by Replay._check_density
 
 
 @dataclass(frozen=True)
@@ -203,24 +195,19 @@ class Replay(Source):
                 self._check_times(src.t, path, src.csv)
                 src.spec = src.spec.with_(rate_hz=self._rate(src.t, path))
                 self._check_density(src, src.t, path)
-        except ReplayFileError as e:
-            raise self._refused(path, str(e)) from None
+        except FileRefused as e:
+            raise self._refused(path, e.reason) from None
+        except OSError as e:  # a dangling link, a file that cannot be read
+            raise self._refused(path, refusal(path, e).reason) from None
         return src
 
-    def _refused(self, path: Path, message: str) -> SpecError:
-        """A file-level refusal, located at the file (so the message need not name it again)."""
-        message = message.removeprefix(f"{path}: ")
-        return SpecError("y", f"{self._where()}: {message}", where=(display(path), 1, 1))
+    def _refused(self, path: Path, reason: str) -> SpecError:
+        """A file-level refusal, located at the file (so the reason does not name it)."""
+        return SpecError("y", f"{self._where()}: {reason}", where=(display(path), 1, 1))
 
     def _inspect_h5(self, path: Path) -> _Source:
-        from flowtact.record import stream_specs
-
         c = self.config
-        check_h5_file(path)
-        try:
-            streams = stream_specs(path)
-        except (OSError, ValueError) as e:
-            raise c.error("path", str(e)) from None
+        streams = h5_streams(path)
         available = listing(list(streams))
         name = c.stream
         if name is None:
@@ -231,7 +218,7 @@ class Replay(Source):
             raise c.error("stream", f"must name a stream of {path} (available: {available}); got '{name}'")
         spec, _ = streams[name]
         if spec.rate_hz is not None and (why := rate_problem(spec.rate_hz)):
-            raise ReplayFileError(f"{path}: stream {name} declares rate_hz {spec.rate_hz:g}; a rate {why}")
+            raise FileRefused(path, f"stream {name} declares rate_hz {spec.rate_hz:g}; a rate {why}")
         _check_h5_stream(path, name, spec, self.config.time_offset_s)
         if c.units is not None and c.units != spec.units:
             raise SpecError(
@@ -253,15 +240,14 @@ class Replay(Source):
     def _inspect_npz(self, path: Path) -> _Source:
         c = self.config
         key = c.stream if isinstance(c.stream, str) else "data"
-        with open_npz(path) as z:
-            arrays = npz_arrays(z)
-            if key not in arrays:
+        with open_npz(path, MAX_STREAMS) as z:
+            if key not in z.names:
                 raise c.error(
-                    "stream", f"must name an array of {path} (arrays: {listing(arrays)}); got '{key}'"
+                    "stream", f"must name an array of {path} (arrays: {listing(z.names)}); got '{key}'"
                 )
-            head = _npy_header(z, key, path)
-            has_t = "t" in arrays and key != "t"
-            t_head = _npy_header(z, "t", path) if has_t else None
+            head = _npy_header(z, key)
+            has_t = "t" in z.names and key != "t"
+            t_head = _npy_header(z, "t") if has_t else None
             if len(head.shape) == 0:
                 raise SpecError(
                     "y", f"{self._where()}: array '{key}' in {path} is a scalar; need (n, ...) samples"
@@ -273,11 +259,12 @@ class Replay(Source):
                 )
             need = head.nbytes + 8 * n + (t_head.nbytes if t_head is not None else 0)
             if need > REPLAY_BUDGET_BYTES:  # the data, its time stamps as float64 (and as stored)
-                raise ReplayFileError(
-                    f"{path}: array '{key}' {head.shape} {head.dtype} and its time stamps take "
-                    f"{budget_text(need)}; record long runs to .h5 (played slice by slice)"
+                raise FileRefused(
+                    path,
+                    f"array '{key}' {head.shape} {head.dtype} and its time stamps take "
+                    f"{budget_text(need)}; record long runs to .h5 (played slice by slice)",
                 )
-            t = None if t_head is None else np.asarray(_npy_read(z, t_head, path), np.float64)
+            t = None if t_head is None else np.asarray(z.read("t", REPLAY_BUDGET_BYTES), np.float64)
         if t is None:
             if c.rate_hz is None:
                 raise c.error(
@@ -441,8 +428,10 @@ class Replay(Source):
             try:  # the file as inspected: bounded, no declared size beyond what it stores
                 check_h5_file(path)
                 _check_h5_stream(path, src.h5_stream, src.spec, self.config.time_offset_s)
-            except ReplayFileError as e:
-                raise self._refused(path, str(e)) from None
+            except FileRefused as e:
+                raise self._refused(path, e.reason) from None
+            except OSError as e:
+                raise self._refused(path, refusal(path, e).reason) from None
             f, h = open_stream(path, src.h5_stream)  # every checksum verified: damage refused up front
             t = np.asarray(f.read(h.t, slice(0, h.n)), np.float64)
             end = float(h.attrs.get("end_s", math.nan))
@@ -451,10 +440,13 @@ class Replay(Source):
             self._check_density(src, t, path)
         elif isinstance(src.data, tuple):  # npz, not read yet: its header checked again, then read
             try:
-                with open_npz(src.data[0]) as z:
-                    src.data = _npy_read(z, _npy_header(z, src.data[1], path), path)
-            except ReplayFileError as e:
-                raise self._refused(path, str(e)) from None
+                with open_npz(src.data[0], MAX_STREAMS) as z:
+                    _npy_header(z, src.data[1])
+                    src.data = z.read(src.data[1], REPLAY_BUDGET_BYTES)
+            except FileRefused as e:
+                raise self._refused(path, e.reason) from None
+            except OSError as e:
+                raise self._refused(path, refusal(path, e).reason) from None
         if isinstance(src.data, np.ndarray):
             src.data.flags.writeable = False
         return src
@@ -547,152 +539,19 @@ def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
     return last, (end if math.isfinite(end) else None)
 
 
-# -- .npz: every size a member declares is checked before its data is read --------------------
-
-_DENSITY_BLOCK = 1 << 20  # time stamps searched at a time by Replay._check_density
-_PIECE = 16 << 20  # bytes inflated at a time while reading a .npz member
-_EOCD = b"PK\x05\x06"  # a zip's end-of-central-directory record
-_EOCD64_LOCATOR = b"PK\x06\x07"
-#: Largest zip central directory read (16 MiB: MAX_STREAMS entries with names of 1.5 kB).
-_MAX_DIRECTORY_BYTES = 16 << 20
+# -- .npz: every size a member declares is checked before its data is read (bounded_files) ----
 
 
-@dataclass(frozen=True)
-class _NpyHeader:
-    """One .npy member of a .npz, as its header declares it (checked against the member's size)."""
-
-    member: zipfile.ZipInfo
-    key: str
-    shape: tuple[int, ...]
-    dtype: np.dtype
-    fortran: bool
-    offset: int  # bytes of magic + header before the data
-
-    @property
-    def nbytes(self) -> int:
-        return math.prod(self.shape) * self.dtype.itemsize
-
-
-@contextlib.contextmanager
-def open_npz(path: Path) -> Iterator[zipfile.ZipFile]:
-    """``path`` as a zip archive: a regular file whose directory is bounded (at most
-    :data:`MAX_STREAMS` members, read before zipfile lists them)."""
-    with open_regular(path) as f:
-        _check_zip_directory(f, path)
-        try:
-            z = zipfile.ZipFile(f)
-        except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
-            raise ReplayFileError(f"{path} is not a .npz file (not a readable zip archive: {e})") from None
-        with z:
-            yield z
-
-
-def _check_zip_directory(f: BinaryIO, path: Path) -> None:
-    """Refuse a zip whose end record declares more members or a larger directory than allowed
-    (zipfile would read the whole directory into memory to list it)."""
-    size = os.fstat(f.fileno()).st_size
-    tail_start = max(0, size - (1 << 16) - 22)  # the end record, after a comment of at most 64 KiB
-    f.seek(tail_start)
-    tail = f.read()
-    at = tail.rfind(_EOCD)
-    if at < 0 or len(tail) - at < 22:
-        return  # not a zip: zipfile says so
-    entries = int.from_bytes(tail[at + 10 : at + 12], "little")
-    directory = int.from_bytes(tail[at + 12 : at + 16], "little")
-    if (
-        (entries == 0xFFFF or directory == 0xFFFFFFFF)
-        and at >= 20
-        and tail[at - 20 : at - 16] == _EOCD64_LOCATOR
-    ):
-        f.seek(int.from_bytes(tail[at - 12 : at - 4], "little"))
-        record = f.read(56)
-        if len(record) == 56:
-            entries = int.from_bytes(record[32:40], "little")
-            directory = int.from_bytes(record[40:48], "little")
-    if entries > MAX_STREAMS or directory > _MAX_DIRECTORY_BYTES:
-        raise ReplayFileError(
-            f"{path}: its zip directory declares {entries} members ({directory} bytes); "
-            f"a .npz may hold at most {MAX_STREAMS} arrays"
-        )
-
-
-def npz_arrays(z: zipfile.ZipFile) -> list[str]:
-    """The array names of an open .npz."""
-    return sorted(n[:-4] for n in z.namelist() if n.endswith(".npy"))
-
-
-def _npy_header(z: zipfile.ZipFile, key: str, path: Path) -> _NpyHeader:
-    """Shape and dtype of one array of an open .npz, from its header only, checked: a member
-    stored or deflated (as numpy writes them), a bounded header, numbers (no Python objects), and
-    exactly as many bytes of data as the header declares (a zip never inflates past its declared
-    size, so that size bounds what is read)."""
-    member = z.getinfo(f"{key}.npy")
-    what = f"{path}: array '{key}'"
-    if member.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED) or member.flag_bits & 1:
-        raise ReplayFileError(
-            f"{what} is encrypted or compressed other than numpy writes (stored or deflated)"
-        )
-    try:
-        with z.open(member) as fp:
-            prefix = fp.read(12)
-            major = prefix[6] if len(prefix) >= 10 and prefix[:6] == b"\x93NUMPY" else None
-            if major not in (1, 2):
-                raise ReplayFileError(f"{what} is not a .npy array of a readable version (1.0 or 2.0)")
-            size_len = 2 if major == 1 else 4
-            header_len = int.from_bytes(prefix[8 : 8 + size_len], "little")
-            if header_len > MAX_NPY_HEADER_BYTES:
-                raise ReplayFileError(
-                    f"{what} has a {header_len}-byte header; a .npy header is at most {MAX_NPY_HEADER_BYTES}"
-                )
-            prefix, header = prefix[: 8 + size_len], prefix[8 + size_len :]
-            header += fp.read(header_len - len(header))
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
-        raise ReplayFileError(f"{what} cannot be read ({e})") from None
-    buf = io.BytesIO(prefix + header)
-    read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
-    try:
-        np.lib.format.read_magic(buf)
-        shape, fortran, dtype = read(buf)
-    except (ValueError, SyntaxError, TypeError) as e:
-        raise ReplayFileError(f"{what} has a damaged header ({e})") from None
-    dtype = np.dtype(dtype)
-    if dtype.hasobject:
-        raise ReplayFileError(f"{what} holds Python objects; numbers only")
-    if dtype.itemsize == 0 or dtype.subdtype is not None or dtype.names is not None:
-        raise ReplayFileError(f"{what} is of dtype {dtype}; plain numbers only")
-    head = _NpyHeader(
-        member, key, tuple(int(n) for n in shape), dtype, bool(fortran), len(prefix) + len(header)
-    )
-    if head.offset + head.nbytes != member.file_size:
-        raise ReplayFileError(
-            f"{what} declares shape {head.shape} of {dtype} ({head.nbytes} bytes), but the file holds "
-            f"{member.file_size - head.offset} bytes of data"
-        )
+def _npy_header(z: NpzArchive, key: str) -> NpyHeader:
+    """Array ``key``'s header, checked (:meth:`NpzArchive.header`), within what a replay may hold."""
+    head = z.header(key)
     if head.nbytes > REPLAY_BUDGET_BYTES:
-        raise ReplayFileError(
-            f"{what} {head.shape} {dtype} takes {budget_text(head.nbytes)}; record long runs to .h5 "
-            "(played slice by slice)"
+        raise FileRefused(
+            z.path,
+            f"array '{key}' {head.shape} {head.dtype} takes {budget_text(head.nbytes)}; record long runs "
+            "to .h5 (played slice by slice)",
         )
     return head
-
-
-def _npy_read(z: zipfile.ZipFile, head: _NpyHeader, path: Path) -> np.ndarray:
-    """The data of a checked member, inflated a piece at a time into one array of its declared size."""
-    out = np.empty(head.nbytes, np.uint8)
-    done = 0
-    try:
-        with z.open(head.member) as fp:
-            fp.read(head.offset)
-            while done < head.nbytes and (piece := fp.read(min(_PIECE, head.nbytes - done))):
-                out[done : done + len(piece)] = np.frombuffer(piece, np.uint8)
-                done += len(piece)
-            fp.read(1)  # at the end: the CRC is checked
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as e:
-        raise ReplayFileError(f"{path}: array '{head.key}' cannot be read ({e})") from None
-    if done != head.nbytes:
-        raise ReplayFileError(f"{path}: array '{head.key}' ends after {done} of its {head.nbytes} bytes")
-    data = out.view(head.dtype)
-    return data.reshape(head.shape[::-1]).T if head.fortran else data.reshape(head.shape)
 
 
 # -- .h5: the file and the played stream checked before record.py reads them ---------------------
@@ -703,12 +562,7 @@ def check_h5_file(path: Path) -> None:
     most :data:`MAX_STREAMS` streams (counted before any is listed)."""
     import h5py
 
-    with open_regular(path) as f:
-        if not has_hdf5_signature(f):
-            empty = os.fstat(f.fileno()).st_size == 0
-            raise ReplayFileError(
-                f"{path}: not a readable HDF5 file ({'it is empty' if empty else 'it has no HDF5 signature'})"
-            )
+    check_hdf5_signature(path)
     try:
         with h5py.File(path, "r") as h5:
             group = h5.get("streams")
@@ -716,7 +570,19 @@ def check_h5_file(path: Path) -> None:
     except (OSError, ValueError, RuntimeError):
         return  # record.py names the problem
     if count > MAX_STREAMS:
-        raise ReplayFileError(f"{path}: {count} streams; a replayed recording may hold at most {MAX_STREAMS}")
+        raise FileRefused(path, f"{count} streams; a replayed recording may hold at most {MAX_STREAMS}")
+
+
+def h5_streams(path: Path) -> dict[str, tuple[StreamSpec, int]]:
+    """The streams of a recording to replay, from its header (:func:`check_h5_file`, then
+    :func:`flowtact.record.stream_specs`); any refusal a :class:`FileRefused` naming the file once."""
+    from flowtact.record import stream_specs
+
+    check_h5_file(path)
+    try:
+        return stream_specs(path)
+    except (OSError, ValueError, KeyError) as e:
+        raise FileRefused(path, str(e).removeprefix(f"{shown(path)}: ")) from None
 
 
 def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> None:
@@ -726,30 +592,31 @@ def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> 
 
     with open_recording(path) as f:
         h = stream_header(f, name)
-        what = f"{path}: stream {name}"
+        what = f"stream {name}"
         t, data = h.t, h.data
         if t.ndim != 1 or data.ndim < 1:
-            raise ReplayFileError(f"{what}: datasets of shape {t.shape} (t) and {data.shape} (data)")
+            raise FileRefused(path, f"{what}: datasets of shape {t.shape} (t) and {data.shape} (data)")
         if tuple(data.shape[1:]) != tuple(spec.shape):
-            raise ReplayFileError(
-                f"{what}: data of samples {data.shape[1:]}, but its attributes say {spec.shape}"
+            raise FileRefused(
+                path, f"{what}: data of samples {data.shape[1:]}, but its attributes say {spec.shape}"
             )
         row = math.prod(data.shape[1:]) * data.dtype.itemsize
         if 8 * t.shape[0] > REPLAY_BUDGET_BYTES or row > REPLAY_BUDGET_BYTES:
-            raise ReplayFileError(
+            raise FileRefused(
+                path,
                 f"{what} declares {t.shape[0]} samples of {data.shape[1:]} {data.dtype}: its time stamps "
-                f"alone take {budget_text(max(8 * t.shape[0], row))}"
+                f"alone take {budget_text(max(8 * t.shape[0], row))}",
             )
         for ds in (t, data):
             if (why := _unstored(ds)) is not None:
-                raise ReplayFileError(f"{what}: {ds.name} of shape {ds.shape} {why}")
+                raise FileRefused(path, f"{what}: {ds.name} of shape {ds.shape} {why}")
         end = float(h.attrs.get("end_s", math.nan))
         firsts = [f.read(t, i) for i in ((0, h.n - 1) if h.n else ())]
         for i, value in zip((0, h.n - 1), firsts, strict=False):
             if why := time_problem(float(value) + offset):
-                raise ReplayFileError(f"{what}: t[{i}] = {float(value):.9g} s {why}")
+                raise FileRefused(path, f"{what}: t[{i}] = {float(value):.9g} s {why}")
         if math.isfinite(end) and (why := time_problem(end + offset)):
-            raise ReplayFileError(f"{what}: its end_s {end:.9g} s {why}")
+            raise FileRefused(path, f"{what}: its end_s {end:.9g} s {why}")
 
 
 def _unstored(ds: Any) -> str | None:
@@ -772,21 +639,14 @@ def _unstored(ds: Any) -> str | None:
 
 
 def _example_file() -> Path:
-    """A small .npz (0.4 s of three force channels at 1 kHz), written once per process."""
-    path = Path(tempfile.gettempdir()) / f"flowtact-replay-example-v1-{os.getpid()}.npz"
+    """A small .npz (0.4 s of three force channels at 1 kHz) in this process's private example
+    folder (:func:`flowtact.block.example_folder`), written once."""
+    path = example_folder() / "replay-example.npz"
     if not path.exists():
         i = np.arange(400)
         t = i / 1000.0
         data = np.stack(
             [0.1 * np.sin(2 * np.pi * 5 * t), 0.05 * np.cos(2 * np.pi * 3 * t), 0.12 + 0.0 * t], axis=1
         )
-        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")
-        np.savez(tmp, t=t, data=data)
-        os.replace(tmp, path)
-        atexit.register(remove_quietly, path)
+        np.savez(path, t=t, data=data)
     return path
-
-
-def remove_quietly(path: Path) -> None:
-    with contextlib.suppress(OSError):
-        path.unlink()

@@ -1,6 +1,8 @@
-"""The documented bounds of every replay reader (the ``replay`` block and ``--replay NODE=FILE``),
-and the file checks they share: a replayed file is data from someone else, so every size, count
-and number it declares is checked against these bounds before anything is allocated or played.
+"""The documented bounds of every replay reader (the ``replay`` block and ``--replay NODE=FILE``):
+a replayed file is data from someone else, so every size, count and number it declares is checked
+against these bounds before anything is allocated or played. The file checks themselves (regular
+files only, the HDF5 signature, .npz members' headers and sizes) are :mod:`flowtact.bounded_files`,
+whose :class:`~flowtact.bounded_files.FileRefused` every replay reader raises.
 
 The bounds are generous for real logs and recordings and small enough that a refusal, and a run
 over a file within them, fits in memory: each player holds at most :data:`REPLAY_BUDGET_BYTES`
@@ -11,30 +13,20 @@ slice by slice).
 from __future__ import annotations
 
 import math
-import os
-import stat
-from pathlib import Path
-from typing import BinaryIO
 
-from flowtact.errors import FlowtactError
 from flowtact.limits import STATE_BUDGET_BYTES, format_bytes
 
 __all__ = [
-    "HDF5_SIGNATURE",
     "MAX_CHUNK_BYTES",
     "MAX_COLUMNS",
     "MAX_LINE_BYTES",
-    "MAX_NPY_HEADER_BYTES",
     "MAX_RATE_HZ",
     "MAX_STREAMS",
     "MAX_TEXT_BYTES",
     "MAX_TIME_S",
     "REPLAY_BUDGET_BYTES",
-    "ReplayFileError",
     "budget_text",
-    "has_hdf5_signature",
     "listing",
-    "open_regular",
     "rate_problem",
     "time_problem",
 ]
@@ -63,9 +55,6 @@ MAX_CHUNK_BYTES = 64 << 20
 """Largest HDF5 chunk of a replayed stream (64 MiB; flowtact writes 64 kB, or one sample when a
 sample is larger): HDF5 inflates a whole chunk to read one value from it."""
 
-MAX_NPY_HEADER_BYTES = 10_000
-"""Longest .npy header in a .npz (numpy's own ``max_header_size``), checked before it is read."""
-
 MAX_TIME_S = 1e6
 """Largest time stamp (in magnitude, ``time_offset_s`` included) a replayed file may carry:
 1e6 s, 11.6 days of graph time. Graph time starts at 0 and a run over a file lasts until its end,
@@ -76,61 +65,6 @@ MAX_RATE_HZ = 1e6
 """Highest sample rate (1 MHz) a replayed file may give (1 / its median time step) or declare
 (a recording's ``rate_hz``): above every tactile sensor's, and blocks downstream size their
 buffers by their input's rate."""
-
-HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-"""The 8 bytes an HDF5 file starts with, at offset 0 or 512, 1024, 2048, ... (after a user block)."""
-
-
-class ReplayFileError(FlowtactError, ValueError):
-    """A replayed file refused by a bound or a check here; the message names the file."""
-
-
-def open_regular(path: str | Path, shown: str | None = None) -> BinaryIO:
-    """``path`` opened for binary reading, refusing anything but a regular file (a FIFO, a device,
-    a socket or a folder) without blocking on it: the file is opened non-blocking and the open
-    descriptor is checked, so a file swapped in between cannot slip through."""
-    shown = shown or str(path)
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
-    except FileNotFoundError:
-        raise ReplayFileError(f"{shown}: no such file") from None
-    except OSError as e:
-        raise ReplayFileError(f"{shown}: cannot be read ({e.strerror})") from None
-    try:
-        mode = os.fstat(fd).st_mode
-        if not stat.S_ISREG(mode):
-            raise ReplayFileError(f"{shown}: not a regular file ({_kind(mode)}); replay reads files only")
-        os.set_blocking(fd, True)
-        return open(fd, "rb", closefd=True)  # the caller closes it
-    except BaseException:
-        os.close(fd)
-        raise
-
-
-def _kind(mode: int) -> str:
-    for test, what in (
-        (stat.S_ISDIR, "a folder"),
-        (stat.S_ISFIFO, "a FIFO"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-        (stat.S_ISSOCK, "a socket"),
-    ):
-        if test(mode):
-            return what
-    return "not a file"
-
-
-def has_hdf5_signature(f: BinaryIO) -> bool:
-    """Whether ``f`` holds the HDF5 signature where HDF5 looks for it (offset 0, 512, 1024, ...):
-    a few 8-byte reads, never the whole file."""
-    size = os.fstat(f.fileno()).st_size
-    offset = 0
-    while offset + len(HDF5_SIGNATURE) <= size:
-        f.seek(offset)
-        if f.read(len(HDF5_SIGNATURE)) == HDF5_SIGNATURE:
-            return True
-        offset = 512 if offset == 0 else 2 * offset
-    return False
 
 
 def budget_text(nbytes: int) -> str:

@@ -9,27 +9,18 @@ which is how graphs, workers and recordings name it.
 
 from __future__ import annotations
 
-import atexit
 import functools
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from flowtact.block import Block, Example, Source, SpecError
+from flowtact.block import Block, Example, Source, SpecError, example_folder
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
-from flowtact.blocks.signal.replay import (
-    SUFFIXES,
-    Replay,
-    check_h5_file,
-    npz_arrays,
-    open_npz,
-    remove_quietly,
-)
-from flowtact.blocks.signal.replay_limits import ReplayFileError, listing
+from flowtact.blocks.signal.replay import SUFFIXES, Replay, h5_streams
+from flowtact.blocks.signal.replay_limits import MAX_STREAMS, listing
+from flowtact.bounded_files import FileRefused, open_npz, refusal
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, ConfigError, did_you_mean, param
 from flowtact.registry import UnknownBlockError, load_block
@@ -139,8 +130,10 @@ class ReplayPorts:
         suffix = path.suffix.lower()
         try:
             names = self._names(path, suffix)
-        except ReplayFileError as e:
-            raise SpecError(None, str(e).removeprefix(f"{path}: "), where=(self._file(), 1, 1)) from None
+        except FileRefused as e:
+            raise SpecError(None, e.reason, where=(self._file(), 1, 1)) from None
+        except OSError as e:  # a dangling link, a file that cannot be read
+            raise SpecError(None, refusal(path, e).reason, where=(self._file(), 1, 1)) from None
         known = set(names)
         what = {".csv": "column", ".npz": "array"}.get(suffix, "stream")
         explicit = parse_port_map(c.ports)
@@ -195,16 +188,9 @@ class ReplayPorts:
             except CsvError as e:
                 raise SpecError(None, e.message, where=e.where) from None
         if suffix == ".npz":
-            with open_npz(path) as z:
-                return [n for n in npz_arrays(z) if n != "t"]
-        from flowtact.record import stream_specs
-
-        check_h5_file(path)
-
-        try:
-            return list(stream_specs(path))
-        except (OSError, ValueError, KeyError) as e:
-            raise SpecError(None, f"{self._file()}: {e}") from None
+            with open_npz(path, MAX_STREAMS) as z:
+                return [n for n in z.names if n != "t"]
+        return list(h5_streams(path))
 
     def _by_name(self, port: str, suffix: str, names: set[str]) -> str | tuple[str, ...] | None:
         if suffix in (".h5", ".hdf5"):
@@ -329,8 +315,9 @@ def __getattr__(name: str) -> type[Source]:
 
 
 def _example_csv(block: type[Block]) -> Path:
-    """0.4 s at 1 kHz of every fixed-shape sample port of ``block``, columns named as found by default."""
-    path = Path(tempfile.gettempdir()) / f"flowtact-replay-ports-{block.name}-v1-{os.getpid()}.csv"
+    """0.4 s at 1 kHz of every fixed-shape sample port of ``block``, columns named as found by
+    default, in this process's private example folder (:func:`flowtact.block.example_folder`)."""
+    path = example_folder() / f"replay-ports-{block.name}.csv"
     if not path.exists():
         t = np.arange(400) / 1000.0
         cols: dict[str, np.ndarray] = {"t": t}
@@ -341,10 +328,7 @@ def _example_csv(block: type[Block]) -> Path:
             for i in range(max(n, 1)):
                 name = f"{port}[{i}]" if n else port
                 cols[name] = np.round(np.sin(2 * np.pi * (3 + k) * t + i), 6)
-        tmp = path.with_name(f"{path.name}.tmp")
         np.savetxt(
-            tmp, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments=""
+            path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments=""
         )
-        os.replace(tmp, path)
-        atexit.register(remove_quietly, path)
     return path

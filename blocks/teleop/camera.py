@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source
+from flowtact.block import Example, Port, Source, example_folder
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
 from flowtact.limits import MAX_TICK_S
@@ -344,16 +344,16 @@ class Camera(Source):
 
 
 def _example_folders() -> list[str]:
-    """Three small image folders (8 emulated TacTip frames each, 160×120 PGM) in the temp dir.
+    """Three small image folders (8 emulated TacTip frames each, 160×120 PGM) in this process's
+    private example folder (:func:`flowtact.block.example_folder`; never a fixed name in the shared
+    temp directory, which another user could plant as a symlink), written once per process.
 
-    Written once, atomically, with numpy only (no OpenCV needed to write them); a rest frame then
-    taps of rising force, so the example shows moving pins and exercises the resize.
+    Written with numpy only (no OpenCV needed to write them); a rest frame then taps of rising
+    force, so the example shows moving pins and exercises the resize.
     """
-    import tempfile
-
     from .tactip_sim import render, scenario_contacts
 
-    root = Path(tempfile.gettempdir()) / "flowtact-camera-example-v1"
+    root = example_folder() / "camera"
     names = [str(root / f) for f in FINGERS]
     if all((Path(d) / "frame_007.pgm").is_file() for d in names):
         return names
@@ -364,8 +364,5 @@ def _example_folders() -> list[str]:
     for s, d in enumerate(names):
         Path(d).mkdir(parents=True, exist_ok=True)
         for k in range(8):
-            target = Path(d) / f"frame_{k:03d}.pgm"
-            tmp = target.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_bytes(b"P5\n160 120\n255\n" + small[k, s].tobytes())
-            os.replace(tmp, target)
+            (Path(d) / f"frame_{k:03d}.pgm").write_bytes(b"P5\n160 120\n255\n" + small[k, s].tobytes())
     return names
