@@ -311,7 +311,7 @@ def replay_h5_huge_declared(folder: Path) -> tuple[list[str], str]:
         streams = f.create_group("streams")
         _h5_stream(streams.create_group("sensor.r"), 1 << 40, (4,))
         _h5_stream(streams.create_group("sensor.ref"), 1 << 40, ())
-    return ["run", TOUCH, "--fast", "--replay", f"sensor={path}"], "declares 1099511627776 samples"
+    return ["run", TOUCH, "--fast", "--replay", f"sensor={path}"], "declares 1,099,511,627,776 values"
 
 
 def replay_h5_many_streams(folder: Path) -> tuple[list[str], str]:
