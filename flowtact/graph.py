@@ -30,7 +30,7 @@ from flowtact.limits import (
     run_ticks_problem,
 )
 from flowtact.located import GraphError, GraphErrors, Loc, Located
-from flowtact.param_paths import resolve_path, resolve_paths
+from flowtact.param_paths import graph_folder, path_fields, resolve_path, resolve_value
 from flowtact.params import ConfigError, did_you_mean
 from flowtact.registry import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
 from flowtact.replay_spec import parse_port_map, split_replay
@@ -149,6 +149,26 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     return m.group(1), m.group(2), value
 
 
+def _resolved(
+    config_cls: type,
+    params: Mapping[str, Any],
+    bases: Mapping[str, Path],
+    locs: Mapping[str, Loc],
+    node: str,
+    errors: list[GraphError],
+) -> dict[str, Any]:
+    """``params`` with path fields resolved (:mod:`flowtact.param_paths`), each against its own
+    base; a name that cannot be resolved (a bad ``pkg:``) is an error at its place, kept as written."""
+    fields = path_fields(config_cls)
+    out = dict(params)
+    for k in fields & set(params):
+        try:
+            out[k] = resolve_value(params[k], bases[k])
+        except ValueError as e:
+            errors.append(GraphError(locs[k], f"node '{node}': '{k}': {e}"))
+    return out
+
+
 def load_graph(
     source: str | Path,
     *,
@@ -245,7 +265,12 @@ def _apply_replays(
                 GraphError(loc, f"{where}: {why}", f"outputs of {cls.name}: {', '.join(cls.outputs)}")
             )
             continue
-        planned[name] = (loc, str(ndoc["block"]), resolve_path(path, Path.cwd()), mapping)
+        try:
+            resolved = resolve_path(path, Path.cwd())
+        except ValueError as e:
+            errors.append(GraphError(loc, f"{where}: {e}"))
+            continue
+        planned[name] = (loc, str(ndoc["block"]), resolved, mapping)
     if not planned:
         return
     _drop_edges_into(doc, y, set(planned))
@@ -464,11 +489,12 @@ def _node(
             GraphError(y.loc("nodes", name, "params"), f"node '{name}': 'params' must be a mapping")
         )
         return None
-    params = resolve_paths(cls.config_cls, params, Path(y.path).parent)  # paths: beside the graph file
     param_locs = {k: y.loc("nodes", name, "params", k) for k in params}
+    folder = graph_folder(y.path)  # paths: beside the graph file (its real folder)
+    params = _resolved(cls.config_cls, params, {k: folder for k in params}, param_locs, name, errors)
     for k, (value, sloc) in sets.items():
-        params[k] = resolve_paths(cls.config_cls, {k: value}, Path.cwd())[k]  # --set: from here
-        param_locs[k] = sloc
+        param_locs[k] = sloc  # --set: from here
+        params.update(_resolved(cls.config_cls, {k: value}, {k: Path.cwd()}, param_locs, name, errors))
     process = ndoc.get("process")
     if process is not None and not (isinstance(process, str) and NAME_RE.match(process)):
         errors.append(
