@@ -249,8 +249,22 @@ def _replays(items: Sequence[str]) -> dict[str, str]:
     return out
 
 
+def _import_beside_graph(graph: str, modules: Sequence[str]) -> None:
+    """Let an allowed module written beside the graph file import (``envelope.py`` for
+    ``--allow-module envelope``): the graph's real folder goes at the END of ``sys.path`` (an
+    installed module of the same name still wins), and workers inherit it. Nothing happens without
+    ``--allow-module``: a graph alone never makes its folder importable."""
+    from flowtact.graph import local_module_folder
+
+    folder = local_module_folder(graph, modules) if modules else None
+    if folder is not None and str(folder) not in sys.path:
+        sys.path.append(str(folder))
+
+
 def _plan(args: argparse.Namespace) -> Any:
     from flowtact.launch import load_plan
+
+    _import_beside_graph(args.graph, args.allow_modules)
 
     return load_plan(
         args.graph,

@@ -136,6 +136,21 @@ def resolve_graph_path(name: str | Path) -> Path:
     return Path(str(packaged)) if packaged.is_file() else p
 
 
+def local_module_folder(graph: str | Path, modules: Iterable[str]) -> Path | None:
+    """The graph file's real folder when it holds one of ``modules`` (``NAME.py`` or a package
+    ``NAME/``), else None: where ``flowtact run GRAPH --allow-module NAME`` finds a block written
+    beside the graph. Only modules the user allowed by name are looked for."""
+    path = Path(graph)
+    if not path.is_file():
+        return None
+    folder = graph_folder(path)
+    for module in modules:
+        top = module.partition(".")[0]
+        if (folder / f"{top}.py").is_file() or (folder / top / "__init__.py").is_file():
+            return folder
+    return None
+
+
 def parse_override(text: str) -> tuple[str, str, Any]:
     """``node.param=value`` -> (node, param, value parsed as a YAML scalar)."""
     m = re.match(r"^\s*([^.=\s]+)\.([^=\s]+)\s*=(.*)$", text)

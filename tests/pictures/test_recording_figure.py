@@ -437,3 +437,27 @@ def test_too_many_events_for_ticks_become_counts_that_add_up(recording, monkeypa
     assert ax.get_title(loc="left").startswith(
         "pop.spikes — spike raster as counts per 1 ms bin (white 0, black"
     )
+
+
+def test_a_blocks_own_event_stream_is_drawn_with_its_name_and_labels(tmp_path):
+    """Events that are not spikes (a block's crossings) are called events, not spikes, and their
+    unit labels name the raster rows and the rate lines, also when the block left n_units unset."""
+    path = tmp_path / "events.h5"
+    specs = {
+        "det.crossings": StreamSpec("int64", (), "1", None, events=True, n_units=2, labels=("rise", "fall")),
+        "det.marks": StreamSpec("int64", (), "1", None, events=True, labels=("up", "down", "flat")),
+    }
+    with Recorder(path, specs, {}) as rec:
+        rec.write("det.crossings", Chunk(np.array([0.1, 0.2, 0.3]), np.array([0, 1, 0]), end=1.0))
+        rec.write("det.marks", Chunk(np.array([0.1, 0.5]), np.array([2, 1]), end=1.0))
+    fig = recording_figure(path)
+    raster = _one(fig, "det.crossings", "raster")
+    assert raster.get_title(loc="left") == "det.crossings — event raster: 3 events on 2 units"
+    assert [t.get_text() for t in raster.get_yticklabels()] == ["rise", "fall"]
+    rate = _one(fig, "det.crossings", "rate")
+    assert rate.get_title(loc="left").startswith("det.crossings — event rate per unit")
+    assert _legend(rate) == ["rise", "fall"]
+    marks = _one(fig, "det.marks", "raster")  # no n_units: one row per label, none dropped
+    assert [t.get_text() for t in marks.get_yticklabels()] == ["up", "down", "flat"]
+    assert _legend(_one(fig, "det.marks", "rate")) == ["up", "down", "flat"]
+    assert not [t for t in _all_text(fig) if "spike" in t or "firing" in t]
