@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from doc_pages import bash_blocks, run_in_clean_shell
 
 ROOT = Path(__file__).parent.parent
 DOC = ROOT / "docs" / "your-own-data.md"
@@ -26,18 +27,9 @@ def quoted(after: str) -> str:
 def walked(tmp_path_factory):
     here = tmp_path_factory.mktemp("walk")
     (here / "graphs").symlink_to(ROOT / "graphs")
-    env_bin = str(Path(sys.executable).parent)
     results = []
-    for cmd in blocks("bash"):
-        proc = subprocess.run(
-            ["bash", "-e", "-c", cmd],
-            cwd=here,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            env={"PATH": f"{env_bin}:/usr/bin:/bin", "HOME": str(here)},
-        )
-        results.append((cmd, proc))
+    for cmd in bash_blocks(DOC):
+        results.append((cmd, run_in_clean_shell(cmd, here, timeout=300)))
     return here, results
 
 
