@@ -20,6 +20,7 @@ import json
 import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -456,6 +457,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``flowtact`` command: its exit status (see the module notes)."""
     from flowtact.debug import ENV, debug_enabled
 
+    as_program = argv is None  # the process's own command line: its exit status is ours to keep
     argv = list(sys.argv[1:] if argv is None else argv)
     plugins = plugin_commands()
     debug = argv[:1] == ["--debug"] and len(argv) > 1 and argv[1] in plugins
@@ -465,7 +467,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if debug:
             os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
         try:
-            return run_command(lambda: _plugin(plugins[argv[0]], argv[1:]), prog=f"flowtact {argv[0]}")
+            return _decided(
+                run_command(lambda: _plugin(plugins[argv[0]], argv[1:]), prog=f"flowtact {argv[0]}"),
+                as_program,
+            )
         finally:  # main() called in process leaves the environment as it found it
             if debug and before is None:
                 del os.environ[ENV]
@@ -475,7 +480,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "plot" and args.t0 is not None and args.t1 is not None and not args.t0 < args.t1:
         parser.error(f"plot: --from ({args.t0:g}) must be before --to ({args.t1:g})")
-    return run_command(lambda: COMMANDS[args.command](args), debug=debug_enabled(args.debug))
+    return _decided(
+        run_command(lambda: COMMANDS[args.command](args), debug=debug_enabled(args.debug)), as_program
+    )
+
+
+def _decided(status: int, as_program: bool) -> int:
+    """``status``, final: as the program, a Ctrl-C arriving from here on (while the interpreter
+    exits: threads joined, files closed) is ignored, so a finished run's 0 does not become -2
+    (killed by SIGINT) after its full summary. Called in-process (``main([...])``), nothing changes."""
+    if as_program and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return status
 
 
 def _plugin(ep: Any, argv: list[str]) -> int:
