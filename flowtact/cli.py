@@ -41,7 +41,14 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = CommandParser(prog="flowtact", description=__doc__.splitlines()[0])
+    from flowtact.rst_text import inline_text
+
+    p = CommandParser(
+        prog="flowtact",
+        description=inline_text(__doc__.splitlines()[0]),
+        epilog="Each command's own options and examples: flowtact COMMAND --help. Shell completion: "
+        'eval "$(register-python-argcomplete flowtact)" (see the README).',
+    )
     p.add_argument("--version", action="version", version=f"flowtact {_version()}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -71,7 +78,14 @@ def _parser() -> argparse.ArgumentParser:
         )
         add_allow_module(sp)
 
-    run = sub.add_parser("run", help="run a graph")
+    run = sub.add_parser(
+        "run",
+        help="run a graph",
+        description="Run a graph: in real time (default) or as fast as possible (--fast), in worker "
+        "processes (one per process group) or all in this one (--inproc); record streams to HDF5.",
+        epilog=RUN_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     graph_args(run)
     run.add_argument(
         "--duration",
@@ -118,9 +132,11 @@ def _parser() -> argparse.ArgumentParser:
     blocks = sub.add_parser("blocks", help="list the block catalogue, or document one block")
     blocks.add_argument("name", nargs="?", help="block name")
 
-    draw = sub.add_parser("graph", help="draw a graph (pruned parts greyed) as .svg, .png or .dot")
+    draw = sub.add_parser("graph", help="draw a graph (pruned parts greyed) as .svg, .png, .pdf or .dot")
     graph_args(draw)
-    draw.add_argument("-o", "--output", required=True, help="output file: .svg, .png or .dot")
+    draw.add_argument(
+        "-o", "--output", required=True, help="output file: .svg, .png, .pdf, or .dot (Graphviz source)"
+    )
 
     plot = sub.add_parser(
         "plot",
@@ -178,6 +194,16 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+RUN_EXAMPLES = """examples:
+  flowtact run touch                                   # a shipped graph by name, in real time
+  flowtact run graphs/touch.yaml --fast --duration 3 --record touch.h5
+  flowtact run touch.h5 --fast                         # re-run what a recording was made with
+  flowtact run touch --replay sensor=touch.h5 --fast   # feed a recorded sensor back in
+  flowtact run graphs/slip.yaml --set sa1.n=200 --set sa1_stim.max_units=200 --fast
+  flowtact run envelope.yaml --allow-module envelope   # a graph using your own block (envelope.py)
+
+Ctrl-C stops a run cleanly: the recording is closed and the summary printed."""
+
 PLUGIN_GROUP = "flowtact.commands"
 DEBUG_HELP = "on failure, print the full Python traceback after the error (also: FLOWTACT_DEBUG=1)"
 
@@ -190,19 +216,45 @@ def plugin_commands() -> dict[str, Any]:
 
 
 def _plugin_help(ep: Any) -> str:
-    """A plugin command's help line: the first line of its module's docstring (cheap: no heavy import)."""
+    """A plugin command's help line: its module's summary (:func:`entry_point_summary`)."""
+    return entry_point_summary(ep)
+
+
+def entry_point_summary(ep: Any) -> str:
+    """An entry point's one-line summary for help lists: the first sentence of its module's
+    docstring as plain text (reST markup gone, :func:`flowtact.rst_text.inline_text`), without a
+    leading ``flowtact NAME ...:`` or trailing ``: flowtact NAME`` that repeats the name beside
+    it. Cheap: the module is parsed, not imported."""
+    import ast
     import importlib.util
 
-    spec = importlib.util.find_spec(ep.value.partition(":")[0])
-    if spec is None or spec.origin is None:
-        return "(not importable)"
-    import ast
+    from flowtact.rst_text import inline_text
 
     try:
+        spec = importlib.util.find_spec(ep.value.partition(":")[0])
+    except (ImportError, ValueError):
+        spec = None
+    if spec is None or spec.origin is None:
+        return "(not importable)"
+    try:
         doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text()))
-    except (OSError, SyntaxError):
+    except (OSError, SyntaxError, ValueError):
         doc = None
-    return (doc or ep.value).splitlines()[0]
+    return one_line_summary(inline_text(doc or ep.value))
+
+
+def one_line_summary(text: str) -> str:
+    """The first sentence of ``text`` (its first paragraph joined), without a ``flowtact ...:``
+    prefix or a ``: flowtact ...`` suffix, its first letter lower-cased as argparse's own help is."""
+    import re
+
+    para = " ".join(text.strip().split("\n\n", 1)[0].split())
+    first = re.split(r"(?<=[a-z0-9)])\. ", para, maxsplit=1)[0].rstrip(".")
+    first = re.sub(r"^flowtact [\w-]+[^:]*:\s*", "", first)
+    first = re.sub(r":\s*flowtact [\w-]+[^:]*$", "", first)
+    if first[:1].isupper() and first[1:2].islower():
+        first = first[0].lower() + first[1:]
+    return first
 
 
 def _module_name(text: str) -> str:

@@ -44,8 +44,10 @@ __all__ = [
     "Loc",
     "NodeDef",
     "load_graph",
+    "missing_graph_error",
     "parse_override",
     "resolve_graph_path",
+    "shipped_graphs",
 ]
 
 TOP_KEYS = (
@@ -125,6 +127,13 @@ class Graph:
     rows load the graph's blocks with exactly this permission, never one the file gives itself."""
 
 
+def shipped_graphs() -> list[str]:
+    """Names of the graphs shipped with flowtact (``flowtact run NAME`` finds them)."""
+    from importlib.resources import files
+
+    return sorted(p.name[:-5] for p in files("flowtact.graphs").iterdir() if p.name.endswith(".yaml"))
+
+
 def resolve_graph_path(name: str | Path) -> Path:
     """A graph file path; a bare name such as ``touch`` also finds the graphs shipped with flowtact."""
     p = Path(name)
@@ -134,6 +143,30 @@ def resolve_graph_path(name: str | Path) -> Path:
 
     packaged = files("flowtact.graphs") / f"{name}.yaml"
     return Path(str(packaged)) if packaged.is_file() else p
+
+
+def missing_graph_error(path: str) -> GraphError:
+    """A graph file that is not there, with the closest graph file beside it or shipped graph name
+    (``flowtact run touhc`` -> did you mean 'touch'?) and the shipped graphs as the hint."""
+    import difflib
+
+    p = Path(path)
+    shipped = shipped_graphs()
+    bare = not p.suffix and "/" not in path
+    try:
+        beside = sorted(q.name for q in p.parent.glob("*.y*ml"))[:500] if p.parent.is_dir() else []
+    except OSError:
+        beside = []
+    names = shipped if bare else sorted({*beside, *(f"{n}.yaml" for n in shipped)} if beside else beside)
+    close = difflib.get_close_matches(p.name, names, n=1, cutoff=0.6)
+    guess = ""
+    if close:
+        guess = f" (did you mean '{close[0] if bare else p.parent / close[0]}'?)"
+    return GraphError(
+        Loc(path),
+        f"no such graph file{guess}",
+        f"shipped graphs, run by name (flowtact run touch): {', '.join(shipped)}",
+    )
 
 
 def local_module_folder(graph: str | Path, modules: Iterable[str]) -> Path | None:
@@ -214,6 +247,8 @@ def load_graph(
         root = compose(text)
     except SafeYamlError as e:
         raise GraphErrors([GraphError(Loc(path, e.line, e.col), e.message, e.hint)]) from None
+    except FileNotFoundError:
+        raise GraphErrors([missing_graph_error(path)]) from None
     except OSError as e:
         raise GraphErrors([GraphError(Loc(path), f"cannot read graph file: {e.strerror or e}")]) from None
     if root is None:
