@@ -242,6 +242,21 @@ def _count(n: int, word: str) -> str:
     return f"{n:,} {word}{'s' if n != 1 else ''}"
 
 
+#: Most row labels a heat map writes out; beyond, every k-th (a label per row would overlap).
+MAX_HEATMAP_LABELS = 40
+
+
+def _heatmap_rows(ax: Any, p: Panel, labelled: bool) -> None:
+    """Name a heat map's rows: every row up to 24; a labelled stream's rows (a posterior over 26
+    letters) up to :data:`MAX_HEATMAP_LABELS` in smaller type, then every k-th label; else numbers."""
+    n = len(p.channels)
+    if n <= 24:
+        ax.set_yticks(range(n), list(p.names), fontsize=6)
+    elif labelled:
+        step = -(-n // MAX_HEATMAP_LABELS)
+        ax.set_yticks(range(0, n, step), list(p.names)[::step], fontsize=5 if step == 1 else 6)
+
+
 def _draw_heatmap(ax: Any, p: Panel, t0: float, t1: float) -> None:
     s = p.source
     i, j = index_range(s, t0, t1)
@@ -253,8 +268,7 @@ def _draw_heatmap(ax: Any, p: Panel, t0: float, t1: float) -> None:
         bar = ax.figure.colorbar(im, ax=ax, pad=0.01, fraction=0.03)
         bar.set_label(pretty_units(p.units), fontsize=8)
     ax.set_ylabel("channel", fontsize=8)
-    if len(p.channels) <= 24:
-        ax.set_yticks(range(len(p.channels)), list(p.names), fontsize=6)
+    _heatmap_rows(ax, p, labelled=bool(s.spec.labels))
     note = f"; each cell the mean of {env.per_point} samples" if env.per_point > 1 else ""
     note += _missing(ax, env, p.channels)
     unit = pretty_units(p.units)

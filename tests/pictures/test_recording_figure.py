@@ -461,3 +461,19 @@ def test_a_blocks_own_event_stream_is_drawn_with_its_name_and_labels(tmp_path):
     assert [t.get_text() for t in marks.get_yticklabels()] == ["up", "down", "flat"]
     assert _legend(_one(fig, "det.marks", "rate")) == ["up", "down", "flat"]
     assert not [t for t in _all_text(fig) if "spike" in t or "firing" in t]
+
+
+def test_a_posterior_over_26_letters_names_its_rows_by_letter(tmp_path):
+    """The Braille decoder's posterior (26 labelled channels, more than the 24 always written out)
+    is a heat map whose rows read a..z, not 0..25."""
+    import string
+
+    path = tmp_path / "post.h5"
+    letters = tuple(string.ascii_lowercase)
+    specs = {"decoder.posterior": StreamSpec("float64", (26,), "1", None, labels=letters)}
+    rng = np.random.default_rng(0)
+    with Recorder(path, specs, {}) as rec:
+        p = rng.dirichlet(np.ones(26), size=30)
+        rec.write("decoder.posterior", Chunk(np.arange(30) * 0.1, p, end=3.0))
+    heat = _one(recording_figure(path), "decoder.posterior", "heat map")
+    assert [t.get_text() for t in heat.get_yticklabels()] == list(letters)
