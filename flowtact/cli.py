@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK  (shell completion: eval "$(register-python-argcomplete flowtact)")
 """The ``flowtact`` command: run, validate, draw and document graphs; list blocks; plot recordings.
 
 Every command, the plugins' (``flowtact.commands``) included, fails the same way
@@ -53,9 +54,10 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def graph_args(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument(
+        graph = sp.add_argument(
             "graph", help="graph file (.yaml), a shipped graph name (touch, slip), or a recording (.h5)"
         )
+        graph.completer = _complete_graph  # type: ignore[attr-defined]
         sp.add_argument(
             "--set",
             dest="overrides",
@@ -255,6 +257,17 @@ def one_line_summary(text: str) -> str:
     if first[:1].isupper() and first[1:2].islower():
         first = first[0].lower() + first[1:]
     return first
+
+
+def _complete_graph(prefix: str, **_kwargs: Any) -> list[str]:
+    """Shell completion of a graph argument: the shipped graph names, and .yaml/.h5 files and
+    folders under the prefix (argcomplete's file completer)."""
+    from argcomplete.completers import FilesCompleter
+
+    from flowtact.graph import shipped_graphs
+
+    names = [n for n in shipped_graphs() if n.startswith(prefix)]
+    return names + list(FilesCompleter(allowednames=("yaml", "yml", "h5"))(prefix))
 
 
 def _module_name(text: str) -> str:
@@ -529,6 +542,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             elif debug:
                 os.environ[ENV] = before  # type: ignore[assignment]
     parser = _parser()
+    if as_program and "_ARGCOMPLETE" in os.environ:  # the shell asks for completions: answer, exit
+        import argcomplete
+
+        argcomplete.autocomplete(parser)
     args = parser.parse_args(argv)
     if args.command == "plot" and args.t0 is not None and args.t1 is not None and not args.t0 < args.t1:
         parser.error(f"plot: --from ({args.t0:g}) must be before --to ({args.t1:g})")
