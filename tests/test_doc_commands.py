@@ -91,3 +91,14 @@ def test_every_command_of_the_page_runs_as_written(page, user_folder):
             if done.returncode != 0 or "Traceback" in done.stderr:
                 failures.append(f"$ {todo}\n(exit {done.returncode})\n{done.stderr[-2000:]}")
     assert ran >= 2 and not failures, "\n\n".join(failures)
+
+
+def test_the_readme_layout_names_every_graph_page_and_block_family():
+    layout = (ROOT / "README.md").read_text().split("## Layout", 1)[1].split("\n## ", 1)[0]
+    graphs = [p.name for p in (ROOT / "graphs").glob("*.yaml")]
+    pages_ = [p.name for p in (ROOT / "docs").glob("*.md")]
+    families = [p.name for p in (ROOT / "blocks").iterdir() if (p / "__init__.py").is_file()]
+    missing = [n for n in graphs + pages_ if n not in layout]
+    missing += [f for f in families if f"{f}/" not in layout]
+    assert {"braille.yaml", "braille_open.yaml"} <= set(graphs) and "braille" in families
+    assert not missing, f"README's layout omits {missing}"

@@ -109,13 +109,12 @@ def test_every_readme_command_runs(tmp_path):
     for cmd in readme_commands():
         if cmd in CI_OWN:
             continue
-        words = argv(cmd)
         ready = SERVES.get(cmd)
         if ready:
-            code, out = serve_then_stop(words, ready, work)
+            code, out = serve_then_stop(argv(cmd), ready, work)
         else:
             proc = subprocess.run(
-                words,
+                ["bash", "-e", "-c", cmd],  # as typed in a shell (eval, quotes, pipes)
                 cwd=work,
                 env=env,
                 stdin=subprocess.DEVNULL,
