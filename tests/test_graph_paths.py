@@ -69,7 +69,8 @@ def test_a_bad_package_name_is_refused_at_its_place(tmp_path, name, why):
     with pytest.raises(GraphErrors) as info:
         load_graph(tmp_path / "g.yaml")
     (err,) = info.value.errors
-    assert why in str(err) and "g.yaml:28:" in str(err) and "'model'" in str(err)
+    line = 1 + next(i for i, ln in enumerate(text.splitlines()) if ln.strip().startswith("decoder:"))
+    assert why in str(err) and f"g.yaml:{line}:" in str(err) and "'model'" in str(err)
 
 
 def test_package_file_points_into_the_installed_package():
