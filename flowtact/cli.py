@@ -202,9 +202,7 @@ RUN_EXAMPLES = """examples:
   flowtact run touch.h5 --fast                         # re-run what a recording was made with
   flowtact run touch --replay sensor=touch.h5 --fast   # feed a recorded sensor back in
   flowtact run graphs/slip.yaml --set sa1.n=200 --set sa1_stim.max_units=200 --fast
-  flowtact run envelope.yaml --allow-module envelope   # a graph using your own block (envelope.py)
-
-Ctrl-C stops a run cleanly: the recording is closed and the summary printed."""
+  flowtact run envelope.yaml --allow-module envelope   # a graph using your own block (envelope.py)"""
 
 PLUGIN_GROUP = "flowtact.commands"
 DEBUG_HELP = "on failure, print the full Python traceback after the error (also: FLOWTACT_DEBUG=1)"
