@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK  (shell completion: eval "$(register-python-argcomplete flowtact)")
 """The ``flowtact`` command: run, validate, draw and document graphs; list blocks; plot recordings.
 
 Every command, the plugins' (``flowtact.commands``) included, fails the same way
@@ -20,6 +21,7 @@ import json
 import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -40,14 +42,22 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = CommandParser(prog="flowtact", description=__doc__.splitlines()[0])
+    from flowtact.rst_text import inline_text
+
+    p = CommandParser(
+        prog="flowtact",
+        description=inline_text(__doc__.splitlines()[0]),
+        epilog="Each command's own options and examples: flowtact COMMAND --help. Shell completion: "
+        'eval "$(register-python-argcomplete flowtact)" (see the README).',
+    )
     p.add_argument("--version", action="version", version=f"flowtact {_version()}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def graph_args(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument(
+        graph = sp.add_argument(
             "graph", help="graph file (.yaml), a shipped graph name (touch, slip), or a recording (.h5)"
         )
+        graph.completer = _complete_graph  # type: ignore[attr-defined]
         sp.add_argument(
             "--set",
             dest="overrides",
@@ -70,7 +80,14 @@ def _parser() -> argparse.ArgumentParser:
         )
         add_allow_module(sp)
 
-    run = sub.add_parser("run", help="run a graph")
+    run = sub.add_parser(
+        "run",
+        help="run a graph",
+        description="Run a graph: in real time (default) or as fast as possible (--fast), in worker "
+        "processes (one per process group) or all in this one (--inproc); record streams to HDF5.",
+        epilog=RUN_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     graph_args(run)
     run.add_argument(
         "--duration",
@@ -117,9 +134,11 @@ def _parser() -> argparse.ArgumentParser:
     blocks = sub.add_parser("blocks", help="list the block catalogue, or document one block")
     blocks.add_argument("name", nargs="?", help="block name")
 
-    draw = sub.add_parser("graph", help="draw a graph (pruned parts greyed) as .svg, .png or .dot")
+    draw = sub.add_parser("graph", help="draw a graph (pruned parts greyed) as .svg, .png, .pdf or .dot")
     graph_args(draw)
-    draw.add_argument("-o", "--output", required=True, help="output file: .svg, .png or .dot")
+    draw.add_argument(
+        "-o", "--output", required=True, help="output file: .svg, .png, .pdf, or .dot (Graphviz source)"
+    )
 
     plot = sub.add_parser(
         "plot",
@@ -180,6 +199,14 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+RUN_EXAMPLES = """examples:
+  flowtact run touch                                   # a shipped graph by name, in real time
+  flowtact run graphs/touch.yaml --fast --duration 3 --record touch.h5
+  flowtact run touch.h5 --fast                         # re-run what a recording was made with
+  flowtact run touch --replay sensor=touch.h5 --fast   # feed a recorded sensor back in
+  flowtact run graphs/slip.yaml --set sa1.n=200 --set sa1_stim.max_units=200 --fast
+  flowtact run envelope.yaml --allow-module envelope   # a graph using your own block (envelope.py)"""
+
 PLUGIN_GROUP = "flowtact.commands"
 DEBUG_HELP = "on failure, print the full Python traceback after the error (also: FLOWTACT_DEBUG=1)"
 
@@ -192,19 +219,56 @@ def plugin_commands() -> dict[str, Any]:
 
 
 def _plugin_help(ep: Any) -> str:
-    """A plugin command's help line: the first line of its module's docstring (cheap: no heavy import)."""
+    """A plugin command's help line: its module's summary (:func:`entry_point_summary`)."""
+    return entry_point_summary(ep)
+
+
+def entry_point_summary(ep: Any) -> str:
+    """An entry point's one-line summary for help lists: the first sentence of its module's
+    docstring as plain text (reST markup gone, :func:`flowtact.rst_text.inline_text`), without a
+    leading ``flowtact NAME ...:`` or trailing ``: flowtact NAME`` that repeats the name beside
+    it. Cheap: the module is parsed, not imported."""
+    import ast
     import importlib.util
 
-    spec = importlib.util.find_spec(ep.value.partition(":")[0])
-    if spec is None or spec.origin is None:
-        return "(not importable)"
-    import ast
+    from flowtact.rst_text import inline_text
 
     try:
+        spec = importlib.util.find_spec(ep.value.partition(":")[0])
+    except (ImportError, ValueError):
+        spec = None
+    if spec is None or spec.origin is None:
+        return "(not importable)"
+    try:
         doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text()))
-    except (OSError, SyntaxError):
+    except (OSError, SyntaxError, ValueError):
         doc = None
-    return (doc or ep.value).splitlines()[0]
+    return one_line_summary(inline_text(doc or ep.value))
+
+
+def one_line_summary(text: str) -> str:
+    """The first sentence of ``text`` (its first paragraph joined), without a ``flowtact ...:``
+    prefix or a ``: flowtact ...`` suffix, its first letter lower-cased as argparse's own help is."""
+    import re
+
+    para = " ".join(text.strip().split("\n\n", 1)[0].split())
+    first = re.split(r"(?<=[a-z0-9)])\. ", para, maxsplit=1)[0].rstrip(".")
+    first = re.sub(r"^flowtact [\w-]+[^:]*:\s*", "", first)
+    first = re.sub(r":\s*flowtact [\w-]+[^:]*$", "", first)
+    if first[:1].isupper() and first[1:2].islower():
+        first = first[0].lower() + first[1:]
+    return first
+
+
+def _complete_graph(prefix: str, **_kwargs: Any) -> list[str]:
+    """Shell completion of a graph argument: the shipped graph names, and .yaml/.h5 files and
+    folders under the prefix (argcomplete's file completer)."""
+    from argcomplete.completers import FilesCompleter
+
+    from flowtact.graph import shipped_graphs
+
+    names = [n for n in shipped_graphs() if n.startswith(prefix)]
+    return names + list(FilesCompleter(allowednames=("yaml", "yml", "h5"))(prefix))
 
 
 def _module_name(text: str) -> str:
@@ -252,8 +316,22 @@ def _replays(items: Sequence[str]) -> dict[str, str]:
     return out
 
 
+def _import_beside_graph(graph: str, modules: Sequence[str]) -> None:
+    """Let an allowed module written beside the graph file import (``envelope.py`` for
+    ``--allow-module envelope``): the graph's real folder goes at the END of ``sys.path`` (an
+    installed module of the same name still wins), and workers inherit it. Nothing happens without
+    ``--allow-module``: a graph alone never makes its folder importable."""
+    from flowtact.graph import local_module_folder
+
+    folder = local_module_folder(graph, modules) if modules else None
+    if folder is not None and str(folder) not in sys.path:
+        sys.path.append(str(folder))
+
+
 def _plan(args: argparse.Namespace) -> Any:
     from flowtact.launch import load_plan
+
+    _import_beside_graph(args.graph, args.allow_modules)
 
     return load_plan(
         args.graph,
@@ -452,6 +530,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``flowtact`` command: its exit status (see the module notes)."""
     from flowtact.debug import ENV, debug_enabled
 
+    as_program = argv is None  # the process's own command line: its exit status is ours to keep
     argv = list(sys.argv[1:] if argv is None else argv)
     plugins = plugin_commands()
     debug = argv[:1] == ["--debug"] and len(argv) > 1 and argv[1] in plugins
@@ -461,17 +540,35 @@ def main(argv: Sequence[str] | None = None) -> int:
         if debug:
             os.environ[ENV] = "1"  # flowtact --debug PLUGIN ...: the plugin reads it
         try:
-            return run_command(lambda: _plugin(plugins[argv[0]], argv[1:]), prog=f"flowtact {argv[0]}")
+            return _decided(
+                run_command(lambda: _plugin(plugins[argv[0]], argv[1:]), prog=f"flowtact {argv[0]}"),
+                as_program,
+            )
         finally:  # main() called in process leaves the environment as it found it
             if debug and before is None:
                 del os.environ[ENV]
             elif debug:
                 os.environ[ENV] = before  # type: ignore[assignment]
     parser = _parser()
+    if as_program and "_ARGCOMPLETE" in os.environ:  # the shell asks for completions: answer, exit
+        import argcomplete
+
+        argcomplete.autocomplete(parser)
     args = parser.parse_args(argv)
     if args.command == "plot" and args.t0 is not None and args.t1 is not None and not args.t0 < args.t1:
         parser.error(f"plot: --from ({args.t0:g}) must be before --to ({args.t1:g})")
-    return run_command(lambda: COMMANDS[args.command](args), debug=debug_enabled(args.debug))
+    return _decided(
+        run_command(lambda: COMMANDS[args.command](args), debug=debug_enabled(args.debug)), as_program
+    )
+
+
+def _decided(status: int, as_program: bool) -> int:
+    """``status``, final: as the program, a Ctrl-C arriving from here on (while the interpreter
+    exits: threads joined, files closed) is ignored, so a finished run's 0 does not become -2
+    (killed by SIGINT) after its full summary. Called in-process (``main([...])``), nothing changes."""
+    if as_program and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return status
 
 
 def _plugin(ep: Any, argv: list[str]) -> int:

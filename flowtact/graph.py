@@ -30,7 +30,7 @@ from flowtact.limits import (
     run_ticks_problem,
 )
 from flowtact.located import GraphError, GraphErrors, Loc, Located
-from flowtact.param_paths import resolve_path, resolve_paths
+from flowtact.param_paths import graph_folder, path_fields, resolve_path, resolve_value
 from flowtact.params import ConfigError, did_you_mean
 from flowtact.registry import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
 from flowtact.replay_spec import parse_port_map, split_replay
@@ -44,8 +44,10 @@ __all__ = [
     "Loc",
     "NodeDef",
     "load_graph",
+    "missing_graph_error",
     "parse_override",
     "resolve_graph_path",
+    "shipped_graphs",
 ]
 
 TOP_KEYS = (
@@ -125,6 +127,13 @@ class Graph:
     rows load the graph's blocks with exactly this permission, never one the file gives itself."""
 
 
+def shipped_graphs() -> list[str]:
+    """Names of the graphs shipped with flowtact (``flowtact run NAME`` finds them)."""
+    from importlib.resources import files
+
+    return sorted(p.name[:-5] for p in files("flowtact.graphs").iterdir() if p.name.endswith(".yaml"))
+
+
 def resolve_graph_path(name: str | Path) -> Path:
     """A graph file path; a bare name such as ``touch`` also finds the graphs shipped with flowtact."""
     p = Path(name)
@@ -134,6 +143,45 @@ def resolve_graph_path(name: str | Path) -> Path:
 
     packaged = files("flowtact.graphs") / f"{name}.yaml"
     return Path(str(packaged)) if packaged.is_file() else p
+
+
+def missing_graph_error(path: str) -> GraphError:
+    """A graph file that is not there, with the closest graph file beside it or shipped graph name
+    (``flowtact run touhc`` -> did you mean 'touch'?) and the shipped graphs as the hint."""
+    import difflib
+
+    p = Path(path)
+    shipped = shipped_graphs()
+    bare = not p.suffix and "/" not in path
+    try:
+        beside = sorted(q.name for q in p.parent.glob("*.y*ml"))[:500] if p.parent.is_dir() else []
+    except OSError:
+        beside = []
+    names = shipped if bare else sorted({*beside, *(f"{n}.yaml" for n in shipped)} if beside else beside)
+    close = difflib.get_close_matches(p.name, names, n=1, cutoff=0.6)
+    guess = ""
+    if close:
+        guess = f" (did you mean '{close[0] if bare else p.parent / close[0]}'?)"
+    return GraphError(
+        Loc(path),
+        f"no such graph file{guess}",
+        f"shipped graphs, run by name (flowtact run touch): {', '.join(shipped)}",
+    )
+
+
+def local_module_folder(graph: str | Path, modules: Iterable[str]) -> Path | None:
+    """The graph file's real folder when it holds one of ``modules`` (``NAME.py`` or a package
+    ``NAME/``), else None: where ``flowtact run GRAPH --allow-module NAME`` finds a block written
+    beside the graph. Only modules the user allowed by name are looked for."""
+    path = Path(graph)
+    if not path.is_file():
+        return None
+    folder = graph_folder(path)
+    for module in modules:
+        top = module.partition(".")[0]
+        if (folder / f"{top}.py").is_file() or (folder / top / "__init__.py").is_file():
+            return folder
+    return None
 
 
 def parse_override(text: str) -> tuple[str, str, Any]:
@@ -147,6 +195,26 @@ def parse_override(text: str) -> tuple[str, str, Any]:
         shown = text if len(text) <= 80 else f"{text[:77]}..."
         raise ValueError(f"--set '{shown}': the value is not valid YAML ({e.message})") from None
     return m.group(1), m.group(2), value
+
+
+def _resolved(
+    config_cls: type,
+    params: Mapping[str, Any],
+    bases: Mapping[str, Path],
+    locs: Mapping[str, Loc],
+    node: str,
+    errors: list[GraphError],
+) -> dict[str, Any]:
+    """``params`` with path fields resolved (:mod:`flowtact.param_paths`), each against its own
+    base; a name that cannot be resolved (a bad ``pkg:``) is an error at its place, kept as written."""
+    fields = path_fields(config_cls)
+    out = dict(params)
+    for k in fields & set(params):
+        try:
+            out[k] = resolve_value(params[k], bases[k])
+        except ValueError as e:
+            errors.append(GraphError(locs[k], f"node '{node}': '{k}': {e}"))
+    return out
 
 
 def load_graph(
@@ -179,6 +247,8 @@ def load_graph(
         root = compose(text)
     except SafeYamlError as e:
         raise GraphErrors([GraphError(Loc(path, e.line, e.col), e.message, e.hint)]) from None
+    except FileNotFoundError:
+        raise GraphErrors([missing_graph_error(path)]) from None
     except OSError as e:
         raise GraphErrors([GraphError(Loc(path), f"cannot read graph file: {e.strerror or e}")]) from None
     if root is None:
@@ -245,7 +315,12 @@ def _apply_replays(
                 GraphError(loc, f"{where}: {why}", f"outputs of {cls.name}: {', '.join(cls.outputs)}")
             )
             continue
-        planned[name] = (loc, str(ndoc["block"]), resolve_path(path, Path.cwd()), mapping)
+        try:
+            resolved = resolve_path(path, Path.cwd())
+        except ValueError as e:
+            errors.append(GraphError(loc, f"{where}: {e}"))
+            continue
+        planned[name] = (loc, str(ndoc["block"]), resolved, mapping)
     if not planned:
         return
     _drop_edges_into(doc, y, set(planned))
@@ -464,11 +539,12 @@ def _node(
             GraphError(y.loc("nodes", name, "params"), f"node '{name}': 'params' must be a mapping")
         )
         return None
-    params = resolve_paths(cls.config_cls, params, Path(y.path).parent)  # paths: beside the graph file
     param_locs = {k: y.loc("nodes", name, "params", k) for k in params}
+    folder = graph_folder(y.path)  # paths: beside the graph file (its real folder)
+    params = _resolved(cls.config_cls, params, {k: folder for k in params}, param_locs, name, errors)
     for k, (value, sloc) in sets.items():
-        params[k] = resolve_paths(cls.config_cls, {k: value}, Path.cwd())[k]  # --set: from here
-        param_locs[k] = sloc
+        param_locs[k] = sloc  # --set: from here
+        params.update(_resolved(cls.config_cls, {k: value}, {k: Path.cwd()}, param_locs, name, errors))
     process = ndoc.get("process")
     if process is not None and not (isinstance(process, str) and NAME_RE.match(process)):
         errors.append(

@@ -133,3 +133,26 @@ def test_paced_stops_a_run_that_falls_far_behind():
 
     late, _ = paced(slow, list(range(1000)), period=1e-4, give_up=0.01)
     assert len(late) < 1000 and late[-1] > 0.01
+
+
+def test_the_lateness_axis_writes_numbers_as_numbers():
+    """The symlog lateness axis of the nlif_scale plot reads −1, 0, 10, not −10⁰, 10¹."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from flowtact.bench.blocks.spiking.nlif_scale import SIGMAS, draw
+
+    rows = [
+        {"sigma": s, "n": n, "rtf": 5.0, "rtf_q1": 4.0, "rtf_q3": 6.0, "late_p99_ms": late}
+        for s in SIGMAS
+        for n, late in ((100, -0.5), (10_000, 30.0))
+    ]
+    fig = Figure()
+    draw(rows)(fig)
+    fig.canvas.draw()
+    ax2 = fig.axes[1]
+    texts = [t.get_text() for t in ax2.get_yticklabels() if t.get_text()]
+    assert "−1" in texts and "10" in texts, texts
+    assert not [t for t in texts if "10^" in t or "{" in t or "⁰" in t], texts

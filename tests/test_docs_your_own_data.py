@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from doc_pages import bash_blocks, run_in_clean_shell
 
 ROOT = Path(__file__).parent.parent
 DOC = ROOT / "docs" / "your-own-data.md"
@@ -26,18 +27,9 @@ def quoted(after: str) -> str:
 def walked(tmp_path_factory):
     here = tmp_path_factory.mktemp("walk")
     (here / "graphs").symlink_to(ROOT / "graphs")
-    env_bin = str(Path(sys.executable).parent)
     results = []
-    for cmd in blocks("bash"):
-        proc = subprocess.run(
-            ["bash", "-e", "-c", cmd],
-            cwd=here,
-            capture_output=True,
-            text=True,
-            timeout=300,
-            env={"PATH": f"{env_bin}:/usr/bin:/bin", "HOME": str(here)},
-        )
-        results.append((cmd, proc))
+    for cmd in bash_blocks(DOC):
+        results.append((cmd, run_in_clean_shell(cmd, here, timeout=300)))
     return here, results
 
 
@@ -93,3 +85,24 @@ def test_the_python_example_runs(walked):
     )
     assert proc.returncode == 0, proc.stderr
     assert re.fullmatch(r"[1-9]\d* SA1 spikes\n", proc.stdout)
+
+
+def test_the_plot_text_says_what_the_fa1_afferents_did(walked):
+    """The page says: FA1 spikes at the press's onset only, one per afferent, during its 10 ms rise
+    from 0.5 s; none at the release (2 s). The walkthrough's own out.h5 must show exactly that."""
+    import h5py
+    import numpy as np
+
+    here, _ = walked
+    said = " ".join(DOC.read_text().split())
+    assert (
+        "FA1 spikes at its onset only (20: one per FA1 afferent, all during the 10 ms rise from 0.5 s)"
+        in said
+    )
+    assert "The release at 2 s gives no FA1 spike" in said
+    with h5py.File(here / "out.h5", "r") as f:
+        fa1 = f["streams/fa1.spikes"]
+        t, unit, n = fa1["t"][:], fa1["data"][:], int(fa1.attrs["n_units"])
+    assert n == 20 and len(t) == 20 and sorted(unit) == list(range(20))
+    assert np.all((t >= 0.5) & (t <= 0.51 + 1e-9))  # the press rises from 0.5 s to 0.51 s
+    assert not np.any(t > 1.5)  # nothing at the release

@@ -90,10 +90,7 @@ def test_a_bad_override_is_refused_located(override, text, capsys):
 
 def test_a_missing_or_unreadable_graph_is_located(tmp_path, capsys):
     assert main(["validate", str(tmp_path / "nope.yaml")]) == 2
-    assert (
-        f"{tmp_path / 'nope.yaml'}:1:1: cannot read graph file: No such file or directory"
-        in capsys.readouterr().err
-    )
+    assert f"{tmp_path / 'nope.yaml'}:1:1: no such graph file" in capsys.readouterr().err
     assert main(["validate", str(tmp_path)]) == 2
     assert f"{tmp_path}:1:1: not a regular file" in capsys.readouterr().err
 

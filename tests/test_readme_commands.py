@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from doc_pages import clean_env
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -75,7 +76,13 @@ def argv(cmd: str) -> list[str]:
 
 def serve_then_stop(words: list[str], ready: str, cwd: Path) -> tuple[int, str]:
     proc = subprocess.Popen(
-        words, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        words,
+        cwd=cwd,
+        env=clean_env(cwd),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
     )
     assert proc.stdout is not None
     first = proc.stdout.readline()  # blocks until it serves (or exits)
@@ -97,18 +104,17 @@ def test_the_readme_shows_the_ci_commands():
 @pytest.mark.timeout(3 * TIMEOUT_S)  # every README command in turn: longer than the suite's per-test 600 s
 def test_every_readme_command_runs(tmp_path):
     work = fresh_checkout(tmp_path / "checkout")
-    env = {**os.environ, "COLUMNS": "100"}
+    env = {**clean_env(work), "COLUMNS": "100"}  # no variable the README does not set
     failures = []
     for cmd in readme_commands():
         if cmd in CI_OWN:
             continue
-        words = argv(cmd)
         ready = SERVES.get(cmd)
         if ready:
-            code, out = serve_then_stop(words, ready, work)
+            code, out = serve_then_stop(argv(cmd), ready, work)
         else:
             proc = subprocess.run(
-                words,
+                ["bash", "-e", "-c", cmd],  # as typed in a shell (eval, quotes, pipes)
                 cwd=work,
                 env=env,
                 stdin=subprocess.DEVNULL,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import re
 import shlex
 import subprocess
@@ -12,6 +11,7 @@ import types
 from pathlib import Path
 
 import pytest
+from doc_pages import clean_env
 
 from flowtact import ConfigError
 from flowtact.testing import CHECKS, check_chunking_invariance
@@ -56,8 +56,7 @@ def folder(tmp_path_factory) -> Path:
 
 
 def run(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(cwd), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+    return subprocess.run(cmd, cwd=cwd, env=clean_env(cwd), capture_output=True, text=True, timeout=300)
 
 
 @pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))

@@ -109,6 +109,17 @@ def _event_columns(spec: Any) -> dict[str, int]:
     return out
 
 
+def n_event_units(spec: Any) -> int:
+    """Rows of an event stream's raster: its ``n_units``, else one per label, else one."""
+    return max(spec.n_units or (len(spec.labels) if spec.labels and not spec.shape else 1), 1)
+
+
+def event_word(name: str) -> str:
+    """What an event stream's events are called in its panels: ``spikes`` for a port named for
+    them, else ``events`` (a block's own stream, ``env.crossings``, is not called spikes)."""
+    return "spikes" if "spike" in name.rpartition(".")[2].lower() else "events"
+
+
 def plan_panels(sources: dict[str, StreamSource]) -> list[Panel]:
     """The panels of every stream, in recorded order, frame strips last."""
     out: list[Panel] = []
@@ -116,13 +127,13 @@ def plan_panels(sources: dict[str, StreamSource]) -> list[Panel]:
     for name, s in sources.items():
         spec = s.spec
         if spec.events:
-            n = max(spec.n_units or 1, 1)
+            n = n_event_units(spec)
             raster_h = float(np.clip(0.8 + 0.04 * n, 1.1, 3.0))
             if s.data.ndim > 1 and "amplitude" in _event_columns(spec):
                 out.append(Panel("pulses", s, 1.6))
                 out.append(Panel("raster", s, raster_h, what="pulses"))
             else:
-                out.append(Panel("raster", s, raster_h, what="spikes"))
+                out.append(Panel("raster", s, raster_h, what=event_word(name)))
                 out.append(Panel("rate", s, 1.4))
         elif is_frames(tuple(spec.shape)):
             frames.append(Panel("frames", s, 0.0, units=spec.units))
@@ -231,6 +242,21 @@ def _count(n: int, word: str) -> str:
     return f"{n:,} {word}{'s' if n != 1 else ''}"
 
 
+#: Most row labels a heat map writes out; beyond, every k-th (a label per row would overlap).
+MAX_HEATMAP_LABELS = 40
+
+
+def _heatmap_rows(ax: Any, p: Panel, labelled: bool) -> None:
+    """Name a heat map's rows: every row up to 24; a labelled stream's rows (a posterior over 26
+    letters) up to :data:`MAX_HEATMAP_LABELS` in smaller type, then every k-th label; else numbers."""
+    n = len(p.channels)
+    if n <= 24:
+        ax.set_yticks(range(n), list(p.names), fontsize=6)
+    elif labelled:
+        step = -(-n // MAX_HEATMAP_LABELS)
+        ax.set_yticks(range(0, n, step), list(p.names)[::step], fontsize=5 if step == 1 else 6)
+
+
 def _draw_heatmap(ax: Any, p: Panel, t0: float, t1: float) -> None:
     s = p.source
     i, j = index_range(s, t0, t1)
@@ -242,8 +268,7 @@ def _draw_heatmap(ax: Any, p: Panel, t0: float, t1: float) -> None:
         bar = ax.figure.colorbar(im, ax=ax, pad=0.01, fraction=0.03)
         bar.set_label(pretty_units(p.units), fontsize=8)
     ax.set_ylabel("channel", fontsize=8)
-    if len(p.channels) <= 24:
-        ax.set_yticks(range(len(p.channels)), list(p.names), fontsize=6)
+    _heatmap_rows(ax, p, labelled=bool(s.spec.labels))
     note = f"; each cell the mean of {env.per_point} samples" if env.per_point > 1 else ""
     note += _missing(ax, env, p.channels)
     unit = pretty_units(p.units)
@@ -277,7 +302,7 @@ def _draw_steps(ax: Any, p: Panel, t0: float, t1: float) -> None:
 def _draw_raster(ax: Any, p: Panel, t0: float, t1: float) -> None:
     s = p.source
     spec = s.spec
-    n = max(spec.n_units or 1, 1)
+    n = n_event_units(spec)
     col = _event_columns(spec).get("unit", 0) if s.data.ndim > 1 else None
     i, j = index_range(s, t0, t1)
     what = p.what or "events"
@@ -317,7 +342,8 @@ def _draw_raster(ax: Any, p: Panel, t0: float, t1: float) -> None:
 
 def _draw_rate(ax: Any, p: Panel, t0: float, t1: float) -> None:
     s = p.source
-    n = max(s.spec.n_units or 1, 1)
+    n = n_event_units(s.spec)
+    rate = "firing rate" if event_word(s.name) == "spikes" else "event rate"
     i, j = index_range(s, t0, t1)
     edges, bin_s = _rate_edges(t0, t1)
     rates = binned_event_counts(s, i, j, n, edges) / bin_s
@@ -330,10 +356,10 @@ def _draw_rate(ax: Any, p: Panel, t0: float, t1: float) -> None:
         for k in range(n):
             ax.stairs(rates[:, k], edges, label=labels[k], linewidth=1.0)
         _legend(ax, n)
-        what = "firing rate per unit"
+        what = f"{rate} per unit"
     else:
         ax.stairs(rates.mean(axis=1), edges, linewidth=1.0, color="C3")
-        what = f"population firing rate (mean over {n} units)"
+        what = f"population {rate} (mean over {n} units)"
     ax.set_ylabel("1/s", fontsize=8)
     ax.set_ylim(bottom=0)
     ax.set_title(f"{s.name} — {what}, {_ms(bin_s)} bins", **TITLE)

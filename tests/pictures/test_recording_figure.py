@@ -464,3 +464,43 @@ def test_text_from_the_file_is_drawn_escaped_and_warns_nothing(tmp_path):
     text = " ".join(_all_text(fig))
     assert "\x1b" not in text and "\x07" not in text
     assert "s\\x1b]0;pwned\\x07\\x1b[2J.y — " in text and "g\\x1b]0;pwned" in text
+
+
+def test_a_blocks_own_event_stream_is_drawn_with_its_name_and_labels(tmp_path):
+    """Events that are not spikes (a block's crossings) are called events, not spikes, and their
+    unit labels name the raster rows and the rate lines, also when the block left n_units unset."""
+    path = tmp_path / "events.h5"
+    specs = {
+        "det.crossings": StreamSpec("int64", (), "1", None, events=True, n_units=2, labels=("rise", "fall")),
+        "det.marks": StreamSpec("int64", (), "1", None, events=True, labels=("up", "down", "flat")),
+    }
+    with Recorder(path, specs, {}) as rec:
+        rec.write("det.crossings", Chunk(np.array([0.1, 0.2, 0.3]), np.array([0, 1, 0]), end=1.0))
+        rec.write("det.marks", Chunk(np.array([0.1, 0.5]), np.array([2, 1]), end=1.0))
+    fig = recording_figure(path)
+    raster = _one(fig, "det.crossings", "raster")
+    assert raster.get_title(loc="left") == "det.crossings — event raster: 3 events on 2 units"
+    assert [t.get_text() for t in raster.get_yticklabels()] == ["rise", "fall"]
+    rate = _one(fig, "det.crossings", "rate")
+    assert rate.get_title(loc="left").startswith("det.crossings — event rate per unit")
+    assert _legend(rate) == ["rise", "fall"]
+    marks = _one(fig, "det.marks", "raster")  # no n_units: one row per label, none dropped
+    assert [t.get_text() for t in marks.get_yticklabels()] == ["up", "down", "flat"]
+    assert _legend(_one(fig, "det.marks", "rate")) == ["up", "down", "flat"]
+    assert not [t for t in _all_text(fig) if "spike" in t or "firing" in t]
+
+
+def test_a_posterior_over_26_letters_names_its_rows_by_letter(tmp_path):
+    """The Braille decoder's posterior (26 labelled channels, more than the 24 always written out)
+    is a heat map whose rows read a..z, not 0..25."""
+    import string
+
+    path = tmp_path / "post.h5"
+    letters = tuple(string.ascii_lowercase)
+    specs = {"decoder.posterior": StreamSpec("float64", (26,), "1", None, labels=letters)}
+    rng = np.random.default_rng(0)
+    with Recorder(path, specs, {}) as rec:
+        p = rng.dirichlet(np.ones(26), size=30)
+        rec.write("decoder.posterior", Chunk(np.arange(30) * 0.1, p, end=3.0))
+    heat = _one(recording_figure(path), "decoder.posterior", "heat map")
+    assert [t.get_text() for t in heat.get_yticklabels()] == list(letters)

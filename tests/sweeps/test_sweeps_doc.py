@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from doc_pages import clean_env
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "sweeps.md"
@@ -26,7 +27,7 @@ def fenced() -> list[tuple[str, str]]:
 def walked(tmp_path_factory):
     here = tmp_path_factory.mktemp("sweepdoc")
     (here / "graphs").symlink_to(ROOT / "graphs")
-    env = {"PATH": f"{Path(sys.executable).parent}:/usr/bin:/bin", "HOME": str(here)}
+    env = clean_env(here)
     results = []
     for lang, body in fenced():
         if lang == "python" and body.startswith("# ") and body.split("\n", 1)[0].endswith(".py"):

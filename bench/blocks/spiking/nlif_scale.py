@@ -145,6 +145,14 @@ def pin_one_core() -> tuple[set[int], int]:
     return old, cpu
 
 
+def plain_ticks():  # type: ignore[no-untyped-def]
+    """A tick formatter writing numbers as numbers (``-1``, ``0.1``, ``100``): symlog's default
+    writes powers of ten (``−10⁰``), which reads as minus ten."""
+    from matplotlib.ticker import FuncFormatter
+
+    return FuncFormatter(lambda v, _pos: f"{v:g}".replace("-", "−"))
+
+
 def draw(rows: list[dict]):  # type: ignore[no-untyped-def]
     def fill(fig) -> None:  # type: ignore[no-untyped-def]
         ax1, ax2 = fig.subplots(1, 2)
@@ -174,6 +182,7 @@ def draw(rows: list[dict]):  # type: ignore[no-untyped-def]
         ax2.set_yscale("symlog", linthresh=0.1)
         low = min(r["late_p99_ms"] for r in rows)
         ax2.set_ylim(bottom=min(-1.0, 1.5 * low))
+        ax2.yaxis.set_major_formatter(plain_ticks())  # "−1", "10", not "−10⁰", "10¹"
         ax2.set_ylabel("p99 lateness past the 1 ms deadline (ms)")
         ax2.set_title("paced at 1 kHz: ≤ 0 is real time", fontsize=9)
         ax2.legend(fontsize=8)

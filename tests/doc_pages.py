@@ -1,0 +1,67 @@
+"""The pages' shell commands and the clean shell they run in, shared by every doc test.
+
+A page works as written when its ```bash blocks run in a shell holding only what any shell has:
+``PATH`` (the venv's ``bin`` first, as after ``. .venv/bin/activate``) and ``HOME``. No
+``PYTHONPATH`` or other variable the page does not set itself; tests/test_doc_commands.py checks
+that every page with commands is run this way by some test.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+FENCE = re.compile(r"^```bash\n(.*?)^```", re.S | re.M)
+
+
+def pages() -> list[Path]:
+    """README.md and every docs/*.md page."""
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def bash_blocks(page: Path) -> list[str]:
+    """The page's ```bash blocks, in order, as written."""
+    return FENCE.findall(page.read_text())
+
+
+def commands(block: str) -> list[str]:
+    """One block's commands: continued lines (``\\``) joined, a heredoc kept whole, blank and
+    comment-only lines dropped."""
+    out: list[str] = []
+    lines = block.splitlines()
+    i = 0
+    while i < len(lines):
+        cmd = lines[i]
+        i += 1
+        if not cmd.strip() or cmd.lstrip().startswith("#"):
+            continue
+        while cmd.endswith("\\") and i < len(lines):
+            cmd = cmd[:-1].rstrip() + " " + lines[i].strip()
+            i += 1
+        heredoc = re.search(r"<<\s*'?(\w+)'?", cmd)
+        if heredoc:
+            end = lines.index(heredoc.group(1), i)
+            cmd, i = "\n".join([cmd, *lines[i : end + 1]]), end + 1
+        out.append(cmd)
+    return out
+
+
+def clean_env(home: Path) -> dict[str, str]:
+    """The environment a page's commands get: PATH (this venv's bin first) and HOME, nothing else."""
+    return {"PATH": f"{Path(sys.executable).parent}:/usr/bin:/bin", "HOME": str(home)}
+
+
+def run_in_clean_shell(cmd: str, cwd: Path, timeout: float = 600) -> subprocess.CompletedProcess:
+    """``cmd`` as ``bash -e -c`` in ``cwd`` with :func:`clean_env` (HOME is ``cwd``)."""
+    return subprocess.run(
+        ["bash", "-e", "-c", cmd],
+        cwd=cwd,
+        env=clean_env(cwd),
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
