@@ -106,6 +106,8 @@ class _Proc:
     done: bool = False
     rec_done: bool = False
     counters: dict[str, dict[str, int]] = field(default_factory=dict)
+    summaries: dict[str, str] = field(default_factory=dict)
+    """What its blocks said of the run (``Block.summary``), per node, sent with ``done``."""
     wired: bool = False
     last_k: int = 0
     violations: dict[str, int] = field(default_factory=dict)
@@ -482,6 +484,7 @@ class ProcessExecutor:
         elif op == "done":
             self._on_stats(proc, msg)
             proc.counters = msg.get("counters", {})
+            proc.summaries = msg.get("summaries", {})
             proc.done = True
             self.last_done_ns = time.monotonic_ns()
             proc.state = "done"
@@ -739,6 +742,8 @@ class ProcessExecutor:
             "now": self._graph_now(),
             "duration": self.duration_s,
             "wall": time.monotonic() - self.t_start,
+            "running": (time.monotonic_ns() - self.t0_ns) / 1e9 if self.t0_ns else None,
+            "startup": self.t0_ns / 1e9 - self.t_start if self.t0_ns else None,
             "processes": self._process_table(),
             "streams": {
                 name: {
@@ -848,6 +853,7 @@ class ProcessExecutor:
             duration_s=now,
             wall_s=time.monotonic() - self.t_start,
             running_s=(self.last_done_ns - self.t0_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
+            startup_s=self.t0_ns / 1e9 - self.t_start if self.t0_ns else None,
             stopped_by=stopped_by,
             samples=samples,
             events=events,
@@ -863,6 +869,9 @@ class ProcessExecutor:
             realtime=None if self.fast else self.max_lag_s < LAG_WARN_S,
             max_lag_s=self.max_lag_s,
             late_nodes=list(self.late),
+            block_summaries={
+                n: t for n in plan.order for p in self.procs.values() if (t := p.summaries.get(n))
+            },
         )
 
 
