@@ -181,6 +181,8 @@ class ProcessExecutor:
         self.t_run = self.next_ping = time.monotonic()
         self.next_watch = 0.0
         self.t0_ns = 0
+        self.go_ns = 0
+        """Graph time 0 on the monotonic clock (ns): ``t0_ns`` in real time, the start message in --fast."""
         self.last_done_ns = 0
         """When the last worker said it was done (monotonic ns): with t0_ns, the running span."""
         self.wplans = {
@@ -363,6 +365,7 @@ class ProcessExecutor:
                         self._wire(p)
         t0 = time.monotonic_ns() + 20_000_000
         self.t0_ns = t0
+        self.go_ns = t0 if not self.fast else t0 - 20_000_000  # --fast workers start at once
         self.t_run = time.monotonic()
         for p in self.procs.values():
             self._send(p, "start", t0_ns=t0, k0=0, resume=False)
@@ -742,8 +745,8 @@ class ProcessExecutor:
             "now": self._graph_now(),
             "duration": self.duration_s,
             "wall": time.monotonic() - self.t_start,
-            "running": (time.monotonic_ns() - self.t0_ns) / 1e9 if self.t0_ns else None,
-            "startup": self.t0_ns / 1e9 - self.t_start if self.t0_ns else None,
+            "running": max(time.monotonic_ns() - self.go_ns, 0) / 1e9 if self.t0_ns else None,
+            "startup": self.go_ns / 1e9 - self.t_start if self.t0_ns else None,
             "processes": self._process_table(),
             "streams": {
                 name: {
@@ -852,8 +855,8 @@ class ProcessExecutor:
             graph=plan.graph.name,
             duration_s=now,
             wall_s=time.monotonic() - self.t_start,
-            running_s=(self.last_done_ns - self.t0_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
-            startup_s=self.t0_ns / 1e9 - self.t_start if self.t0_ns else None,
+            running_s=(self.last_done_ns - self.go_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
+            startup_s=self.go_ns / 1e9 - self.t_start if self.t0_ns else None,
             stopped_by=stopped_by,
             samples=samples,
             events=events,
