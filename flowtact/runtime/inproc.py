@@ -58,8 +58,10 @@ class RunSummary:
     """Seconds from graph time 0 (the first tick's clock start) to the end of the last tick
     (multi-process: the last worker's end), without the start-up that ``wall_s`` includes."""
     startup_s: float | None = None
-    """Seconds from launch to graph time 0: opening blocks, compiling or loading kernels, warming
-    up, and (multi-process) spawning and wiring the workers. Shown apart from the real-time factor."""
+    """Seconds from launch to graph time 0: making and opening blocks, compiling or loading kernels
+    (warming up), and (multi-process) spawning and wiring the workers. Shown apart from the
+    real-time factor. A --fast run in process does not warm up (its blocks' first steps load the
+    kernels, inside the running time), so as not to step throwaway copies of every block."""
     samples: dict[str, int] = field(default_factory=dict)
     events: dict[str, int] = field(default_factory=dict)
     event_units: dict[str, int] = field(default_factory=dict)
@@ -316,9 +318,8 @@ class InprocExecutor:
             for block in self.blocks.values():
                 block.open()
                 opened.append(block)
-            # kernels load or compile now, before graph time 0: not on the real-time clock, and
-            # never in the running time a real-time factor is taken over (start-up is told apart)
-            warm_up_here(self.blocks, self.tick_s)
+            if not self.fast:  # kernels load or compile now, not on the real-time clock
+                warm_up_here(self.blocks, self.tick_s)
             clock.start()
             startup_s = time.perf_counter() - self._made
             n_ticks = math.ceil(duration_s / self.tick_s - 1e-9) if duration_s is not None else None
