@@ -60,8 +60,8 @@ class RunSummary:
     startup_s: float | None = None
     """Seconds from launch to graph time 0: making and opening blocks, compiling or loading kernels
     (warming up), and (multi-process) spawning and wiring the workers. Shown apart from the
-    real-time factor. A --fast run in process does not warm up (its blocks' first steps load the
-    kernels, inside the running time), so as not to step throwaway copies of every block."""
+    real-time factor. An in-process --fast executor made without ``warm_up`` loads its kernels in
+    its blocks' first steps, inside the running time (``flowtact run`` and sweeps warm up)."""
     samples: dict[str, int] = field(default_factory=dict)
     events: dict[str, int] = field(default_factory=dict)
     event_units: dict[str, int] = field(default_factory=dict)
@@ -207,9 +207,14 @@ class InprocExecutor:
         tick_s: float | None = None,
         recorder: Sink | None = None,
         progress: Callable[[float, float | None], None] | None = None,
+        warm_up: bool | None = None,
     ) -> None:
         self.plan = plan
         self.fast = fast
+        self.warm_up = not fast if warm_up is None else warm_up
+        """Load or compile kernels before graph time 0 (:func:`warm_up_here`, on throwaway copies
+        of the blocks, as a worker does): always in real time; in --fast when asked (``flowtact
+        run --inproc``, sweeps), so their kernel loading is start-up, not running time."""
         self.tick_s = tick_for(fast, tick_s)
         self.recorder = recorder
         self.progress = progress
@@ -318,7 +323,7 @@ class InprocExecutor:
             for block in self.blocks.values():
                 block.open()
                 opened.append(block)
-            if not self.fast:  # kernels load or compile now, not on the real-time clock
+            if self.warm_up:  # kernels load or compile now, not on the clock the factor is taken on
                 warm_up_here(self.blocks, self.tick_s)
             clock.start()
             startup_s = time.perf_counter() - self._made
