@@ -106,3 +106,20 @@ def test_a_replayed_run_says_what_it_replayed(tmp_path):
         line = next((ln for ln in proc.stdout.splitlines() if ln.strip().startswith("sensor: ")), "")
         assert line.strip().startswith(f"sensor: replayed {rec} ("), proc.stdout
         assert "r: 1,500 samples, 0-1.499 s" in line, line
+
+
+def test_a_block_summary_is_one_bounded_line():
+    from flowtact.runtime.inproc import SUMMARY_MAX_CHARS, block_summaries
+
+    class Says:
+        name = "says"
+
+        def __init__(self, text):
+            self.text = text
+
+        def summary(self):
+            return self.text
+
+    got = block_summaries({"a": Says("two\nlines"), "b": Says(None), "c": Says("x" * 10**6)})
+    assert got["a"] == "two lines" and "b" not in got
+    assert len(got["c"]) == SUMMARY_MAX_CHARS and got["c"].endswith("…")

@@ -396,6 +396,11 @@ def _take(box: list[Chunk], empty: Chunk, spec: StreamSpec) -> Chunk:
     return c
 
 
+SUMMARY_MAX_CHARS = 240
+"""A block's summary line is cut to this many characters: it is a line of the run summary, and a
+worker sends it to the supervisor with its last message (a block's bug must not flood either)."""
+
+
 def block_summaries(blocks: Mapping[str, Block]) -> dict[str, str]:
     """What each block says of its run (its :meth:`~flowtact.block.Block.summary`), per node, for
     the blocks that say something; asked after the final flush, before ``close``."""
@@ -406,7 +411,8 @@ def block_summaries(blocks: Mapping[str, Block]) -> dict[str, str]:
         except Exception as e:
             raise NodeError(node, block.name, math.nan, e) from e
         if text:
-            out[node] = " ".join(str(text).split())  # one line, whatever the block returned
+            line = " ".join(str(text)[: 4 * SUMMARY_MAX_CHARS].split())  # one line, whatever it returned
+            out[node] = line if len(line) <= SUMMARY_MAX_CHARS else line[: SUMMARY_MAX_CHARS - 1] + "…"
     return out
 
 
