@@ -349,6 +349,16 @@ class Block:
         if n:
             self.counters[what] = self.counters.get(what, 0) + int(n)
 
+    def summary(self) -> str | None:
+        """One line on what this block did in the run, or None (the default) to say nothing.
+
+        The run summary prints it under the node's name (``decoder: read 26 letters, 26 right``),
+        in process or from any worker: it is asked once, after the final ``flush`` and before
+        ``close``. Say results a user wants to read (what was decoded, what was replayed); counts
+        of routine work belong in :meth:`count`. Keep it short and cheap: no I/O.
+        """
+        return None
+
     @classmethod
     def documented_counters(cls) -> dict[str, str]:
         """Every counter this class documents, its own ``counter_docs`` over its bases'."""

@@ -212,7 +212,9 @@ def run_plan(
 
     def executor(recorder: Any) -> Any:
         if inproc:
-            return InprocExecutor(plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress)
+            return InprocExecutor(
+                plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress, warm_up=True
+            )  # warmed up as a worker is: kernel loading is start-up, apart from the running time
         from flowtact.runtime.supervisor import ProcessExecutor
 
         return ProcessExecutor(

@@ -214,11 +214,14 @@ def _run_lines(summary: dict[str, Any] | None) -> list[str]:
         return ["run:        no summary: the run was killed before it closed the recording"]
     parts = []
     if "duration_s" in summary:
-        wall = summary.get("wall_s")
-        parts.append(
-            f"{_num(summary['duration_s'], '.3f')} s of graph time"
-            + (f" in {_num(wall, '.2f')} s wall" if wall else "")
+        wall, running, startup = summary.get("wall_s"), summary.get("running_s"), summary.get("startup_s")
+        took = (
+            f" in {_num(running, '.2f')} s"
+            if running
+            else (f" in {_num(wall, '.2f')} s wall" if wall else "")
         )
+        took += f" (start-up {_num(startup, '.1f')} s apart)" if running and startup is not None else ""
+        parts.append(f"{_num(summary['duration_s'], '.3f')} s of graph time{took}")
     if summary.get("stopped_by"):
         parts.append(f"stopped by {_t(summary['stopped_by'])}")
     if summary.get("realtime") is False:

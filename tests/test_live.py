@@ -12,7 +12,9 @@ FULL = {
     "mode": "realtime",
     "now": 3.2,
     "duration": 10.0,
-    "wall": 1.6,
+    "wall": 11.4,
+    "running": 1.6,
+    "startup": 9.8,
     "processes": {
         "sensor": {
             "pid": 4242,
@@ -83,7 +85,8 @@ def test_full_snapshot_shows_every_stream_process_and_path():
     text = text_of(FULL)
     title = text.splitlines()[0]
     assert "touch.yaml" in title and "realtime" in title
-    assert "3.2/10.0 s" in title and "32%" in title and "2.0× real time" in title  # real-time factor now/wall
+    assert "3.2/10.0 s" in title and "32%" in title and "2.0× real time" in title  # now over the running time
+    assert "start-up 9.8 s" in title  # the start-up apart, never in the factor
     src = line_with(text, "src.out")
     assert "1000" in src and "16003" in src and "182 µs" in src and "640 µs" in src and "block" in src
     cam = line_with(text, "cam.frame")
@@ -123,7 +126,7 @@ def test_nearly_empty_snapshots_render():
             "paths": None,
         }
     )
-    assert "slip.yaml" in text and "0.4 s" in text
+    assert "slip.yaml" in text and "starting 0.4 s" in text
     assert "starting" in line_with(text, "main") and "10.0.0.2" in line_with(text, "far")
     assert "src.out" in text and "x.y" in text
     assert "deadline" not in text

@@ -94,6 +94,10 @@ class BrailleScanConfig(BadDataConfig):
         return -self.lead_mm, self.n_cells() * pitch + self.lead_mm
 
 
+SUMMARY_TEXT_CHARS = 60
+"""At most this many characters of the line in :meth:`BrailleScan.summary`."""
+
+
 @njit(cache=True)
 def _samples_at(x0: float, x_end: float, step: float) -> int:
     """How many samples ``x_i = x_{i−1} + step`` (from x0) stay at or before x_end, summed as the block does."""
@@ -225,6 +229,7 @@ class BrailleScan(Source):
         self._i = 0
         self._x0, self._x_end = c.track()
         self._x = self._x0
+        self._x_last = self._x0  # the last emitted sample's position (for summary)
         self._v = self._clamp_speed(c.speed_mm_s)
         self._lat = 0.0
         self._done = False
@@ -303,6 +308,8 @@ class BrailleScan(Source):
             ys.append(self.config.y_offset_mm + self._lat)
             self._i += 1
         n = len(xs)
+        if n:
+            self._x_last = xs[-1]
         t = (self._i - n + np.arange(n)) / self.config.rate_hz
         x, y = np.array(xs, np.float64), np.array(ys, np.float64)
         out: dict[str, Chunk] = {}
@@ -327,6 +334,20 @@ class BrailleScan(Source):
         lo, hi = g.cell_span(kk)
         on = inside & (x >= lo) & (x <= hi)
         return np.where(on, self._cat[kk] if len(self._cat) else 0.0, 0.0)
+
+    def summary(self) -> str | None:
+        """``scanned "qwerty…" (26 letters) in 2.31 s, 231 mm/s mean`` (the mean over the distance
+        scanned; ``… 40 of 120 mm`` when the run ended before the line did); None before a sample."""
+        if self._i < 2:
+            return None
+        span = (self._i - 1) * self._dt
+        dist = self._x_last - self._x0
+        text = (
+            self.text if len(self.text) <= SUMMARY_TEXT_CHARS else self.text[: SUMMARY_TEXT_CHARS - 1] + "…"
+        )
+        letters = sum(1 for ch in self.text if ch != " ")
+        part = "" if self._done else f", {dist:.0f} of {self._x_end - self._x0:.0f} mm"
+        return f'scanned "{text}" ({letters} letters{part}) in {span:.2f} s, {dist / span:.0f} mm/s mean'
 
     @classmethod
     def example(cls) -> Example:

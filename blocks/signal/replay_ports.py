@@ -259,6 +259,7 @@ class ReplayPorts:
 
     # -- run time ----------------------------------------------------------------------------
     def reset(self) -> None:
+        self._played: dict[str, list[float]] = {}  # port -> [count, first t, last t] (for summary)
         for port, player in self._players.items():
             if port in self.demanded:
                 player.bind({}, seed=self.seed)
@@ -276,7 +277,22 @@ class ReplayPorts:
             player.close()
 
     def step(self, now: float) -> dict[str, Chunk]:
-        return {p: r(now)["y"] for p, r in self._players.items() if p in self.demanded}
+        out = {p: r(now)["y"] for p, r in self._players.items() if p in self.demanded}
+        for p, chunk in out.items():
+            if len(chunk.t):
+                seen = self._played.setdefault(p, [0, float(chunk.t[0]), 0.0])
+                seen[0] += len(chunk.t)
+                seen[2] = float(chunk.t[-1])
+        return out
+
+    def summary(self) -> str | None:
+        """``replayed FILE (r: 3,000 samples, 0-2.999 s)``: what the run played back, per port."""
+        parts = [
+            f"{p}: {n:,} {'events' if self._players[p].output_specs['y'].events else 'samples'}, "
+            f"{t0:g}-{t1:g} s"
+            for p, (n, t0, t1) in self._played.items()
+        ]
+        return f"replayed {self._file()} ({'; '.join(parts) or 'nothing: no sample fell in the run'})"
 
     @classmethod
     def example(cls) -> Example:

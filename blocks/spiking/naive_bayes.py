@@ -105,8 +105,8 @@ class NaiveBayes(Block):
         "windows": "windows decoded (posterior and decision emitted): the normal work",
         "empty_windows": "windows with no spike at all: decoded as the prior (the population was silent)",
         "unfinished_windows": "a window still open at end of stream: dropped, not decoded",
-        "late_spikes": "spikes older than results already emitted (the producer broke its watermark): "
-        "ignored; a fault upstream",
+        "late_spikes": "spikes older than results already emitted, by more than float rounding "
+        "(the producer broke its watermark): ignored; a fault upstream",
         "unknown_window_values": "window samples whose value is no category (or NaN): treated as gap; a fault upstream",
     }
 
@@ -166,7 +166,9 @@ class NaiveBayes(Block):
         self._spk_i = np.zeros(0, np.int64)
         self._wm = -math.inf
         self._cur: tuple[int, float] | None = None  # (value, start) of the open window
-        self._queue: deque[tuple[str, float, float]] = deque()  # ("win"|"run", start, need)
+        self._queue: deque[tuple[str, float, float, int]] = deque()  # ("win"|"run", start, need, value)
+        self._labels = tuple(cats) if cats is not None else None
+        self._read: list[tuple[str, bool | None]] = []  # per decoded window: (class, right or unknown)
         self._last = np.exp(self._m.arrays["class_log_prior"])
         self._keep_from = -math.inf
         self._t_last = -math.inf  # time of the last window sample
@@ -208,7 +210,8 @@ class NaiveBayes(Block):
                     f"(got {idx.min()}..{idx.max()})"
                 )
             t = np.asarray(spikes.t, np.float64)
-            late = t < self._decided  # before a window already decoded: the producer broke its watermark
+            # before a result already emitted, beyond rounding: the producer broke its watermark
+            late = t < self._decided - SAME_INSTANT_S
             if late.any():
                 self.count("late_spikes", int(late.sum()))
                 t, idx = t[~late], idx[~late]
@@ -226,18 +229,18 @@ class NaiveBayes(Block):
         gap = self._is_gap(v)
         self._t_last = t
         if self._cur is not None and (gap or v != self._cur[0]):
-            self._queue.append(("win", self._cur[1], t))  # the window [start, t) is finished
+            self._queue.append(("win", self._cur[1], t, self._cur[0]))  # the window [start, t) is finished
             self._cur = None
         if not gap and self._cur is None:
             self._cur = (v, t)
         start = self._cur[1] if self._cur is not None else math.nan
-        self._queue.append(("run", start, t + self._dt))
+        self._queue.append(("run", start, t + self._dt, v))
 
     def _drain(self, final: bool) -> dict[str, Chunk]:
         c = len(self._m.classes)
         post_t, post, dec, run_t, run = [], [], [], [], []
         while self._queue and (final or self._queue[0][2] <= self._wm):
-            kind, start, need = self._queue.popleft()
+            kind, start, need, value = self._queue.popleft()
             self._decided = max(self._decided, need)
             if kind == "win":
                 p = self._decode(start, need)
@@ -245,6 +248,7 @@ class NaiveBayes(Block):
                 post_t.append(need)
                 post.append(p)
                 dec.append(int(np.argmax(p)))
+                self._tell(dec[-1], value)
             else:
                 run_t.append(need - self._dt)
                 run.append(self._running(start, need))
@@ -256,12 +260,33 @@ class NaiveBayes(Block):
             "running": Chunk(np.array(run_t), np.array(run).reshape(-1, c), end),
         }
 
+    def _tell(self, decided: int, value: int) -> None:
+        """Keep what a window was read as, and whether that is its label (the window stream's own
+        category name, or its value where the stream has no categories), for :meth:`summary`."""
+        name = self._m.classes[decided]
+        if self._labels is not None:
+            right: bool | None = 0 <= value < len(self._labels) and self._labels[value] == name
+        else:
+            right = value == decided
+        self._read.append((name, right))
+
+    def summary(self) -> str | None:
+        """``read 26 windows, 26 right (against the window labels): "qwerty…"``; None if none was read."""
+        if not self._read:
+            return None
+        names = [n for n, _ in self._read]
+        right = sum(1 for _, r in self._read if r)
+        text = "".join(names) if all(len(n) == 1 for n in names) else " ".join(names)
+        if len(text) > SUMMARY_TEXT_CHARS:
+            text = text[: SUMMARY_TEXT_CHARS - 1] + "…"
+        return f'read {len(names)} windows, {right} right (against the window labels): "{text}"'
+
     def _decode(self, t0: float, t1: float) -> np.ndarray:
         m = self._m
         x = window_features(
             self._spk_t,
             self._spk_i,
-            np.array([[t0, t1]]),
+            np.array([[t0, t1 - SAME_INSTANT_S]]),
             n_units=m.n_units,
             n_bins=m.n_bins,
             kind=m.features,
@@ -275,12 +300,14 @@ class NaiveBayes(Block):
     def _running(self, start: float, need: float) -> np.ndarray:
         if math.isnan(start) or self._marg is None:
             return self._last.copy()
-        x = window_features(self._spk_t, self._spk_i, np.array([[start, need]]), n_units=self._n_units)
+        x = window_features(
+            self._spk_t, self._spk_i, np.array([[start, need - SAME_INSTANT_S]]), n_units=self._n_units
+        )
         return np.exp(tempered_log_posterior(self._marg, x, self._m.running_temperature)[0])
 
     def _prune(self) -> None:
         """Forget spikes no open or queued window can need."""
-        starts = [s for k, s, _ in self._queue if not math.isnan(s)]
+        starts = [s for _k, s, _n, _v in self._queue if not math.isnan(s)]
         if self._cur is not None:
             starts.append(self._cur[1])
         keep = min(starts) if starts else self._t_last  # the next window starts after the last sample
@@ -305,6 +332,16 @@ class NaiveBayes(Block):
             rate_hz=EXAMPLE_RATE_HZ,
         )
 
+
+#: Times closer than this are one instant (s). A window ends at ``t + 1/rate`` and a producer's
+#: watermark is its last sample's ``t + dt``, sums that float rounding can put an ulp past the next
+#: sample's own time ``(i + 1) / rate`` (0.068 + 0.004 = 0.07200000000000001 > 0.072): a spike at
+#: that next sample is neither late nor inside the window that ends there. 1 ns is far below any
+#: sample period and far above the rounding of times up to days.
+SAME_INSTANT_S = 1e-9
+
+#: At most this many characters of the decoded text in :meth:`NaiveBayes.summary`.
+SUMMARY_TEXT_CHARS = 60
 
 #: Stand-in for a window value that is no whole number (NaN, inf, 2.5): counted, treated as gap.
 _BAD = np.iinfo(np.int64).min

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import math
+import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -26,7 +27,7 @@ from flowtact.runtime.stats import format_factor
 from flowtact.runtime.step_plan import NodePlan, OutPlan, build_plans, takes_first, tallies
 from flowtact.runtime.warm_up import warm_up_here
 
-__all__ = ["InprocExecutor", "NodeError", "RunSummary", "check_chunk", "explain_counters"]
+__all__ = ["InprocExecutor", "NodeError", "RunSummary", "block_summaries", "check_chunk", "explain_counters"]
 
 
 class Sink(Protocol):
@@ -54,8 +55,13 @@ class RunSummary:
     wall_s: float
     stopped_by: str
     running_s: float | None = None
-    """Multi-process runs: seconds from tick 0 to the last worker's end, without the start-up
-    (spawning, compiling, wiring) that ``wall_s`` includes. None in process."""
+    """Seconds from graph time 0 (the first tick's clock start) to the end of the last tick
+    (multi-process: the last worker's end), without the start-up that ``wall_s`` includes."""
+    startup_s: float | None = None
+    """Seconds from launch to graph time 0: making and opening blocks, compiling or loading kernels
+    (warming up), and (multi-process) spawning and wiring the workers. Shown apart from the
+    real-time factor. An in-process --fast executor made without ``warm_up`` loads its kernels in
+    its blocks' first steps, inside the running time (``flowtact run`` and sweeps warm up)."""
     samples: dict[str, int] = field(default_factory=dict)
     events: dict[str, int] = field(default_factory=dict)
     event_units: dict[str, int] = field(default_factory=dict)
@@ -80,11 +86,22 @@ class RunSummary:
     """Real-time runs that fell behind: the nodes that took most of the wall time then."""
     notes: list[str] = field(default_factory=list)
     """Things the run should tell (a played-back file that ended before the run did)."""
+    block_summaries: dict[str, str] = field(default_factory=dict)
+    """What blocks said of their run (:meth:`flowtact.block.Block.summary`), per node: ``read 26
+    letters, 26 right``; printed under the counters."""
 
     @property
     def realtime_factor(self) -> float:
-        """Simulated seconds per wall second."""
-        return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
+        """Graph seconds per *running* second (from graph time 0; start-up is ``startup_s``, apart):
+        1.0 for a real-time run that kept up. ``wall_s`` stands in when no running span is known."""
+        span = self.running_s if self.running_s is not None else self.wall_s
+        return self.duration_s / span if span > 0 else math.inf
+
+    @property
+    def shown_paths(self) -> dict[str, dict[str, Any]]:
+        """Deadline paths worth telling: none on the virtual clock (``--fast``), whose wall-clock
+        latencies say nothing about the budgets a deadline declares."""
+        return {} if self.realtime is None else self.paths
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
@@ -93,6 +110,7 @@ class RunSummary:
             "duration_s": self.duration_s,
             "wall_s": self.wall_s,
             "running_s": self.running_s,
+            "startup_s": self.startup_s,
             "realtime_factor": self.realtime_factor,
             "stopped_by": self.stopped_by,
             "realtime": self.realtime,
@@ -108,8 +126,9 @@ class RunSummary:
             "processes": self.processes,
             "supervisor": {"cpu_pct": self.supervisor_cpu_pct},
             "streams": self.streams,
-            "paths": self.paths,
+            "paths": self.shown_paths,
             "notes": self.notes,
+            "block_summaries": self.block_summaries,
         }
 
     def rate(self, stream: str) -> float:
@@ -117,12 +136,19 @@ class RunSummary:
         units = max(self.event_units.get(stream, 1), 1)
         return self.events[stream] / units / self.duration_s if self.duration_s > 0 else 0.0
 
+    def _headline(self) -> str:
+        """``touch: 3.000 s of graph time in 3.002 s (1.0× real time, duration); start-up 9.8 s``:
+        the factor over the running span, the start-up apart (see :attr:`realtime_factor`)."""
+        running = self.running_s if self.running_s is not None else self.wall_s
+        startup = f"; start-up {self.startup_s:.1f} s" if self.startup_s is not None else ""
+        return (
+            f"{self.graph}: {self.duration_s:.3f} s of graph time in {running:.3f} s "
+            f"({format_factor(self.realtime_factor)} real time, {self.stopped_by}){startup}"
+        )
+
     def format(self) -> str:
         """A short human summary."""
-        lines = [
-            f"{self.graph}: {self.duration_s:.3f} s of graph time in {self.wall_s:.3f} s wall "
-            f"({format_factor(self.realtime_factor)} real time, {self.stopped_by})"
-        ]
+        lines = [self._headline()]
         if self.realtime is False:
             busiest = f"; busiest nodes: {', '.join(self.late_nodes)}" if self.late_nodes else ""
             lines.append(
@@ -142,6 +168,7 @@ class RunSummary:
         ]
         width = max((len(c) for c, _ in counted), default=0)
         lines += [f"  {c:<{width}}  {doc}" if doc else f"  {c}" for c, doc in counted]
+        lines += [f"  {node}: {text}" for node, text in self.block_summaries.items()]
         for name, p in self.processes.items():
             cpu = f"{p['cpu_pct']:.1f}% CPU" if p.get("cpu_pct") is not None else "CPU n/a"
             restarts = f", {p['restarts']} restart(s)" if p.get("restarts") else ""
@@ -157,7 +184,7 @@ class RunSummary:
             lines.append(
                 f"  stream {name:<21} {st['messages']:>8,} msgs ({st['policy']}), {latency}{dropped}"
             )
-        for name, pa in self.paths.items():
+        for name, pa in self.shown_paths.items():
             if pa.get("n"):
                 lines.append(
                     f"  deadline {name}: p50 {pa['p50_us']:.0f} µs, p99 {pa['p99_us']:.0f} µs "
@@ -180,9 +207,14 @@ class InprocExecutor:
         tick_s: float | None = None,
         recorder: Sink | None = None,
         progress: Callable[[float, float | None], None] | None = None,
+        warm_up: bool | None = None,
     ) -> None:
         self.plan = plan
         self.fast = fast
+        self.warm_up = not fast if warm_up is None else warm_up
+        """Load or compile kernels before graph time 0 (:func:`warm_up_here`, on throwaway copies
+        of the blocks, as a worker does): always in real time; in --fast when asked (``flowtact
+        run --inproc``, sweeps), so their kernel loading is start-up, not running time."""
         self.tick_s = tick_for(fast, tick_s)
         self.recorder = recorder
         self.progress = progress
@@ -191,6 +223,7 @@ class InprocExecutor:
             plan.bind(n, block)
         self.nodes, self._delay_ports = build_plans(plan, self.blocks)
         self._delivered: list[OutPlan] = []  # outputs counted in the summary, by first delivery
+        self._made = time.perf_counter()  # start-up counts from here: the blocks were just made
 
     def _step(self, nodes: Iterable[NodePlan], now: float, at_end: bool, flush: bool = False) -> None:  # noqa: C901 — the hot loop, inline on purpose (see the docstring)
         """Step each node in ``nodes`` on its inboxes (a non-source only when something came), or
@@ -290,9 +323,10 @@ class InprocExecutor:
             for block in self.blocks.values():
                 block.open()
                 opened.append(block)
-            if not self.fast:  # kernels load or compile now, not on the real-time clock
+            if self.warm_up:  # kernels load or compile now, not on the clock the factor is taken on
                 warm_up_here(self.blocks, self.tick_s)
             clock.start()
+            startup_s = time.perf_counter() - self._made
             n_ticks = math.ceil(duration_s / self.tick_s - 1e-9) if duration_s is not None else None
             try:
                 while n_ticks is None or k < n_ticks:
@@ -313,7 +347,9 @@ class InprocExecutor:
                 stopped_by = "interrupted"
                 for _, later in delay_ports:  # the interrupted tick's delayed outputs never arrive
                     later.clear()
+            running_s = clock.elapsed()
             self._flush_all(now)
+            said = block_summaries(self.blocks)
         finally:
             for block in reversed(opened):
                 block.close()
@@ -322,7 +358,9 @@ class InprocExecutor:
         return RunSummary(
             graph=self.plan.graph.name,
             duration_s=now,
-            wall_s=clock.elapsed(),
+            wall_s=time.perf_counter() - self._made,
+            running_s=running_s,
+            startup_s=startup_s,
             stopped_by=stopped_by,
             samples=samples,
             events=events,
@@ -338,6 +376,7 @@ class InprocExecutor:
             counter_docs=explain_counters(self.plan, counters),
             realtime=None if self.fast else lag < LAG_WARN_S,
             max_lag_s=lag,
+            block_summaries=said,
         )
 
     def _flush_all(self, now: float) -> None:
@@ -355,6 +394,26 @@ def _take(box: list[Chunk], empty: Chunk, spec: StreamSpec) -> Chunk:
     c = concat(box, spec).readonly()
     box.clear()
     return c
+
+
+SUMMARY_MAX_CHARS = 240
+"""A block's summary line is cut to this many characters: it is a line of the run summary, and a
+worker sends it to the supervisor with its last message (a block's bug must not flood either)."""
+
+
+def block_summaries(blocks: Mapping[str, Block]) -> dict[str, str]:
+    """What each block says of its run (its :meth:`~flowtact.block.Block.summary`), per node, for
+    the blocks that say something; asked after the final flush, before ``close``."""
+    out: dict[str, str] = {}
+    for node, block in blocks.items():
+        try:
+            text = block.summary()
+        except Exception as e:
+            raise NodeError(node, block.name, math.nan, e) from e
+        if text:
+            line = " ".join(str(text)[: 4 * SUMMARY_MAX_CHARS].split())  # one line, whatever it returned
+            out[node] = line if len(line) <= SUMMARY_MAX_CHARS else line[: SUMMARY_MAX_CHARS - 1] + "…"
+    return out
 
 
 def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:

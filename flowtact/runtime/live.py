@@ -11,6 +11,7 @@ redraws from ``update()`` at most 4 times a second.
 Snapshot keys (any of them may be missing or None early in a run)::
 
     {"graph": str, "mode": "fast" | "realtime", "now": graph s, "duration": s | None, "wall": s,
+     "running": s since graph time 0 | None, "startup": s from launch to graph time 0 | None,
      "processes": {name: {"pid", "host", "state", "cpu_pct", "restarts", "nodes": [str]}},
      "streams": {"node.port": {"rate_hz", "samples_hz", "p50_us", "p99_us", "dropped", "policy"}},
      "paths": {"src -> dst": {"p50_us", "p99_us", "budget_us", "violations"}}}
@@ -86,10 +87,14 @@ def _title(snap: Mapping[str, Any]) -> Text:
             title.append(f"/{_format_seconds(duration)} s ({min(100.0, 100.0 * now / duration):.0f}%)")
         else:
             title.append(" s")
-        if wall:
-            title.append(f"  {format_factor(now / wall)} real time")
+        running = snap.get("running")
+        if running:  # from graph time 0: the start-up is shown apart, never in the factor
+            title.append(f"  {format_factor(now / running)} real time")
+        startup = snap.get("startup")
+        if startup is not None:
+            title.append(f"  start-up {_format_seconds(startup)} s")
     elif wall is not None:
-        title.append(f"  wall {_format_seconds(wall)} s")
+        title.append(f"  starting {_format_seconds(wall)} s")
     return title
 
 

@@ -106,6 +106,8 @@ class _Proc:
     done: bool = False
     rec_done: bool = False
     counters: dict[str, dict[str, int]] = field(default_factory=dict)
+    summaries: dict[str, str] = field(default_factory=dict)
+    """What its blocks said of the run (``Block.summary``), per node, sent with ``done``."""
     wired: bool = False
     last_k: int = 0
     violations: dict[str, int] = field(default_factory=dict)
@@ -179,6 +181,8 @@ class ProcessExecutor:
         self.t_run = self.next_ping = time.monotonic()
         self.next_watch = 0.0
         self.t0_ns = 0
+        self.go_ns = 0
+        """Graph time 0 on the monotonic clock (ns): ``t0_ns`` in real time, the start message in --fast."""
         self.last_done_ns = 0
         """When the last worker said it was done (monotonic ns): with t0_ns, the running span."""
         self.wplans = {
@@ -361,6 +365,7 @@ class ProcessExecutor:
                         self._wire(p)
         t0 = time.monotonic_ns() + 20_000_000
         self.t0_ns = t0
+        self.go_ns = t0 if not self.fast else t0 - 20_000_000  # --fast workers start at once
         self.t_run = time.monotonic()
         for p in self.procs.values():
             self._send(p, "start", t0_ns=t0, k0=0, resume=False)
@@ -482,6 +487,7 @@ class ProcessExecutor:
         elif op == "done":
             self._on_stats(proc, msg)
             proc.counters = msg.get("counters", {})
+            proc.summaries = msg.get("summaries", {})
             proc.done = True
             self.last_done_ns = time.monotonic_ns()
             proc.state = "done"
@@ -739,6 +745,8 @@ class ProcessExecutor:
             "now": self._graph_now(),
             "duration": self.duration_s,
             "wall": time.monotonic() - self.t_start,
+            "running": max(time.monotonic_ns() - self.go_ns, 0) / 1e9 if self.t0_ns else None,
+            "startup": self.go_ns / 1e9 - self.t_start if self.t0_ns else None,
             "processes": self._process_table(),
             "streams": {
                 name: {
@@ -759,6 +767,7 @@ class ProcessExecutor:
                     "violations": p["violations"],
                 }
                 for name, p in paths.items()
+                if not self.fast  # wall-clock budgets: nothing to show on a virtual clock
             },
         }
 
@@ -847,7 +856,8 @@ class ProcessExecutor:
             graph=plan.graph.name,
             duration_s=now,
             wall_s=time.monotonic() - self.t_start,
-            running_s=(self.last_done_ns - self.t0_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
+            running_s=(self.last_done_ns - self.go_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
+            startup_s=self.go_ns / 1e9 - self.t_start if self.t0_ns else None,
             stopped_by=stopped_by,
             samples=samples,
             events=events,
@@ -863,6 +873,9 @@ class ProcessExecutor:
             realtime=None if self.fast else self.max_lag_s < LAG_WARN_S,
             max_lag_s=self.max_lag_s,
             late_nodes=list(self.late),
+            block_summaries={
+                n: t for n in plan.order for p in self.procs.values() if (t := p.summaries.get(n))
+            },
         )
 
 

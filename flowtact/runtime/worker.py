@@ -57,7 +57,7 @@ import zmq
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.registry import load_block
-from flowtact.runtime.inproc import check_chunk
+from flowtact.runtime.inproc import block_summaries, check_chunk
 from flowtact.runtime.placement import spec_from_wire
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.warm_up import CompileWatch, settle_heap, warm_up
@@ -852,7 +852,7 @@ class Worker:
             self._flush_records()
             self._send_lossless(self.rec, -1, 0, k, Chunk.empty(), flags=END)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
-        self._send("done", **self._stats(), counters=counters)
+        self._send("done", **self._stats(), counters=counters, summaries=block_summaries(self.blocks))
 
     # -- statistics -------------------------------------------------------------------------
     def _stats(self) -> dict[str, Any]:

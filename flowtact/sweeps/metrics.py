@@ -4,7 +4,9 @@ Built-ins: ``spikes`` (per event stream â€” every population, recorded or not â€
 ``spikes:STREAM`` and mean rate per unit ``rate_hz:STREAM``), ``rmse`` (``rmse:STREAM``, the root
 mean square difference of a recorded stream from a reference stream, the reference linearly
 interpolated at the stream's times; pairs given as ``STREAM=REFERENCE``) and ``runtime`` (the
-graph's own ``wall_s`` and ``realtime_factor``).
+run's ``wall_s``, its ``startup_s`` (launch to graph time 0: making blocks, compiling or loading
+kernels) and its ``realtime_factor``, graph time over the *running* time from graph time 0, so a
+worker's warm-up never reads as a slow graph).
 
 A user metric is ``fn(streams) -> dict[str, float]``: ``streams`` maps each recorded stream name
 (``"force.f"``) to a :class:`flowtact.record.RecordedStream` (``t``, ``data``, ``spec``), the same
@@ -113,6 +115,8 @@ def compute_metrics(spec: MetricSpec, streams: Mapping[str, Any], summary: Any) 
         out[f"rmse:{est}"] = rmse(a.t, a.data, b.t, b.data)
     if "runtime" in spec.builtins:
         out["wall_s"] = float(summary.wall_s)
+        startup = getattr(summary, "startup_s", None)
+        out["startup_s"] = float(startup) if startup is not None else math.nan
         out["realtime_factor"] = float(summary.realtime_factor)
     for name in spec.user:
         values = resolve_user_metric(name)(streams)

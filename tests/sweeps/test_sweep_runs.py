@@ -34,7 +34,7 @@ GRID = {"sa1.tau_s": [0.005, 0.01, 0.02], "sa1.sigma": [1.0, 2.0], "sensor.scena
 
 def metric_columns(df: pd.DataFrame) -> list[str]:
     """Columns that must not depend on where or when a run ran (not run times)."""
-    timing = {"run_s", "wall_s", "realtime_factor"}
+    timing = {"run_s", "wall_s", "startup_s", "realtime_factor"}
     return sorted(c for c in df.columns if c not in timing)
 
 

@@ -314,3 +314,66 @@ def test_spikes_out_of_order_are_sorted_and_late_ones_counted():
         spikes=Chunk(np.array([0.005]), np.array([1]), 0.07), window=Chunk(np.zeros(0), np.zeros(0, np.int64))
     )
     assert blk.counters["late_spikes"] == 1  # its window was decoded already
+
+
+def test_a_watermark_one_rounding_past_the_next_sample_makes_no_late_spike():
+    """The Braille loop's case: a producer's watermark ``t + dt`` (0.068 + 0.004 =
+    0.07200000000000001) passes the next sample's own time 0.072 by an ulp. Spikes at 0.072 are
+    neither late nor lost, and the running posterior at 0.068 leaves them out in every chunking."""
+    specs = {
+        "spikes": StreamSpec(dtype="int64", events=True, n_units=4),
+        "window": StreamSpec(dtype="int64", rate_hz=250.0),
+    }
+    assert 0.068 + 0.004 > 18 / 250.0  # the rounding this test is about
+    t = np.arange(40) / 250.0
+    w = np.r_[np.full(30, 0), np.full(10, -1)]
+    spk_t, spk_u = np.array([0.02, 0.072, 0.072, 0.1]), np.array([0, 2, 2, 3])
+
+    def by_ticks() -> tuple[dict, dict]:
+        blk = NaiveBayes(model=str(example_model_path()))
+        blk.bind(specs)
+        outs = []
+        for i in range(len(t)):  # one sample per tick, as the closed loop runs it
+            sel = (spk_t >= t[i] - 1e-12) & (spk_t < t[i] + 0.002)
+            end = t[i] + 1 / 250.0  # the producer's watermark: t_last + dt, rounded
+            outs.append(
+                blk(spikes=Chunk(spk_t[sel], spk_u[sel], end), window=Chunk(t[i : i + 1], w[i : i + 1]))
+            )
+        outs.append(blk.flush())
+        joined = {k: np.concatenate([o[k].data for o in outs]) for k in ("posterior", "running")}
+        return joined, blk.counters
+
+    ticked, counters = by_ticks()
+    assert "late_spikes" not in counters, counters
+    whole = NaiveBayes(model=str(example_model_path()))
+    whole.bind(specs)
+    one = whole(spikes=Chunk(spk_t, spk_u, 1.0), window=Chunk(t, w))
+    rest = whole.flush()
+    np.testing.assert_array_equal(
+        ticked["posterior"], np.concatenate([one["posterior"].data, rest["posterior"].data])
+    )
+    np.testing.assert_array_equal(
+        ticked["running"], np.concatenate([one["running"].data, rest["running"].data])
+    )
+
+
+@pytest.mark.parametrize(
+    ("cats", "n_right"),
+    [(("x", "y", "z", "gap"), 5), (("y", "z", "x", "gap"), 0)],
+    ids=["labelled", "mislabelled"],
+)
+def test_the_summary_counts_windows_read_right_against_their_labels(cats, n_right):
+    """The example's windows are driven as classes 0, 1, 2, 0, 2 and read so (the docstring
+    example): named as the model names them they are all right; named otherwise, none is."""
+    (t, u), window = example_data(labels=(0, 1, 2, 0, 2), seed=3)
+    window = np.where(window < 0, 3, window)  # the gaps named
+    blk = NaiveBayes(model=str(example_model_path()), gap=("gap",))
+    blk.bind(
+        {
+            "spikes": StreamSpec(dtype="int64", events=True, n_units=4),
+            "window": StreamSpec(dtype="int64", rate_hz=EXAMPLE_RATE_HZ, categories=cats),
+        }
+    )
+    assert blk.summary() is None  # nothing read yet: nothing to say
+    blk(spikes=Chunk(t, u, 10.0), window=Chunk(np.arange(len(window)) / EXAMPLE_RATE_HZ, window))
+    assert blk.summary() == f'read 5 windows, {n_right} right (against the window labels): "xyzxz"'
