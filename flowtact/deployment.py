@@ -53,6 +53,9 @@ STARTUP_LOCAL_S = 60.0
 """Default ``startup_s`` of a group on this host: start the interpreter, import, build the blocks."""
 STARTUP_REMOTE_S = 120.0
 """Default ``startup_s`` of a group with ``host:``: someone has to start it there by hand."""
+MAX_STARTUP_S = 86_400.0
+"""Longest start-up window ``--startup-s`` takes (a day): a window is time *without progress*, so
+even a first run that compiles for an hour needs far less; more is a typing slip."""
 STOP_GRACE_S = 10.0
 """Default ``stop_grace_s``: how long a stopped run may drain before it is aborted."""
 

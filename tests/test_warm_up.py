@@ -201,6 +201,30 @@ def test_a_worker_compiling_longer_than_its_startup_window_is_not_killed(tmp_pat
 
 
 @pytest.mark.slow
+def test_a_worker_warming_up_longer_than_its_window_joins_while_it_reports_progress(tmp_path):
+    # six warm-up steps of 0.4 s each: 2.4 s of warm-up (sleeps, not compiling) against a window of
+    # 1.5 s without progress; each step is a start-up report that restarts the window
+    graph = _graph(tmp_path, "Slow", "{step_s: 0.4}", startup=1.5)
+    proc = flowtact("run", graph, "--fast", "--duration", "1", "--quiet")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert "did not join" not in err
+
+
+@pytest.mark.slow
+def test_a_worker_without_start_up_progress_is_named_with_how_to_widen_its_window(tmp_path):
+    # open() hangs without a word; --startup-s replaces the graph's window of 600 s
+    graph = _graph(tmp_path, "Slow", "{open_s: 600}", startup=600)
+    proc = flowtact("run", graph, "--fast", "--duration", "1", "--startup-s", "2")
+    _, err = proc.communicate(timeout=120)  # a hang bound: the graph's own window would take 600 s
+    assert proc.returncode == 1, err
+    assert "process 'work' (nodes gain, scale) did not join: no start-up progress for" in err, err
+    assert "(its start-up window, 2 s) while opening node 'scale'" in err, err
+    assert "widen the window with --startup-s S or startup_s under processes: work: in the graph" in err, err
+    assert len(err.strip().splitlines()) == 1, err  # one line, no traceback
+
+
+@pytest.mark.slow
 def test_an_inprocess_real_time_run_warms_up_and_says_so(tmp_path):
     proc = flowtact("run", _graph(tmp_path), "--inproc", "--duration", "0.5", "--quiet")
     _, err = proc.communicate(timeout=300)
