@@ -144,6 +144,45 @@ def test_no_blocks_example_calls_a_kernel_signature_its_warm_up_missed():
     assert json.loads(done.stdout.strip().splitlines()[-1]) == {}
 
 
+SHARED = """
+import sys
+import numpy as np
+from flowtact.chunk import StreamSpec
+from flowtact.finite import all_finite
+from flowtact.runtime.warm_up import CompileWatch, _unaligned, warm_shared_kernels
+spec = StreamSpec(dtype="float64", shape=(3,), rate_hz=1000.0)
+if sys.argv[1] == "supervisor":
+    print(warm_shared_kernels([spec]))
+else:  # a worker's bad-data screen on the inputs it gets: read-only, aligned or not
+    watch = CompileWatch().install()
+    for n in (1, 7):
+        a = np.ones((n, 3))
+        a.setflags(write=False)
+        all_finite(a)
+        all_finite(_unaligned(a))
+    print(watch.count)
+"""
+
+
+def _compiled(role: str, cache) -> int:
+    run = subprocess.run(
+        [sys.executable, "-c", SHARED, role],
+        env={**env(), "NUMBA_CACHE_DIR": str(cache)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    return int(run.stdout.split()[-1])
+
+
+@pytest.mark.slow
+def test_kernels_every_worker_shares_are_compiled_once_before_the_workers_start(tmp_path):
+    assert _compiled("worker", tmp_path / "alone") > 0  # a worker on a fresh install compiles them
+    assert _compiled("supervisor", tmp_path / "warmed") > 0  # ... unless the supervisor did first:
+    assert _compiled("worker", tmp_path / "warmed") == 0  # then every worker loads them from the cache
+
+
 # -- through flowtact run ---------------------------------------------------------------------
 
 GRAPH = """

@@ -52,6 +52,7 @@ from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.rundir import make_run_folder
 from flowtact.runtime.stats import LatencyHistogram, format_factor
+from flowtact.runtime.warm_up import warm_shared_kernels
 from flowtact.runtime.wire import recv_message
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
@@ -216,6 +217,7 @@ class ProcessExecutor:
                     stop_grace_s=pdef.stop_grace_s,
                     since=self.t_start,
                 )
+            self._warm_shared()
             for proc in self.procs.values():
                 if proc.host is None:
                     self._spawn(proc)
@@ -233,6 +235,14 @@ class ProcessExecutor:
             err.summary = summary  # type: ignore[attr-defined]
             raise err
         return summary
+
+    def _warm_shared(self) -> None:
+        """Compile once, here, the kernels every local worker calls (the bad-data screen's), so
+        that the workers load them from numba's cache rather than each compile them at once."""
+        if sum(1 for p in self.procs.values() if p.host is None) < 2:
+            return
+        specs = [spec for (node, _port), spec in self.plan.specs.items() if node in self.plan.demanded]
+        warm_shared_kernels(specs, self.warn)
 
     def _catch_signals(self) -> Callable[[], None]:
         """Ctrl-C and SIGTERM become a flag the pump reads: no exception lands mid-write."""

@@ -19,7 +19,7 @@ import contextlib
 import gc
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,7 +28,15 @@ import numpy as np
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec
 
-__all__ = ["CompileWatch", "WarmUpReport", "settle_heap", "synthetic_inputs", "warm_up", "warm_up_here"]
+__all__ = [
+    "CompileWatch",
+    "WarmUpReport",
+    "settle_heap",
+    "synthetic_inputs",
+    "warm_shared_kernels",
+    "warm_up",
+    "warm_up_here",
+]
 
 VARIANTS = (
     (1, "zeros", True, ""),
@@ -172,6 +180,39 @@ def warm_up(
         report.seconds[name] = time.perf_counter() - t0
         report.compiled[name] = watch.count - before
     return report
+
+
+def warm_shared_kernels(specs: Iterable[StreamSpec], say: Callable[[str], None] | None = None) -> int:
+    """Load or compile, in this process, the framework's kernels every worker calls: the bad-data
+    screen's finite test, on each float stream's sample shape as the workers get it (read-only,
+    aligned and not). Numba caches them on disk, so workers started next load them instead of each
+    compiling the same signatures at once (on a first run, three workers compiled them side by
+    side on two cores). Returns how many were compiled (0 when all came from the cache)."""
+    from flowtact.finite import all_finite
+
+    watch = CompileWatch(
+        on_first=lambda _k: (
+            say
+            and say("compiling the kernels every process shares (first run after an install or upgrade)...")
+        )
+    )
+    watch.install()
+    t0 = time.perf_counter()
+    shapes = {(np.dtype(s.dtype or "float64"), s.shape) for s in specs if not s.events}
+    for dtype, shape in sorted(shapes, key=str):
+        if dtype.kind != "f":
+            continue
+        for n in (1, 4):
+            a = np.zeros((n, *shape), dtype)
+            a.setflags(write=False)
+            all_finite(a)
+            all_finite(_unaligned(a))
+    watch.uninstall()
+    if watch.count and say:
+        say(
+            f"{watch.count} shared kernel{'s' if watch.count > 1 else ''} compiled in {time.perf_counter() - t0:.1f} s"
+        )
+    return watch.count
 
 
 def warm_up_here(
