@@ -188,6 +188,7 @@ class ProcessExecutor:
         """The supervisor's own CPU seconds and monotonic time when the first worker was warm."""
         self.late: list[str] = []  # the busiest nodes when the run fell behind real time
         self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
+        self.shared_warm: threading.Thread | None = None
         self.t_run = self.next_ping = time.monotonic()
         self.next_watch = 0.0
         self.t0_ns = 0
@@ -238,11 +239,18 @@ class ProcessExecutor:
 
     def _warm_shared(self) -> None:
         """Compile once, here, the kernels every local worker calls (the bad-data screen's), so
-        that the workers load them from numba's cache rather than each compile them at once."""
+        that the workers load them from numba's cache rather than each compile them at once.
+
+        In a thread, while the workers start their interpreters and import (seconds): done before
+        spawning, it delayed every worker by its compile time (4 s at load 9 for touch.yaml)."""
+        self.shared_warm = None
         if sum(1 for p in self.procs.values() if p.host is None) < 2:
             return
         specs = [spec for (node, _port), spec in self.plan.specs.items() if node in self.plan.demanded]
-        warm_shared_kernels(specs, self.warn)
+        self.shared_warm = threading.Thread(
+            target=warm_shared_kernels, args=(specs, self.warn), name="flowtact-shared-kernels", daemon=True
+        )
+        self.shared_warm.start()
 
     def _catch_signals(self) -> Callable[[], None]:
         """Ctrl-C and SIGTERM become a flag the pump reads: no exception lands mid-write."""
@@ -757,6 +765,8 @@ class ProcessExecutor:
                     self._drain_records(sock)
 
     def _shutdown(self, failed: bool) -> None:
+        if self.shared_warm is not None:
+            self.shared_warm.join()  # a compile under way ends before the interpreter does
         for p in self.procs.values():
             if p.ident is not None:
                 self._send(p, "abort" if failed else "exit")
