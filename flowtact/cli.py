@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from flowtact.command import EXIT_RUN_ERROR, CommandParser, run_command
+from flowtact.deployment import MAX_STARTUP_S
 from flowtact.errors import UsageError
 from flowtact.graph import GraphErrors
 from flowtact.limits import (
@@ -35,6 +36,7 @@ from flowtact.limits import (
     MIN_TICK_S,
     cli_duration_seconds,
     cli_finite_seconds,
+    cli_float,
     cli_tick_seconds,
 )
 
@@ -105,6 +107,14 @@ def _parser() -> argparse.ArgumentParser:
         metavar="S",
         help=f"clock tick, {MIN_TICK_S:g} to {MAX_TICK_S:g} s (default 1 s with --fast, 5 ms real time); "
         "a run takes at most 1e9 ticks",
+    )
+    run.add_argument(
+        "--startup-s",
+        type=cli_float(0.0, MAX_STARTUP_S, "s", lo_open=True),
+        metavar="S",
+        help="how long a worker process may start up without progress (importing, compiling, warming "
+        "up, opening devices are progress) before the run gives up on it; replaces every process "
+        "group's startup_s (default 60 s, 120 s on another host)",
     )
     run.add_argument(
         "--inproc",
@@ -390,6 +400,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 progress=progress,
                 live=live if live.enabled else None,
                 argv=["flowtact", *sys.argv[1:]],
+                startup_s=args.startup_s,
             )
     finally:
         progress.done()

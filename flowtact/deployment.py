@@ -50,9 +50,13 @@ STALL_REALTIME_S = 1.0
 STALL_FAST_S = 30.0
 """Default ``stall_s`` on the virtual clock, where one tick may carry seconds of data."""
 STARTUP_LOCAL_S = 60.0
-"""Default ``startup_s`` of a group on this host: start the interpreter, import, build the blocks."""
+"""Default ``startup_s`` of a group on this host: the longest start-up step without progress (starting
+the interpreter, one import, one compiler pass, one warm-up step, one block's ``open()``)."""
 STARTUP_REMOTE_S = 120.0
 """Default ``startup_s`` of a group with ``host:``: someone has to start it there by hand."""
+MAX_STARTUP_S = 86_400.0
+"""Longest start-up window ``--startup-s`` takes (a day): a window is time *without progress*, so
+even a first run that compiles for an hour needs far less; more is a typing slip."""
 STOP_GRACE_S = 10.0
 """Default ``stop_grace_s``: how long a stopped run may drain before it is aborted."""
 
@@ -62,9 +66,10 @@ class ProcessDef:
     """A process group: restart policy, host (None: this machine) and supervision windows.
 
     ``stall_s`` (None: :data:`STALL_REALTIME_S` in real time, :data:`STALL_FAST_S` with
-    ``--fast``) bounds how long a worker may show no progress; ``startup_s`` how long it may take
-    to join (also a node's first step, where kernels compile); ``stop_grace_s`` how long it may
-    drain after a stop.
+    ``--fast``) bounds how long a worker may show no progress; ``startup_s`` how long it may show
+    no start-up progress before it joins (each phase, import, compiler pass and warm-up step it
+    reports restarts the window; ``flowtact run --startup-s`` replaces it for every group) and
+    how long a node's first step may take; ``stop_grace_s`` how long it may drain after a stop.
     """
 
     name: str
@@ -82,7 +87,7 @@ class ProcessDef:
         return STALL_FAST_S if fast else STALL_REALTIME_S
 
     def startup_window(self) -> float:
-        """Seconds this group's worker may take to join the run."""
+        """Seconds this group's worker may go without start-up progress before it joins the run."""
         if self.startup_s is not None:
             return self.startup_s
         return STARTUP_REMOTE_S if self.host else STARTUP_LOCAL_S

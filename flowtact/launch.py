@@ -197,11 +197,13 @@ def run_plan(
     warn: Callable[[str], None] | None = None,
     argv: list[str] | None = None,
     sink: Any = None,
+    startup_s: float | None = None,
 ) -> RunSummary:
     """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
     ``record:`` streams to ``record``. A failing worker raises
     :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed. Without
-    ``record``, an ``inproc`` run may hand its recorded streams to ``sink`` in memory (sweeps)."""
+    ``record``, an ``inproc`` run may hand its recorded streams to ``sink`` in memory (sweeps).
+    ``startup_s`` (``--startup-s``) replaces every process group's start-up window."""
     duration = default_duration(
         plan, duration_s
     )  # --duration, else the replayed files' end, else the graph's
@@ -218,7 +220,14 @@ def run_plan(
         from flowtact.runtime.supervisor import ProcessExecutor
 
         return ProcessExecutor(
-            plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress, live=live, warn=warn
+            plan,
+            fast=fast,
+            tick_s=tick_s,
+            recorder=recorder,
+            progress=progress,
+            live=live,
+            warn=warn,
+            startup_s=startup_s,
         )
 
     if record is None:

@@ -108,6 +108,14 @@ def test_every_plugin_commands_bad_flag_is_one_line_and_status_2(argv, text, tmp
 RUN_MISUSE = [
     (["run", TOUCH, "--duration", "1e308"], "argument --duration: must be at most 1e+10 s, got '1e308'"),
     (["run", TOUCH, "--tick", "1e-12"], "argument --tick: must be at least 1e-06 s, got '1e-12'"),
+    (
+        ["run", TOUCH, "--startup-s", "0"],
+        "argument --startup-s: must be a finite number in (0, 86400] s, got '0'",
+    ),
+    (
+        ["run", TOUCH, "--startup-s", "nan"],
+        "argument --startup-s: must be a finite number in (0, 86400] s, got 'nan'",
+    ),
 ]
 
 

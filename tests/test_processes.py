@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import toyblocks
-from runs import ROOT, TEST_BLOCKS, alive, flowtact, wait_children, wait_recorded, worker_of
+from runs import ROOT, TEST_BLOCKS, alive, flowtact, wait_children, wait_for_line, wait_recorded, worker_of
 
 from flowtact.graph import GraphErrors
 from flowtact.launch import load_plan, run_plan
@@ -185,10 +185,13 @@ def test_ctrl_c_stops_every_worker_cleanly(tmp_path):
     assert len(rec.streams["sa1_drive.y"].t) == n and len(rec.streams["dforce.y"].t) == n
 
 
-def test_workers_die_with_a_killed_supervisor():
-    proc = flowtact("run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--quiet")
+def test_workers_die_with_a_killed_supervisor(tmp_path):
+    out = tmp_path / "touch.h5"
+    proc = flowtact(
+        "run", str(ROOT / "graphs" / "touch.yaml"), "--duration", "60", "--quiet", "--record", str(out)
+    )
     kids = wait_children(proc.pid, 3)
-    time.sleep(1.0)
+    wait_recorded(out, "force.f", 1)  # running: past graph time 0
     proc.kill()
     proc.communicate(timeout=10)
     deadline = time.monotonic() + 5.0
@@ -214,7 +217,7 @@ def test_restart_on_failure_brings_a_killed_worker_back(tmp_path):
     path.write_text(RESTART)
     proc = flowtact("run", str(path), "--duration", "4", "--json", "--record", str(tmp_path / "r.h5"))
     kids = wait_children(proc.pid, 2)
-    time.sleep(1.5)
+    wait_recorded(tmp_path / "r.h5", "gain.y", 1)  # past graph time 0: the filter has run
     os.kill(worker_of(kids, "filter"), signal.SIGKILL)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr
@@ -223,6 +226,35 @@ def test_restart_on_failure_brings_a_killed_worker_back(tmp_path):
     assert summary["processes"]["filter"]["restarts"] == 1
     t = read_recording(tmp_path / "r.h5").streams["gain.y"].t
     assert t[-1] > 3.0 and t[0] < 1.0  # data from before and after the restart
+
+
+RESTART_EARLY = """
+name: restart_early
+nodes:
+  src:  {block: "toyblocks:Ramp", process: source}
+  gain: {block: "warmblocks:Slow", process: filter, params: {step_s: 0.2, mark: MARK}}
+edges: [src.y -> gain.x]
+processes:
+  filter: {restart: on-failure, max_restarts: 2}
+record: [gain.y]
+"""
+
+
+def test_restart_on_failure_brings_back_a_worker_killed_before_graph_time_0(tmp_path):
+    mark = tmp_path / "warming.txt"
+    path = tmp_path / "restart_early.yaml"
+    path.write_text(RESTART_EARLY.replace("MARK", str(mark)))
+    out = tmp_path / "r.h5"
+    proc = flowtact("run", str(path), "--duration", "2", "--fast", "--json", "--record", str(out))
+    # the filter's warm-up has begun: it has not said ready, so no process has started the clock
+    pid = int(wait_for_line(mark, "step").split()[0])
+    os.kill(pid, signal.SIGKILL)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    assert "(nodes gain) killed by SIGKILL; restarting it (1/2)" in stderr
+    assert json.loads(stdout)["processes"]["filter"]["restarts"] == 1
+    t = read_recording(out).streams["gain.y"].t
+    assert len(t) == 2000 and t[0] == 0.0 and t[-1] == pytest.approx(1.999)  # the whole run, from 0
 
 
 SLOW = """
@@ -234,6 +266,7 @@ edges:
   - {from: src.y, to: sink.x, policy: POLICY, queue: 8}
 processes:
   sink: {stall_s: 30}  # the test sink sleeps, as a hung call would: not what these tests are about
+record: [src.y]
 """
 
 
@@ -248,11 +281,12 @@ def test_a_slow_consumer_under_latest_drops_with_flat_memory(tmp_path):
     """The sink takes 10 ms per sample of a 1 kHz stream (10x too slow), for 60 s."""
     path = tmp_path / "slow.yaml"
     path.write_text(SLOW.replace("POLICY", "latest"))
-    proc = flowtact("run", str(path), "--duration", "60", "--json")
+    out = tmp_path / "slow.h5"
+    proc = flowtact("run", str(path), "--duration", "60", "--json", "--record", str(out))
     kids = wait_children(proc.pid, 2)
-    time.sleep(8.0)
+    wait_recorded(out, "src.y", 5000, timeout=120)  # 5 s past graph time 0: start-up is behind
     rss = {k: _rss_kib(k) for k in kids}
-    time.sleep(50.0)
+    wait_recorded(out, "src.y", 55_000, timeout=240)  # 50 s of graph time later
     grown = {k: _rss_kib(k) - rss[k] for k in kids if alive(k)}
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 0, stderr

@@ -144,6 +144,45 @@ def test_no_blocks_example_calls_a_kernel_signature_its_warm_up_missed():
     assert json.loads(done.stdout.strip().splitlines()[-1]) == {}
 
 
+SHARED = """
+import sys
+import numpy as np
+from flowtact.chunk import StreamSpec
+from flowtact.finite import all_finite
+from flowtact.runtime.warm_up import CompileWatch, _unaligned, warm_shared_kernels
+spec = StreamSpec(dtype="float64", shape=(3,), rate_hz=1000.0)
+if sys.argv[1] == "supervisor":
+    print(warm_shared_kernels([spec]))
+else:  # a worker's bad-data screen on the inputs it gets: read-only, aligned or not
+    watch = CompileWatch().install()
+    for n in (1, 7):
+        a = np.ones((n, 3))
+        a.setflags(write=False)
+        all_finite(a)
+        all_finite(_unaligned(a))
+    print(watch.count)
+"""
+
+
+def _compiled(role: str, cache) -> int:
+    run = subprocess.run(
+        [sys.executable, "-c", SHARED, role],
+        env={**env(), "NUMBA_CACHE_DIR": str(cache)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    return int(run.stdout.split()[-1])
+
+
+@pytest.mark.slow
+def test_kernels_every_worker_shares_are_compiled_once_before_the_workers_start(tmp_path):
+    assert _compiled("worker", tmp_path / "alone") > 0  # a worker on a fresh install compiles them
+    assert _compiled("supervisor", tmp_path / "warmed") > 0  # ... unless the supervisor did first:
+    assert _compiled("worker", tmp_path / "warmed") == 0  # then every worker loads them from the cache
+
+
 # -- through flowtact run ---------------------------------------------------------------------
 
 GRAPH = """
@@ -198,6 +237,30 @@ def test_a_worker_compiling_longer_than_its_startup_window_is_not_killed(tmp_pat
     assert proc.returncode == 0, err
     took = float(re.search(r"(\d+) kernels? compiled in ([\d.]+) s", err).group(2))
     assert took > startup_s, f"the warm-up took {took} s: not longer than startup_s, the test proves nothing"
+
+
+@pytest.mark.slow
+def test_a_worker_warming_up_longer_than_its_window_joins_while_it_reports_progress(tmp_path):
+    # six warm-up steps of 0.4 s each: 2.4 s of warm-up (sleeps, not compiling) against a window of
+    # 1.5 s without progress; each step is a start-up report that restarts the window
+    graph = _graph(tmp_path, "Slow", "{step_s: 0.4}", startup=1.5)
+    proc = flowtact("run", graph, "--fast", "--duration", "1", "--quiet")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert "did not join" not in err
+
+
+@pytest.mark.slow
+def test_a_worker_without_start_up_progress_is_named_with_how_to_widen_its_window(tmp_path):
+    # open() hangs without a word; --startup-s replaces the graph's window of 600 s
+    graph = _graph(tmp_path, "Slow", "{open_s: 600}", startup=600)
+    proc = flowtact("run", graph, "--fast", "--duration", "1", "--startup-s", "2")
+    _, err = proc.communicate(timeout=120)  # a hang bound: the graph's own window would take 600 s
+    assert proc.returncode == 1, err
+    assert "process 'work' (nodes gain, scale) did not join: no start-up progress for" in err, err
+    assert "(its start-up window, 2 s) while opening node 'scale'" in err, err
+    assert "widen the window with --startup-s S or startup_s under processes: work: in the graph" in err, err
+    assert len(err.strip().splitlines()) == 1, err  # one line, no traceback
 
 
 @pytest.mark.slow

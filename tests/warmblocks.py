@@ -1,4 +1,5 @@
-"""Toy blocks with numba kernels compiled afresh in every process (no cache), for test_warm_up.py.
+"""Toy blocks with numba kernels compiled afresh in every process (no cache), for test_warm_up.py,
+and one whose start-up is slow without numba (``Slow``: a warm-up in slow steps, an ``open()`` that hangs).
 
 Graphs name them as ``warmblocks:Class`` (tests/ is on the workers' path, as for toyblocks).
 Without ``cache=True`` every process compiles them, so a run always has something to compile.
@@ -6,6 +7,8 @@ Without ``cache=True`` every process compiles them, so a run always has somethin
 
 from __future__ import annotations
 
+import os
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,3 +86,42 @@ def _plus(k):
         return a + k
 
     return plus
+
+
+@dataclass(frozen=True)
+class SlowConfig(Config):
+    step_s: float = param(0.0, doc="wall time each of an instance's first slow_steps steps sleeps", ge=0)
+    slow_steps: int = param(6, doc="how many of an instance's steps are slow", ge=0)
+    open_s: float = param(0.0, doc="wall time open() sleeps (a device that never answers)", ge=0)
+    mark: str = param("", doc="a file each instance appends its pid to as its first step begins")
+
+
+class Slow(Block):
+    """Passes its input through slowly: a start-up (warm-up, open) that takes a while, without numba.
+
+    Its warm-up copy sleeps in each of the warm-up's steps (progress in steps); ``open_s`` makes
+    ``open()`` hang without a word; ``mark`` tells a test that a warm-up has begun in this process.
+    """
+
+    config_cls = SlowConfig
+    inputs = {"x": Port(doc="in")}
+    outputs = {"y": Port(doc="the input, unchanged")}
+
+    def reset(self):
+        self.steps = 0
+
+    def open(self):
+        time.sleep(self.config.open_s)
+
+    def step(self, x):
+        if self.steps == 0 and self.config.mark:
+            with open(self.config.mark, "a") as f:
+                f.write(f"{os.getpid()} step\n")
+        if self.steps < self.config.slow_steps:
+            time.sleep(self.config.step_s)
+        self.steps += 1
+        return {"y": x}
+
+    @classmethod
+    def example(cls):
+        return Example(inputs={"x": np.ones((10, 2))})

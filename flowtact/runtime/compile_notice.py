@@ -1,14 +1,13 @@
 """What the supervisor tells about numba compiling in its workers, from their heartbeats.
 
 A first run after an install compiles kernels for tens of seconds before a worker is ready: the
-run says so (once per worker, then how long it took), and a worker that keeps compiling keeps
-its start-up window open. A kernel compiled after the start is a real-time stall the warm-up
+run says so (once per worker, then how long it took). That compiling keeps the worker's start-up
+window open is the supervisor's own rule (every start-up report restarts it: see supervisor.py). A kernel compiled after the start is a real-time stall the warm-up
 missed (flowtact/runtime/warm_up.py): that is said too, never left to show up as latency.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -20,17 +19,12 @@ class CompileNotices:
 
     def __init__(self, warn: Callable[[str], None]) -> None:
         self.warn = warn
-        self.progress_at: dict[str, float] = {}  # worker -> when a kernel last began or ended
         self.said: set[str] = set()
         self.late_said: set[str] = set()
-        self.last: dict[str, tuple[Any, int]] = {}
 
     def on_beat(self, proc: str, what: str, running: bool, beat: dict[str, Any]) -> None:
         """A heartbeat of worker ``proc`` (``what`` describes it) arrived."""
-        current, count = beat.get("compiling"), int(beat.get("compiled", 0))
-        if self.last.get(proc, (None, 0)) != (current, count):
-            self.last[proc] = (current, count)
-            self.progress_at[proc] = time.monotonic()
+        current = beat.get("compiling")
         if current is None:
             return
         if not running and proc not in self.said:
@@ -55,7 +49,3 @@ class CompileNotices:
             self.warn(
                 f"{what}: {n} kernel{'s' if n > 1 else ''} compiled in {msg.get('compile_s', 0.0):.1f} s"
             )
-
-    def startup_since(self, proc: str, since: float) -> float:
-        """When worker ``proc``'s start-up window began: its start, or its latest compiling progress."""
-        return max(since, self.progress_at.get(proc, since))

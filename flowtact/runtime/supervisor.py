@@ -9,11 +9,16 @@ recorder, collects heartbeats and statistics, pings the workers, and watches the
 Every phase runs the same pump (:meth:`ProcessExecutor._pump`), so pings, records, exits and
 liveness are handled alike while starting, running and stopping. Failures are told truly:
 
+* a worker has its group's ``startup_s`` (or ``--startup-s``) *without progress* to join: its
+  window restarts on every start-up report it makes (a phase entered, a module imported, a
+  compiler pass run; before its first message, CPU time spent starting the interpreter), so a
+  first run that compiles for minutes joins, and one that hangs is named with its last phase;
+  a worker that waits for the others (ready, wired) has no window;
 * a worker that raises or dies is named with its nodes and cause;
 * a worker that shows no progress for its group's ``stall_s`` (no heartbeat, or one node's step
   that does not return) is named with the node and tick, and killed;
 * either ends the run (recording flushed up to the failure) or, under ``restart: on-failure``,
-  restarts the group, which rejoins the running graph;
+  restarts the group, which rejoins the running graph (or, before graph time 0, the start-up);
 * Ctrl-C or SIGTERM picks one tick on which every worker stops (a loop through several processes
   drains like the end of a timed run); a group still draining after ``stop_grace_s`` is aborted,
   named, and the run exits non-zero; a second Ctrl-C aborts at once;
@@ -47,6 +52,7 @@ from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.rundir import make_run_folder
 from flowtact.runtime.stats import LatencyHistogram, format_factor
+from flowtact.runtime.warm_up import warm_shared_kernels
 from flowtact.runtime.wire import recv_message
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
@@ -118,6 +124,9 @@ class _Proc:
     next_waiting: float = math.inf  # when to repeat that the run waits for it (another host)
     tick_rate: float = 0.0  # ticks per second lately (from heartbeats)
     silent_mark: tuple[float, float] | None = None  # (when, CPU seconds) as its heartbeats fell silent
+    progress_at: float = 0.0  # when it last showed start-up progress
+    progress: Any = None  # its last start-up progress report (or CPU seconds before its first message)
+    phase: str = "starting its interpreter"  # its last reported start-up phase
 
     def describe(self) -> str:
         where = f" on {self.host}" if self.host else ""
@@ -137,8 +146,11 @@ class ProcessExecutor:
         progress: Callable[[float, float | None], None] | None = None,
         live: Any = None,
         warn: Callable[[str], None] | None = None,
+        startup_s: float | None = None,
     ) -> None:
         self.plan = plan
+        self.startup_s = startup_s
+        """``--startup-s``: every group's start-up window (None: each group's own ``startup_s``)."""
         self.fast = fast
         self.tick_s = tick_for(fast, tick_s)
         self.recorder = recorder
@@ -178,6 +190,7 @@ class ProcessExecutor:
         """The supervisor's own CPU seconds and monotonic time when the first worker was warm."""
         self.late: list[str] = []  # the busiest nodes when the run fell behind real time
         self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
+        self.shared_warm: threading.Thread | None = None
         self.t_run = self.next_ping = time.monotonic()
         self.next_watch = 0.0
         self.t0_ns = 0
@@ -205,10 +218,11 @@ class ProcessExecutor:
                     pdef.restart,
                     pdef.max_restarts,
                     stall_s=pdef.stall_window(self.fast),
-                    startup_s=pdef.startup_window(),
+                    startup_s=self.startup_s or pdef.startup_window(),
                     stop_grace_s=pdef.stop_grace_s,
                     since=self.t_start,
                 )
+            self._warm_shared()
             for proc in self.procs.values():
                 if proc.host is None:
                     self._spawn(proc)
@@ -226,6 +240,21 @@ class ProcessExecutor:
             err.summary = summary  # type: ignore[attr-defined]
             raise err
         return summary
+
+    def _warm_shared(self) -> None:
+        """Compile once, here, the kernels every local worker calls (the bad-data screen's), so
+        that the workers load them from numba's cache rather than each compile them at once.
+
+        In a thread, while the workers start their interpreters and import (seconds): done before
+        spawning, it delayed every worker by its compile time (4 s at load 9 for touch.yaml)."""
+        self.shared_warm = None
+        if sum(1 for p in self.procs.values() if p.host is None) < 2:
+            return
+        specs = [spec for (node, _port), spec in self.plan.specs.items() if node in self.plan.demanded]
+        self.shared_warm = threading.Thread(
+            target=warm_shared_kernels, args=(specs, self.warn), name="flowtact-shared-kernels", daemon=True
+        )
+        self.shared_warm.start()
 
     def _catch_signals(self) -> Callable[[], None]:
         """Ctrl-C and SIGTERM become a flag the pump reads: no exception lands mid-write."""
@@ -299,7 +328,8 @@ class ProcessExecutor:
         proc.state = "starting"
         proc.ident = None
         proc.beat = {}
-        proc.since = time.monotonic()
+        proc.since = proc.progress_at = time.monotonic()
+        proc.progress, proc.phase = None, "starting its interpreter"
         proc.done = proc.rec_done = proc.wired = False
 
     def _say_waiting(self, proc: _Proc) -> None:
@@ -346,17 +376,13 @@ class ProcessExecutor:
             for p in self.procs.values():
                 if p.wired:
                     continue
-                if now - self.compiles.startup_since(p.name, p.since) > p.startup_s:
-                    how = "start it with `flowtact worker`; " if p.host and p.ident is None else ""
-                    raise WorkerFailed(
-                        f"{p.describe()} did not join within {p.startup_s:g} s ({how}its startup_s sets the window)"
-                    )
+                self._check_startup(p, now)
                 if p.host and p.ident is None and now >= p.next_waiting:
                     self._say_waiting(p)
             try:
                 self._pump(50)
             except _Failure as f:
-                raise WorkerFailed(describe_failure(f.proc, f.report), f.report.get("traceback")) from None
+                self._failed(f)  # under restart: on-failure the group starts again
             if all(p.endpoints or not self.wplans[p.name]["inbound"] for p in self.procs.values()) and all(
                 p.state in ("ready", "wiring", "wired") for p in self.procs.values()
             ):
@@ -371,6 +397,32 @@ class ProcessExecutor:
             self._send(p, "start", t0_ns=t0, k0=0, resume=False)
             self._running(p)
         return True
+
+    def _check_startup(self, p: _Proc, now: float) -> None:
+        """A worker that shows no start-up progress for its window did not join: name its last phase
+        and how to widen the window. One that waits for the others (ready, wired) has no window."""
+        if p.state in ("ready", "wired"):
+            p.progress_at = now
+            return
+        if p.ident is None and p.host is None and p.pid is not None:  # before its first message
+            seen = _proc_stat(p.pid)
+            if seen is not None and seen[1] != p.progress:  # the interpreter starts, imports
+                p.progress, p.progress_at = seen[1], now
+        quiet = now - max(p.since, p.progress_at)
+        if quiet <= p.startup_s:
+            return
+        if p.host and p.ident is None:
+            raise WorkerFailed(
+                f"{p.describe()} did not join within {p.startup_s:g} s: start it with `flowtact worker` "
+                f"there, or give it longer with --startup-s S or startup_s under processes: {p.name}: in the graph"
+            )
+        if p.popen is not None and p.popen.poll() is None:
+            p.popen.kill()  # hung: it cannot take part in an orderly end
+        raise WorkerFailed(
+            f"{p.describe()} did not join: no start-up progress for {quiet:.0f} s (its start-up window, "
+            f"{p.startup_s:g} s) while {p.phase}; if it needs longer, widen the window with "
+            f"--startup-s S or startup_s under processes: {p.name}: in the graph"
+        )
 
     def _running(self, proc: _Proc) -> None:
         proc.state = "running"
@@ -460,6 +512,7 @@ class ProcessExecutor:
             if proc.host is None and proc.popen is not None and msg["pid"] != proc.popen.pid:
                 return  # a stale worker
             proc.ident, proc.sock, proc.pid = ident, sock, msg["pid"]
+            proc.progress_at, proc.phase = time.monotonic(), "waiting for its plan"
             self.by_ident[ident] = proc
             self._send(proc, "plan", plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
             proc.state = "planned"
@@ -467,15 +520,16 @@ class ProcessExecutor:
         proc = self.by_ident.get(ident)
         if proc is None:
             return
+        proc.progress_at = time.monotonic()  # every message before the start is start-up progress
         if op == "ready":
             self.compiles.on_ready(proc.describe(), msg)
             proc.endpoints = {int(k): v for k, v in msg["endpoints"].items()}
             proc.state = "ready"
-            if proc.restarts:
+            if proc.restarts and self.t0_ns:  # a restart after the start rejoins the running graph
                 self._wire(proc)
         elif op == "wired":
             proc.wired = True
-            if proc.restarts:
+            if proc.restarts and self.t0_ns:
                 self._send(proc, "start", t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
                 self._running(proc)
                 if self.stopped:
@@ -503,6 +557,10 @@ class ProcessExecutor:
         if old:  # ticks per second, for where a stop can reach it
             proc.tick_rate = max(_tick_rate(old, beat), 0.5 * proc.tick_rate)  # slow to forget a fast spell
         proc.beat, proc.beat_at = beat, now
+        if proc.state != "running":
+            proc.phase = beat.get("phase") or proc.phase
+            if beat.get("progress") != proc.progress:  # start-up advances: its window restarts
+                proc.progress, proc.progress_at = beat.get("progress"), now
         self.compiles.on_beat(proc.name, proc.describe(), proc.state == "running", beat)
         proc.last_k = max(proc.last_k, beat["k"])
 
@@ -713,6 +771,8 @@ class ProcessExecutor:
                     self._drain_records(sock)
 
     def _shutdown(self, failed: bool) -> None:
+        if self.shared_warm is not None:
+            self.shared_warm.join()  # a compile under way ends before the interpreter does
         for p in self.procs.values():
             if p.ident is not None:
                 self._send(p, "abort" if failed else "exit")

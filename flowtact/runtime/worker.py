@@ -26,7 +26,10 @@ ends on the same tick everywhere and drains like the end of a timed run.
 
 Liveness: a heartbeat thread reports the tick, the node being stepped and the steps done every
 :data:`BEAT_S`, so the supervisor tells a worker stuck inside a block (or stopped) from one that
-waits for its clock or its inputs. A worker the supervisor started dies with it (it checks its
+waits for its clock or its inputs. Before the start it reports its start-up phase instead
+("building node 'sa1' (nlif)", "warming node 'sa1' (2/3), step 4/10", "opening node 'cam'"),
+with counters that advance while it imports modules or numba runs compiler passes: each advance
+restarts the supervisor's start-up window, so a long compile or warm-up is progress, not a stall. A worker the supervisor started dies with it (it checks its
 parent, and on Linux ``PR_SET_PDEATHSIG``); one started by hand on another host exits after
 :data:`ORPHAN_S` without a ping. So no process outlives a run.
 
@@ -217,6 +220,8 @@ class Worker:
         self.busy_first = True  # ... for the first time: kernels may be compiling
         self.lag_s = 0.0
         self.compiles = CompileWatch()  # numba compilations: announced while warming, a stall after
+        self.phase = "starting"  # what the start-up is doing now (reported by the heartbeat)
+        self.marks = 0  # start-up phases entered so far: each one is progress
         self.heart = _Heartbeat(self, control)
 
     # -- control ----------------------------------------------------------------------------
@@ -288,14 +293,21 @@ class Worker:
                 send_message(self.rec, o.record, 0, self.k, chunk, nowait=True)  # type: ignore[arg-type]
 
     # -- set-up -----------------------------------------------------------------------------
+    def _phase(self, text: str) -> None:
+        """Enter a start-up phase: the heartbeat reports it, and the supervisor counts it as progress."""
+        self.phase = text
+        self.marks += 1
+
     def serve(self) -> int:
         """Run the whole lifecycle; returns the process exit status."""
         self._send("hello", process=self.process, pid=os.getpid(), host=socket.gethostname())
         self.heart.start()
         try:
+            self._phase("waiting for the plan")
             msg = self._expect("plan")
             self._build(msg["plan"])
             self._warm_up()
+            self._phase("binding its inputs")
             self._bind(msg["bind"])
             self._send(
                 "ready",
@@ -303,11 +315,14 @@ class Worker:
                 compiled=self.warm_report.total_compiled,
                 compile_s=self.compiles.seconds,
             )
+            self._phase("waiting for the other processes")
             wire = self._expect("wire")
+            self._phase("connecting its outputs")
             self._connect(wire["connect"], wire["record"])
             try:
                 self._open()  # devices, cameras, weights: before the clock starts, not on its time
                 self._send("wired")
+                self._phase("waiting for the start")
                 start = self._expect("start")
                 self.t0_ns = start["t0_ns"] or time.monotonic_ns()
                 self.warm_ns = self.t0_ns + int(_latency_from_s() * 1e9)
@@ -357,6 +372,7 @@ class Worker:
         self.out_specs: dict[str, dict[str, StreamSpec]] = {}
         for nd in plan["nodes"]:
             self.busy = nd["name"]
+            self._phase(f"building node '{nd['name']}' ({nd['block']})")
             allow = plan["allow_modules"] if self.allow_modules is None else self.allow_modules
             cls = load_block(nd["block"], allow)
             block = cls(cls.config_cls.build(nd["params"], owner=nd["name"]), node=nd["name"])
@@ -426,10 +442,17 @@ class Worker:
     def _warm_up(self) -> None:
         """Load or compile every kernel the run will call, before the worker says ready (warm_up.py)."""
 
+        order = {n: i for i, n in enumerate(self.blocks, 1)}
+
         def naming(n: str) -> None:
             self.busy, self.busy_first = n, True
 
-        self.warm_report = warm_up(self.blocks, self.tick_s, watch=self.compiles, on_node=naming)
+        def stepping(n: str, step: int, steps: int) -> None:
+            self._phase(f"warming node '{n}' ({order[n]}/{len(order)}), step {step}/{steps}")
+
+        self.warm_report = warm_up(
+            self.blocks, self.tick_s, watch=self.compiles, on_node=naming, on_step=stepping
+        )
         self.busy = None
         settle_heap()
 
@@ -469,6 +492,7 @@ class Worker:
         self.opened: list[Block] = []
         for n in self.order:
             self.busy, self.busy_first = n, True
+            self._phase(f"opening node '{n}'")
             try:
                 self.blocks[n].open()
             except Exception as e:
@@ -930,6 +954,9 @@ class _Heartbeat:
                     "lag_s": w.lag_s,
                     "compiling": w.compiles.current,
                     "compiled": w.compiles.count,
+                    "phase": w.phase,
+                    # start-up progress: phases entered, modules imported, compiler passes run
+                    "progress": (w.marks, len(sys.modules), w.compiles.passes),
                     "sent_ns": time.monotonic_ns(),  # rates from the sender's clock, not arrivals
                 }
                 with contextlib.suppress(zmq.Again):
