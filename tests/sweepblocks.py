@@ -18,6 +18,26 @@ import numpy as np
 
 from flowtact import Block, Chunk, Config, Example, Port, param
 
+TOY_GRAPH = """
+name: toy
+seed: 3
+duration_s: 0.3
+nodes:
+  src:   {block: "toyblocks:Ramp", params: {noise: 0.1}}
+  probe: {block: "sweepblocks:Probe"}
+edges: [src.y -> probe.x]
+record: [src.y, probe.y]
+"""
+"""The sweep tests' graph: a noisy ramp through a probe (name both modules with --allow-module)."""
+
+TOY_GRAPH_SCALED = (
+    TOY_GRAPH.replace('  probe: {block: "sweepblocks:Probe"}\n',
+                      '  probe: {block: "sweepblocks:Probe"}\n  dbl:   {block: "toyblocks:Scale", params: {gain: 2.0}}\n')
+    .replace("edges: [src.y -> probe.x]", "edges: [src.y -> probe.x, src.y -> dbl.x]")
+    .replace("record: [src.y, probe.y]", "record: [src.y, probe.y, dbl.y]")
+)  # fmt: skip
+""":data:`TOY_GRAPH` with a scaled copy of the ramp recorded too."""
+
 
 @dataclass(frozen=True)
 class ProbeConfig(Config):

@@ -11,21 +11,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 from runs import allow_args, env, flowtact
+from sweepblocks import TOY_GRAPH
 
 from flowtact.cli import main
 
 pytestmark = pytest.mark.cli
-
-TOY = """
-name: toy
-seed: 3
-duration_s: 0.3
-nodes:
-  src:   {block: "toyblocks:Ramp", params: {noise: 0.1}}
-  probe: {block: "sweepblocks:Probe"}
-edges: [src.y -> probe.x]
-record: [src.y, probe.y]
-"""
 
 
 def sweep(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
@@ -36,7 +26,7 @@ def sweep(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
 @pytest.fixture
 def toy(tmp_path: Path) -> Path:
     p = tmp_path / "toy.yaml"
-    p.write_text(TOY)
+    p.write_text(TOY_GRAPH)
     return p
 
 

@@ -19,19 +19,9 @@ pytest.importorskip("cryptography")
 from distributed import Client
 from distributed.security import Security
 from runs import TEST_BLOCKS
+from sweepblocks import TOY_GRAPH
 
 from flowtact.sweeps.executors import DaskRows, local_cluster
-
-TOY = """
-name: toy
-seed: 3
-duration_s: 0.3
-nodes:
-  src:   {block: "toyblocks:Ramp", params: {noise: 0.1}}
-  probe: {block: "sweepblocks:Probe"}
-edges: [src.y -> probe.x]
-record: [src.y, probe.y]
-"""
 
 
 @pytest.fixture(scope="module")
@@ -99,7 +89,7 @@ def test_a_foreign_client_cannot_submit_to_the_sweeps_cluster(cluster, client, t
 
 def test_the_sweep_runs_on_it_and_a_hung_row_there_times_out(client, tmp_path: Path) -> None:
     toy, flag, log = tmp_path / "toy.yaml", tmp_path / "armed", tmp_path / "opens.log"
-    toy.write_text(TOY)
+    toy.write_text(TOY_GRAPH)
     flag.touch()
     rows = DaskRows(client, restart_workers=True)  # as dask_executor makes it for its own cluster
     df = flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=["probe.mode=ok,hang"], overrides=[f"probe.flag={flag}", f"probe.log={log}"],

@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 from runs import TEST_BLOCKS, allow_args
+from sweepblocks import TOY_GRAPH_SCALED
 
 import flowtact
 from flowtact.cli import main as cli_main
@@ -22,24 +23,13 @@ def main(argv: list[str]) -> int:
     return cli_main(allow_args(argv))
 
 
-TOY = """
-name: toy
-seed: 3
-duration_s: 0.3
-nodes:
-  src:   {block: "toyblocks:Ramp", params: {noise: 0.1}}
-  probe: {block: "sweepblocks:Probe"}
-  dbl:   {block: "toyblocks:Scale", params: {gain: 2.0}}
-edges: [src.y -> probe.x, src.y -> dbl.x]
-record: [src.y, probe.y, dbl.y]
-"""
 GRID = ["src.noise=0,0.1"]
 
 
 @pytest.fixture
 def toy(tmp_path: Path) -> Path:
     p = tmp_path / "toy.yaml"
-    p.write_text(TOY)
+    p.write_text(TOY_GRAPH_SCALED)
     return p
 
 
@@ -65,7 +55,7 @@ def test_a_table_from_another_setup_is_refused_and_left_as_it_was(toy: Path, tmp
         with pytest.raises(SweepSpecError) as e:
             flowtact.sweep(toy, allow_modules=TEST_BLOCKS, grid=GRID, workers=1, out=out, **kwargs)
         assert str(e.value) == f"{out}: made by another setup ({says}); use another --out or --fresh"
-    toy.write_text(TOY.replace("gain: 2.0", "gain: 3.0"))  # another graph, the same grid
+    toy.write_text(TOY_GRAPH_SCALED.replace("gain: 2.0", "gain: 3.0"))  # another graph, the same grid
     assert main(["sweep", str(toy), "--set-grid", "src.noise=0,0.1", "--set", fixed[0], "--duration", "0.3",
                  "--workers", "1", "--out", str(out)]) == 2  # fmt: skip
     err = capsys.readouterr().err.strip()
