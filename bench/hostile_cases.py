@@ -235,7 +235,12 @@ def replay_h5_not_hdf5_sparse(folder: Path) -> tuple[list[str], str]:
     path = folder / "big.h5"
     with open(path, "wb") as f:
         f.truncate(1 << 30)
-    return ["validate", TOUCH, "--replay", f"sensor={path}"], f"{path}:1:1: node 'sensor' (replay): "
+    return [
+        "validate",
+        TOUCH,
+        "--replay",
+        f"sensor={path}",
+    ], f"{Path(path).name}:1:1: node 'sensor' (replay): "
 
 
 def replay_csv_sparse(folder: Path) -> tuple[list[str], str]:
@@ -248,7 +253,7 @@ def replay_csv_sparse(folder: Path) -> tuple[list[str], str]:
         TOUCH,
         "--replay",
         f"sensor={path}",
-    ], f"{path}:1:1: node 'sensor' (replay): 1.0 GiB: larger than"
+    ], f"{Path(path).name}:1:1: node 'sensor' (replay): 1.0 GiB: larger than"
 
 
 def replay_csv_wide_header(folder: Path) -> tuple[list[str], str]:
@@ -260,7 +265,7 @@ def replay_csv_wide_header(folder: Path) -> tuple[list[str], str]:
         TOUCH,
         "--replay",
         f"sensor={path}",
-    ], f"{path}:1:1: node 'sensor' (replay): 100000 columns"
+    ], f"{Path(path).name}:1:1: node 'sensor' (replay): 100000 columns"
 
 
 def replay_csv_long_line(folder: Path) -> tuple[list[str], str]:
@@ -271,25 +276,34 @@ def replay_csv_long_line(folder: Path) -> tuple[list[str], str]:
         TOUCH,
         "--replay",
         f"sensor={path}",
-    ], f"{path}:1:1: node 'sensor' (replay): a line longer than"
+    ], f"{Path(path).name}:1:1: node 'sensor' (replay): a line longer than"
 
 
 def replay_csv_far_times(folder: Path) -> tuple[list[str], str]:
     """Time stamps 1e300 s apart: a run to the file's end would never end."""
     path = _write(folder, "far.csv", _GAUGES + "0,0,0,0,0,0\n1e300,0,0,0,0,0\n")
-    return ["run", TOUCH, "--fast", "--replay", f"sensor={path}"], f"{path}:3:1: node 'sensor' (replay): "
+    return [
+        "run",
+        TOUCH,
+        "--fast",
+        "--replay",
+        f"sensor={path}",
+    ], f"{Path(path).name}:3:1: node 'sensor' (replay): "
 
 
 def replay_csv_rate(folder: Path) -> tuple[list[str], str]:
     """Time stamps 1 ns apart: a 1 GHz stream, beyond what a replay may give."""
     rows = "".join(f"{i}e-9,0,0,0,0,0\n" for i in range(3))
     path = _write(folder, "fast.csv", _GAUGES + rows)
-    return [
-        "validate",
-        TOUCH,
-        "--replay",
-        f"sensor={path}",
-    ], f"{path}:1:1: node 'sensor' (replay): port 'r': sensor (replay): its time stamps step at 1e+09 Hz"
+    return (
+        [
+            "validate",
+            TOUCH,
+            "--replay",
+            f"sensor={path}",
+        ],
+        f"{Path(path).name}:1:1: node 'sensor' (replay): port 'r': sensor (replay): its time stamps step at 1e+09 Hz",
+    )
 
 
 def _h5_stream(g: Any, samples: int, shape: tuple[int, ...]) -> None:
@@ -340,7 +354,7 @@ def replay_fifo(folder: Path) -> tuple[list[str], str]:
         TOUCH,
         "--replay",
         f"sensor={path}",
-    ], f"{path}:1:1: node 'sensor' (replay): not a regular file (a FIFO)"
+    ], f"{Path(path).name}:1:1: node 'sensor' (replay): not a regular file (a FIFO)"
 
 
 REPLAY_CASES: dict[str, Callable[[Path], tuple[list[str], str]]] = {
