@@ -230,17 +230,27 @@ def replay_npz_lying_header(folder: Path) -> tuple[list[str], str]:
     return ["validate", _replay_graph(folder, str(path))], "declares shape (1099511627776,) of float64"
 
 
+def _replayed(
+    path: str | Path, refusal: str, *, command: str = "validate", line: int = 1
+) -> tuple[list[str], str]:
+    """touch.yaml with ``path`` replayed as its sensor, and the refusal located at the file (by name:
+    the refusal shows the path as given, relative when the run is beside it)."""
+    fast = ["--fast"] if command == "run" else []
+    return [
+        command,
+        TOUCH,
+        *fast,
+        "--replay",
+        f"sensor={path}",
+    ], f"{Path(path).name}:{line}:1: node 'sensor' (replay): {refusal}"
+
+
 def replay_h5_not_hdf5_sparse(folder: Path) -> tuple[list[str], str]:
     """A 1 GB sparse file named .h5: refused from its first bytes, never read whole."""
     path = folder / "big.h5"
     with open(path, "wb") as f:
         f.truncate(1 << 30)
-    return [
-        "validate",
-        TOUCH,
-        "--replay",
-        f"sensor={path}",
-    ], f"{Path(path).name}:1:1: node 'sensor' (replay): "
+    return _replayed(path, "")
 
 
 def replay_csv_sparse(folder: Path) -> tuple[list[str], str]:
@@ -248,62 +258,33 @@ def replay_csv_sparse(folder: Path) -> tuple[list[str], str]:
     path = folder / "big.csv"
     with open(path, "wb") as f:
         f.truncate(1 << 30)
-    return [
-        "validate",
-        TOUCH,
-        "--replay",
-        f"sensor={path}",
-    ], f"{Path(path).name}:1:1: node 'sensor' (replay): 1.0 GiB: larger than"
+    return _replayed(path, "1.0 GiB: larger than")
 
 
 def replay_csv_wide_header(folder: Path) -> tuple[list[str], str]:
     """A .csv naming 100 000 columns (a quadratic header check took minutes)."""
     names = ",".join(["t", *(f"c{i}" for i in range(1, 100_000))])
     path = _write(folder, "wide.csv", names + "\n")
-    return [
-        "validate",
-        TOUCH,
-        "--replay",
-        f"sensor={path}",
-    ], f"{Path(path).name}:1:1: node 'sensor' (replay): 100000 columns"
+    return _replayed(path, "100000 columns")
 
 
 def replay_csv_long_line(folder: Path) -> tuple[list[str], str]:
     """A .csv whose header is one 10 MB line."""
     path = _write(folder, "long.csv", "t," + "x" * (10 << 20) + "\n0,1\n")
-    return [
-        "validate",
-        TOUCH,
-        "--replay",
-        f"sensor={path}",
-    ], f"{Path(path).name}:1:1: node 'sensor' (replay): a line longer than"
+    return _replayed(path, "a line longer than")
 
 
 def replay_csv_far_times(folder: Path) -> tuple[list[str], str]:
     """Time stamps 1e300 s apart: a run to the file's end would never end."""
     path = _write(folder, "far.csv", _GAUGES + "0,0,0,0,0,0\n1e300,0,0,0,0,0\n")
-    return [
-        "run",
-        TOUCH,
-        "--fast",
-        "--replay",
-        f"sensor={path}",
-    ], f"{Path(path).name}:3:1: node 'sensor' (replay): "
+    return _replayed(path, "", command="run", line=3)
 
 
 def replay_csv_rate(folder: Path) -> tuple[list[str], str]:
     """Time stamps 1 ns apart: a 1 GHz stream, beyond what a replay may give."""
     rows = "".join(f"{i}e-9,0,0,0,0,0\n" for i in range(3))
     path = _write(folder, "fast.csv", _GAUGES + rows)
-    return (
-        [
-            "validate",
-            TOUCH,
-            "--replay",
-            f"sensor={path}",
-        ],
-        f"{Path(path).name}:1:1: node 'sensor' (replay): port 'r': sensor (replay): its time stamps step at 1e+09 Hz",
-    )
+    return _replayed(path, "port 'r': sensor (replay): its time stamps step at 1e+09 Hz")
 
 
 def _h5_stream(g: Any, samples: int, shape: tuple[int, ...]) -> None:
@@ -349,12 +330,7 @@ def replay_fifo(folder: Path) -> tuple[list[str], str]:
     """A FIFO named like a log: refused without opening it for a blocking read."""
     path = folder / "log.csv"
     os.mkfifo(path)
-    return [
-        "validate",
-        TOUCH,
-        "--replay",
-        f"sensor={path}",
-    ], f"{Path(path).name}:1:1: node 'sensor' (replay): not a regular file (a FIFO)"
+    return _replayed(path, "not a regular file (a FIFO)")
 
 
 REPLAY_CASES: dict[str, Callable[[Path], tuple[list[str], str]]] = {

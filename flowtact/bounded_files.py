@@ -54,6 +54,7 @@ __all__ = [
     "NpyHeader",
     "NpzArchive",
     "check_hdf5_signature",
+    "file_kind",
     "has_hdf5_signature",
     "open_npz",
     "open_regular",
@@ -110,12 +111,14 @@ def regular_file(path: str | os.PathLike[str]) -> os.stat_result:
     refused with :class:`FileRefused`); a missing file raises ``FileNotFoundError`` as usual."""
     st = os.stat(path)
     if not stat.S_ISREG(st.st_mode):
-        raise FileRefused(path, f"not a regular file ({_kind(st.st_mode)})")
+        raise FileRefused(path, f"not a regular file ({file_kind(st.st_mode)})")
     return st
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What an ``st_mode`` is, in words for a message ("a regular file", "a FIFO", ...)."""
     for test, name in (
+        (stat.S_ISREG, "a regular file"),
         (stat.S_ISDIR, "a folder"),
         (stat.S_ISFIFO, "a FIFO"),
         (stat.S_ISCHR, "a character device"),
@@ -135,7 +138,7 @@ def open_regular(path: str | os.PathLike[str]) -> BinaryIO:
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
-            raise FileRefused(path, f"not a regular file ({_kind(mode)})")
+            raise FileRefused(path, f"not a regular file ({file_kind(mode)})")
         os.set_blocking(fd, True)
         return os.fdopen(fd, "rb")
     except BaseException:

@@ -32,6 +32,8 @@ from typing import Protocol
 
 import numpy as np
 
+from flowtact.bounded_files import file_kind
+
 __all__ = ["LineDevice", "LinkError", "PtyServer", "link_problem"]
 
 
@@ -80,9 +82,7 @@ def link_problem(path: str) -> str | None:
     except OSError as e:
         return f"cannot be inspected ({e.strerror})"
     if not stat.S_ISLNK(st.st_mode):
-        return (
-            f"exists and is {_kind(st.st_mode)}; it is never replaced (give a new path, or a stale pty link)"
-        )
+        return f"exists and is {file_kind(st.st_mode)}; it is never replaced (give a new path, or a stale pty link)"
     target = os.readlink(path)
     try:
         if stat.S_ISCHR(os.stat(path).st_mode):
@@ -93,20 +93,6 @@ def link_problem(path: str) -> str | None:
     except OSError:
         pass
     return f"is a symlink to {target!r}, not to a pty; it is never replaced"
-
-
-def _kind(mode: int) -> str:
-    if stat.S_ISREG(mode):
-        return "a regular file"
-    if stat.S_ISDIR(mode):
-        return "a folder"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    return "not a symlink"
 
 
 def _new_symlink(target: str, beside: str) -> str:
