@@ -143,7 +143,9 @@ def plan_panels(sources: dict[str, StreamSource]) -> list[Panel]:
             names = channel_names(name, spec)
             for unit, idx, shown in _unit_groups(names, spec.units):
                 kind = "lines" if len(idx) <= MAX_LINES else "heatmap"
-                out.append(Panel(kind, s, 1.9 if kind == "lines" else 2.4, tuple(idx), tuple(shown), unit))
+                out.append(
+                    Panel(kind, s, _height(kind, len(idx), bool(spec.labels)), tuple(idx), tuple(shown), unit)
+                )
     return out + frames
 
 
@@ -244,6 +246,15 @@ def _count(n: int, word: str) -> str:
 
 #: Most row labels a heat map writes out; beyond, every k-th (a label per row would overlap).
 MAX_HEATMAP_LABELS = 40
+HEATMAP_ROW_IN = 0.11
+"""Height a written-out row label needs, in inches (5-point type with a little air)."""
+
+
+def _height(kind: str, n: int, labelled: bool) -> float:
+    """A lines panel 1.9 in; a heat map 2.4 in, taller where it writes many row labels."""
+    if kind == "lines":
+        return 1.9
+    return max(2.4, HEATMAP_ROW_IN * min(n, MAX_HEATMAP_LABELS)) if labelled else 2.4
 
 
 def _heatmap_rows(ax: Any, p: Panel, labelled: bool) -> None:
