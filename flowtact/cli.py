@@ -377,6 +377,7 @@ class _Progress:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from flowtact.launch import run_plan
+    from flowtact.runtime.clock import process_started_at
     from flowtact.runtime.live import LiveView
 
     plan = _plan(args)
@@ -401,6 +402,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 live=live if live.enabled else None,
                 argv=["flowtact", *sys.argv[1:]],
                 startup_s=args.startup_s,
+                launched_at=process_started_at(),
             )
     finally:
         progress.done()

@@ -198,12 +198,14 @@ def run_plan(
     argv: list[str] | None = None,
     sink: Any = None,
     startup_s: float | None = None,
+    launched_at: float | None = None,
 ) -> RunSummary:
     """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
     ``record:`` streams to ``record``. A failing worker raises
     :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed. Without
     ``record``, an ``inproc`` run may hand its recorded streams to ``sink`` in memory (sweeps).
-    ``startup_s`` (``--startup-s``) replaces every process group's start-up window."""
+    ``startup_s`` (``--startup-s``) replaces every process group's start-up window; a
+    multi-process run counts its start-up from ``launched_at`` (monotonic) when given."""
     duration = default_duration(
         plan, duration_s
     )  # --duration, else the replayed files' end, else the graph's
@@ -228,6 +230,7 @@ def run_plan(
             live=live,
             warn=warn,
             startup_s=startup_s,
+            launched_at=launched_at,
         )
 
     if record is None:

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from flowtact.record import read_recording
+from flowtact.runtime.forked import comm_name
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTS = Path(__file__).resolve().parent
@@ -80,7 +81,7 @@ def wait_children(pid: int, n: int, timeout: float = 60.0) -> list[int]:
         kids = []
         for k in children(pid):
             try:
-                if "flowtact.runtime.worker" in Path(f"/proc/{k}/cmdline").read_text():
+                if _is_worker(k):
                     kids.append(k)
             except OSError:
                 continue
@@ -90,9 +91,21 @@ def wait_children(pid: int, n: int, timeout: float = 60.0) -> list[int]:
     raise AssertionError(f"expected {n} workers")
 
 
+def _is_worker(pid: int) -> bool:
+    """A worker started as its own interpreter (its command line) or forked (its ``ft:`` name)."""
+    if Path(f"/proc/{pid}/comm").read_text().startswith("ft:"):
+        return True
+    return "flowtact.runtime.worker" in Path(f"/proc/{pid}/cmdline").read_text()
+
+
 def worker_of(kids: list[int], process: str) -> int:
-    """The pid of the worker running process group ``process``."""
-    return next(k for k in kids if process in Path(f"/proc/{k}/cmdline").read_bytes().decode().split("\0"))
+    """The pid of the worker running process group ``process`` (by its name when forked)."""
+    for k in kids:
+        if Path(f"/proc/{k}/comm").read_text().strip() == comm_name(process):
+            return k
+        if process in Path(f"/proc/{k}/cmdline").read_bytes().decode().split("\0"):
+            return k
+    raise LookupError(f"no worker runs process group {process!r}")
 
 
 def wait_recorded(path: Path, stream: str, n: int, timeout: float = 90.0) -> None:

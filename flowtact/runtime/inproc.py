@@ -62,6 +62,12 @@ class RunSummary:
     (warming up), and (multi-process) spawning and wiring the workers. Shown apart from the
     real-time factor. An in-process --fast executor made without ``warm_up`` loads its kernels in
     its blocks' first steps, inside the running time (``flowtact run`` and sweeps warm up)."""
+    startup_parts: dict[str, float] = field(default_factory=dict)
+    """Multi-process runs: where ``startup_s`` went (s), in order: ``launch`` (interpreter, imports,
+    reading and checking the graph), ``kernels`` (numba set up before workers are forked), then
+    for the last process to be ready ``start`` (its interpreter and imports; ~0 when forked),
+    ``build``, ``warm_up`` (loading or compiling kernels), ``bind``, and ``wiring`` (until graph
+    time 0: outputs connected, devices opened); ``other`` is the rest (handshakes, waiting)."""
     samples: dict[str, int] = field(default_factory=dict)
     events: dict[str, int] = field(default_factory=dict)
     event_units: dict[str, int] = field(default_factory=dict)
@@ -111,6 +117,7 @@ class RunSummary:
             "wall_s": self.wall_s,
             "running_s": self.running_s,
             "startup_s": self.startup_s,
+            "startup_parts": self.startup_parts,
             "realtime_factor": self.realtime_factor,
             "stopped_by": self.stopped_by,
             "realtime": self.realtime,
@@ -149,6 +156,9 @@ class RunSummary:
     def format(self) -> str:
         """A short human summary."""
         lines = [self._headline()]
+        if self.startup_parts:
+            parts = ", ".join(f"{k.replace('_', '-')} {v:.2f}" for k, v in self.startup_parts.items())
+            lines.append(f"  start-up parts (s): {parts}")
         if self.realtime is False:
             busiest = f"; busiest nodes: {', '.join(self.late_nodes)}" if self.late_nodes else ""
             lines.append(

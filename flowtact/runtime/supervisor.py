@@ -48,11 +48,12 @@ from flowtact.errors import FlowtactError
 from flowtact.python_child import python_command
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.compile_notice import CompileNotices
+from flowtact.runtime.forked import ForkedWorker, can_fork, fork_worker
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.rundir import make_run_folder
 from flowtact.runtime.stats import LatencyHistogram, format_factor
-from flowtact.runtime.warm_up import warm_shared_kernels
+from flowtact.runtime.warm_up import load_shared_kernels, warm_shared_kernels
 from flowtact.runtime.wire import recv_message
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
@@ -99,7 +100,11 @@ class _Proc:
     stall_s: float
     startup_s: float
     stop_grace_s: float
-    popen: subprocess.Popen[bytes] | None = None
+    popen: subprocess.Popen[bytes] | ForkedWorker | None = None
+    spawned_at: float = 0.0  # when its process was started (monotonic)
+    hello_at: float = 0.0  # when its first message arrived
+    ready_at: float = 0.0  # when it said ready (warm, inputs bound)
+    setup: dict[str, float] = field(default_factory=dict)  # its own start-up parts (s): build, warm_up
     ident: bytes | None = None
     sock: zmq.Socket | None = None
     pid: int | None = None
@@ -147,8 +152,11 @@ class ProcessExecutor:
         live: Any = None,
         warn: Callable[[str], None] | None = None,
         startup_s: float | None = None,
+        launched_at: float | None = None,
     ) -> None:
         self.plan = plan
+        self.launched_at = launched_at
+        """When the command started (monotonic), if known: start-up is counted from there."""
         self.startup_s = startup_s
         """``--startup-s``: every group's start-up window (None: each group's own ``startup_s``)."""
         self.fast = fast
@@ -171,7 +179,6 @@ class ProcessExecutor:
         if duration_s is None and self.fast:
             raise ValueError("a --fast run needs a duration (--duration or the graph's duration_s)")
         self.duration_s = duration_s
-        self.ctx = zmq.Context()
         self.run_folder = make_run_folder("run")  # ipc sockets; also sweeps folders of killed runs
         self.rundir = self.run_folder.path
         self.procs: dict[str, _Proc] = {}
@@ -190,6 +197,10 @@ class ProcessExecutor:
         """The supervisor's own CPU seconds and monotonic time when the first worker was warm."""
         self.late: list[str] = []  # the busiest nodes when the run fell behind real time
         self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
+        self.ctx: zmq.Context | None = None
+        self.ctl = self.rec = None
+        self.parts: dict[str, float] = {}
+        """Start-up parts measured here (s): ``kernels`` (numba set up before forking workers)."""
         self.shared_warm: threading.Thread | None = None
         self.t_run = self.next_ping = time.monotonic()
         self.next_watch = 0.0
@@ -208,7 +219,6 @@ class ProcessExecutor:
         remote_tb: str | None = None
         restore = self._catch_signals()
         try:
-            self._open_sockets()
             for g, nodes in self.placement.groups.items():
                 pdef = self.placement.processes[g]
                 self.procs[g] = _Proc(
@@ -222,12 +232,15 @@ class ProcessExecutor:
                     stop_grace_s=pdef.stop_grace_s,
                     since=self.t_start,
                 )
+            forked = self._fork_local()  # before any socket or thread: see flowtact.runtime.forked
+            self.ctx = zmq.Context()
+            self._open_sockets()
             self._warm_shared()
             for proc in self.procs.values():
-                if proc.host is None:
-                    self._spawn(proc)
-                else:
+                if proc.host is not None:
                     self._say_waiting(proc)
+                elif not forked:
+                    self._spawn(proc)
             stopped_by = self._supervise() if self._start_all() else "interrupted"
         except WorkerFailed as e:
             failure, remote_tb = str(e), e.traceback
@@ -240,6 +253,21 @@ class ProcessExecutor:
             err.summary = summary  # type: ignore[attr-defined]
             raise err
         return summary
+
+    def _fork_local(self) -> bool:
+        """Start every local group as a fork of this process, with numba set up and the kernel
+        every worker calls loaded here once; False (nothing started) where forking is not safe
+        or the graph spans hosts (its workers get CURVE keys as their own interpreters do)."""
+        local = [p for p in self.procs.values() if p.host is None]
+        if not local or self.plan.graph.deployment.remote or not can_fork():
+            return False
+        t0 = time.monotonic()
+        specs = [spec for (node, _port), spec in self.plan.specs.items() if node in self.plan.demanded]
+        load_shared_kernels(specs)
+        self.parts["kernels"] = time.monotonic() - t0
+        for proc in local:
+            self._started(proc, fork_worker(f"ipc://{self.rundir}/ctl", proc.name))
+        return True
 
     def _warm_shared(self) -> None:
         """Compile once, here, the kernels every local worker calls (the bad-data screen's), so
@@ -323,8 +351,13 @@ class ProcessExecutor:
         )
         if self.auth is not None:
             cmd += ["--keys", self.keys_dir]
-        proc.popen = subprocess.Popen(cmd, env=env, start_new_session=True)
-        proc.pid = proc.popen.pid
+        self._started(proc, subprocess.Popen(cmd, env=env, start_new_session=True))
+
+    def _started(self, proc: _Proc, popen: subprocess.Popen[bytes] | ForkedWorker) -> None:
+        """Watch a newly started worker process of group ``proc`` from its start-up on."""
+        proc.popen = popen
+        proc.pid = popen.pid
+        proc.spawned_at = time.monotonic()
         proc.state = "starting"
         proc.ident = None
         proc.beat = {}
@@ -512,6 +545,7 @@ class ProcessExecutor:
             if proc.host is None and proc.popen is not None and msg["pid"] != proc.popen.pid:
                 return  # a stale worker
             proc.ident, proc.sock, proc.pid = ident, sock, msg["pid"]
+            proc.hello_at = time.monotonic()
             proc.progress_at, proc.phase = time.monotonic(), "waiting for its plan"
             self.by_ident[ident] = proc
             self._send(proc, "plan", plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
@@ -523,6 +557,7 @@ class ProcessExecutor:
         proc.progress_at = time.monotonic()  # every message before the start is start-up progress
         if op == "ready":
             self.compiles.on_ready(proc.describe(), msg)
+            proc.ready_at, proc.setup = time.monotonic(), msg.get("setup") or {}
             proc.endpoints = {int(k): v for k, v in msg["endpoints"].items()}
             proc.state = "ready"
             if proc.restarts and self.t0_ns:  # a restart after the start rejoins the running graph
@@ -792,7 +827,8 @@ class ProcessExecutor:
         if self.auth is not None:
             self.ctl_watch.close()
             self.auth.stop()
-        self.ctx.destroy(linger=0)
+        if self.ctx is not None:
+            self.ctx.destroy(linger=0)
         self.run_folder.close()
 
     # -- reporting --------------------------------------------------------------------------
@@ -804,9 +840,9 @@ class ProcessExecutor:
             "mode": "fast" if self.fast else "realtime",
             "now": self._graph_now(),
             "duration": self.duration_s,
-            "wall": time.monotonic() - self.t_start,
+            "wall": time.monotonic() - (self.launched_at or self.t_start),
             "running": max(time.monotonic_ns() - self.go_ns, 0) / 1e9 if self.t0_ns else None,
-            "startup": self.go_ns / 1e9 - self.t_start if self.t0_ns else None,
+            "startup": self.go_ns / 1e9 - (self.launched_at or self.t_start) if self.t0_ns else None,
             "processes": self._process_table(),
             "streams": {
                 name: {
@@ -897,6 +933,24 @@ class ProcessExecutor:
             }
         return out
 
+    def _startup_parts(self) -> dict[str, float]:
+        """Where the start-up went (see :attr:`RunSummary.startup_parts`)."""
+        go = self.go_ns / 1e9
+        began = self.launched_at or self.t_start
+        parts: dict[str, float] = {}
+        if self.launched_at is not None:
+            parts["launch"] = self.t_start - self.launched_at
+        if "kernels" in self.parts:
+            parts["kernels"] = self.parts["kernels"]
+        ready = [p for p in self.procs.values() if 0 < p.ready_at <= go and p.spawned_at]
+        if ready:
+            last = max(ready, key=lambda p: p.ready_at)
+            parts["start"] = last.hello_at - last.spawned_at
+            parts |= {k: float(last.setup[k]) for k in ("build", "warm_up", "bind") if k in last.setup}
+            parts["wiring"] = go - last.ready_at
+        parts["other"] = max(go - began - sum(parts.values()), 0.0)
+        return parts
+
     def _summary(self, stopped_by: str) -> RunSummary:
         plan = self.plan
         events: dict[str, int] = {}
@@ -915,9 +969,10 @@ class ProcessExecutor:
         return RunSummary(
             graph=plan.graph.name,
             duration_s=now,
-            wall_s=time.monotonic() - self.t_start,
+            wall_s=time.monotonic() - (self.launched_at or self.t_start),
             running_s=(self.last_done_ns - self.go_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
-            startup_s=self.go_ns / 1e9 - self.t_start if self.t0_ns else None,
+            startup_s=self.go_ns / 1e9 - (self.launched_at or self.t_start) if self.t0_ns else None,
+            startup_parts=self._startup_parts() if self.t0_ns else {},
             stopped_by=stopped_by,
             samples=samples,
             events=events,

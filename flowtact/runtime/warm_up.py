@@ -32,6 +32,7 @@ from flowtact.chunk import Chunk, StreamSpec
 __all__ = [
     "CompileWatch",
     "WarmUpReport",
+    "load_shared_kernels",
     "settle_heap",
     "synthetic_inputs",
     "warm_shared_kernels",
@@ -205,6 +206,31 @@ def warm_shared_kernels(specs: Iterable[StreamSpec], say: Callable[[str], None] 
     )
     watch.install()
     t0 = time.perf_counter()
+    _screen_shapes(all_finite, specs)
+    watch.uninstall()
+    if watch.count and say:
+        say(
+            f"{watch.count} shared kernel{'s' if watch.count > 1 else ''} compiled in {time.perf_counter() - t0:.1f} s"
+        )
+    return watch.count
+
+
+def load_shared_kernels(specs: Iterable[StreamSpec]) -> bool:
+    """Load, in this process, the kernels every worker calls, when numba's cache holds them: set
+    up before workers are forked from this process, they start with numba's first dispatch (its
+    target set-up, ~0.4 s of CPU) made. On a cold cache nothing is done (False): compiling here
+    would hold every fork back; :func:`warm_shared_kernels` compiles them beside the workers."""
+    from flowtact.finite import all_finite, all_finite_kernel
+
+    if not _in_cache(all_finite_kernel):
+        return False
+    _screen_shapes(all_finite, specs)
+    return True
+
+
+def _screen_shapes(all_finite: Callable[[np.ndarray], bool], specs: Iterable[StreamSpec]) -> None:
+    """Call the bad-data screen on each float stream's sample shape as workers get it: one tick
+    and several, read-only, aligned and not (numba types each apart)."""
     shapes = {(np.dtype(s.dtype or "float64"), s.shape) for s in specs if not s.events}
     for dtype, shape in sorted(shapes, key=str):
         if dtype.kind != "f":
@@ -214,12 +240,6 @@ def warm_shared_kernels(specs: Iterable[StreamSpec], say: Callable[[str], None] 
             a.setflags(write=False)
             all_finite(a)
             all_finite(_unaligned(a))
-    watch.uninstall()
-    if watch.count and say:
-        say(
-            f"{watch.count} shared kernel{'s' if watch.count > 1 else ''} compiled in {time.perf_counter() - t0:.1f} s"
-        )
-    return watch.count
 
 
 def _in_cache(dispatcher: Any) -> bool:

@@ -305,8 +305,11 @@ class Worker:
         try:
             self._phase("waiting for the plan")
             msg = self._expect("plan")
+            t_plan = time.monotonic()
             self._build(msg["plan"])
+            t_built = time.monotonic()
             self._warm_up()
+            t_warm = time.monotonic()
             self._phase("binding its inputs")
             self._bind(msg["bind"])
             self._send(
@@ -314,6 +317,11 @@ class Worker:
                 endpoints={i.id: i.sock.last_endpoint.decode() for i in self.inbound.values()},
                 compiled=self.warm_report.total_compiled,
                 compile_s=self.compiles.seconds,
+                setup={
+                    "build": t_built - t_plan,
+                    "warm_up": t_warm - t_built,
+                    "bind": time.monotonic() - t_warm,
+                },
             )
             self._phase("waiting for the other processes")
             wire = self._expect("wire")
@@ -1025,6 +1033,13 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
     return worker.serve()
+
+
+def run_child(control: str, process: str) -> int:
+    """Run process group ``process`` in a fork of the supervisor (:mod:`flowtact.runtime.forked`)."""
+    if sys.platform.startswith("linux"):
+        _die_with_parent()
+    return Worker(control, process, child=True).serve()
 
 
 if __name__ == "__main__":
