@@ -9,7 +9,7 @@ the kernel every worker calls); a fork of it starts with all of that done.
 
 A fork copies only the calling thread: a lock another thread held stays held in the child forever.
 So a worker is forked only while the supervisor runs one Python thread and before it has made a
-ZeroMQ context (whose I/O threads are native): at the start of a run on a POSIX system. A group
+ZeroMQ context (whose I/O threads are native): at the start of a run, on Linux. A group
 restarted during the run, or a process when this cannot be ensured, starts as its own interpreter
 (:func:`flowtact.python_child.python_command`), as before.
 """
@@ -34,8 +34,11 @@ NO_FORK_ENV = "FLOWTACT_NO_FORK"
 
 
 def can_fork() -> bool:
-    """Whether a worker may be forked from this process now (POSIX, one Python thread, not turned off)."""
-    return hasattr(os, "fork") and threading.active_count() == 1 and not os.environ.get(NO_FORK_ENV)
+    """Whether a worker may be forked from this process now: Linux (macOS system libraries are not
+    safe to use in a fork that does not exec), one Python thread, not turned off."""
+    return (
+        sys.platform.startswith("linux") and threading.active_count() == 1 and not os.environ.get(NO_FORK_ENV)
+    )
 
 
 class ForkedWorker:
