@@ -141,3 +141,40 @@ def test_every_benchmark_suite_in_bench_is_registered_under_its_name():
     missing = [f"{s.name} ({s.run.__module__})" for s in defined if registered.get(s.name) is not s]
     assert not missing, f"add these to [project.entry-points.'flowtact.bench']: {missing}"
     assert all(isinstance(s, Suite) for s in registered.values())
+
+
+def _private_imports(path: Path) -> list[str]:
+    """``from M import _name`` / ``import M._part`` in a file: a private name taken from another module."""
+    bad = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = []
+        if isinstance(node, ast.ImportFrom):
+            names = [f"from {'.' * node.level}{node.module or ''} import {a.name}" for a in node.names
+                     if a.name.startswith("_") and not a.name.startswith("__")]  # fmt: skip
+        elif isinstance(node, ast.Import):
+            names = [f"import {a.name}" for a in node.names
+                     if any(p.startswith("_") and not p.startswith("__") for p in a.name.split("."))]  # fmt: skip
+        bad += [f"{path.relative_to(ROOT)}:{node.lineno}: {n}" for n in names]
+    return bad
+
+
+def test_no_module_imports_another_modules_private_name():
+    """What a module keeps private (a leading underscore) is not another module's to import: share
+    it under a public name instead (issue 32). Attribute access (``mod._name``) is ruff's SLF001."""
+    folders = (
+        ("flowtact", "flowtact"),
+        ("blocks", "flowtact.blocks"),
+        ("bench", "flowtact.bench"),
+        ("scripts", "scripts"),
+    )
+    bad = [b for folder, pkg in folders for path, _ in _sources(folder, pkg) for b in _private_imports(path)]
+    assert not bad, bad
+
+
+def test_the_private_import_rule_sees_one(tmp_path, monkeypatch):
+    (tmp_path / "m.py").write_text("from flowtact.record import _attr\nimport os._x\nfrom a import __all__\n")
+    monkeypatch.setattr(f"{__name__}.ROOT", tmp_path)
+    assert _private_imports(tmp_path / "m.py") == [
+        "m.py:1: from flowtact.record import _attr",
+        "m.py:2: import os._x",
+    ]
