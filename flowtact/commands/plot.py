@@ -17,10 +17,22 @@ def add_arguments(plot: argparse.ArgumentParser) -> None:
     plot.add_argument("--streams", nargs="*", help="streams to plot (default: all)")
     plot.add_argument("--from", dest="t0", type=cli_finite_seconds, help="start time (s)")
     plot.add_argument("--to", dest="t1", type=cli_finite_seconds, help="end time (s)")
+    from flowtact.commands import entry_point_summary
+    from flowtact.pictures.figures import figure_entry_points
+
+    figures = "; ".join(f"{n}: {entry_point_summary(ep)}" for n, ep in figure_entry_points().items())
+    plot.add_argument(
+        "--figure",
+        metavar="NAME",
+        help="draw the figure a package registered as NAME instead (entry-point group flowtact.figures; "
+        f"installed: {figures or 'none'})",
+    )
     plot.add_argument(
         "--paper",
-        action="store_true",
-        help="compact touch/slip figure: force, dF/dt, rasters, rates (one column)",
+        dest="figure",
+        action="store_const",
+        const="paper",
+        help="the same as --figure paper",
     )
 
 
@@ -37,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     try:
         out = plot_recording(
-            args.recording, args.output, streams=args.streams, t_range=t_range, paper=args.paper
+            args.recording, args.output, streams=args.streams, t_range=t_range, figure=args.figure
         )
     except KeyError as e:  # an unknown --streams name: a usage error
         raise UsageError(str(e.args[0])) from e
@@ -54,6 +66,6 @@ COMMAND = Command(
     description="Plot a recording on a shared time axis: vector samples as labelled lines per channel "
     "in their units (heat map beyond 12 channels), categorical streams as named steps, spike events "
     "as rasters with firing rates, stimulation pulses as pulse trains, frames as a thumbnail strip. "
-    "Reads block by block: memory stays bounded whatever the file size. --paper draws the compact "
-    "touch/slip figure instead (force, dF/dt, SA1/FA1 rasters, rates; after Rager et al. Fig. 4).",
+    "Reads block by block: memory stays bounded whatever the file size. --figure NAME draws a figure "
+    "an installed package registered instead (--paper: the one named paper).",
 )
