@@ -178,3 +178,37 @@ def test_the_private_import_rule_sees_one(tmp_path, monkeypatch):
         "m.py:1: from flowtact.record import _attr",
         "m.py:2: import os._x",
     ]
+
+
+def _literal_block_lookups(path: Path) -> list[str]:
+    """``load_block("NAME")`` calls with a literal name: a library block named by the framework."""
+    bad = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)):
+            continue
+        func = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+        if func == "load_block":
+            bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: load_block({node.args[0].value!r})")
+    return bad
+
+
+def test_the_framework_asks_for_library_blocks_by_role_only():
+    """The framework never names a library block (``load_block("replay")`` hides a dependency on
+    the library from rule 1); it asks for a role, and every role is filled by a registered block."""
+    from importlib.metadata import entry_points
+
+    from flowtact.registry import ROLES, ROLES_GROUP, role_block
+
+    bad = [b for path, _ in _sources("flowtact", "flowtact") for b in _literal_block_lookups(path)]
+    assert not bad, bad
+    registered = {load_block(n) for n in block_names()}
+    assert {ep.name for ep in entry_points(group=ROLES_GROUP)} == set(ROLES)
+    for role in ROLES:
+        assert role_block(role) in registered, role
+    assert callable(role_block("replay").stand_in)  # type: ignore[attr-defined]
+
+
+def test_the_role_rule_sees_a_literal_block_name(tmp_path, monkeypatch):
+    (tmp_path / "m.py").write_text("from flowtact.registry import load_block\nx = load_block('replay')\n")
+    monkeypatch.setattr(f"{__name__}.ROOT", tmp_path)
+    assert _literal_block_lookups(tmp_path / "m.py") == ["m.py:2: load_block('replay')"]
