@@ -22,7 +22,7 @@ from flowtact.limits import MAX_TICK_S, MIN_TICK_S, cli_duration_seconds, cli_fl
 if TYPE_CHECKING:
     from flowtact.terminal_bar import TerminalBar
 
-__all__ = ["COMMAND", "RUN_EXAMPLES"]
+__all__ = ["COMMAND", "RUN_EXAMPLES", "run_progress"]
 
 RUN_EXAMPLES = """examples:
   flowtact run touch                                   # a shipped graph by name, in real time
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     quiet = args.quiet or args.json
     live = LiveView(enabled=not quiet and not args.inproc)
     bar = TerminalBar("run", None, show=not quiet and not live.enabled, count=False)
-    progress = _progress(bar)
+    progress = run_progress(bar)
 
     def on_term(_signum: int, _frame: Any) -> None:
         raise KeyboardInterrupt
@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress(bar: TerminalBar) -> Callable[[float, float | None], None]:
+def run_progress(bar: TerminalBar) -> Callable[[float, float | None], None]:
     """The run's ``progress(now, total)`` on ``bar``: graph seconds done of the run's (Ctrl-C stops
     a run without an end), at most 5 updates a second."""
     last = [-1.0]
