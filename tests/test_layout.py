@@ -4,7 +4,10 @@
 * a generic family (signal, spiking, devices) never imports a domain;
 * a domain (touch, teleop, ...) never imports another domain;
 * every Block subclass defined in blocks/ is registered under its name (pyproject.toml entry
-  points), so the conformance suite runs on it.
+  points), so the conformance suite runs on it;
+* no module imports another module's private (``_name``) name (framework, blocks, bench, scripts);
+* the framework names no library block (no literal ``load_block("...")``): it asks for a role
+  (``flowtact.registry.ROLES``), which a registered block fills.
 
 Imports are read from the source (every ``import`` statement, including those inside functions).
 """
