@@ -19,7 +19,15 @@ from flowtact.deployment import ProcessDef
 from flowtact.graph import GraphError, GraphErrors
 from flowtact.runtime.worker_plan import ticks_mergeable
 
-__all__ = ["DEFAULT_GROUP", "MAX_LOCAL_PROCESSES", "Placement", "default_groups", "place", "spec_from_wire", "spec_to_wire"]
+__all__ = [
+    "DEFAULT_GROUP",
+    "MAX_LOCAL_PROCESSES",
+    "Placement",
+    "default_groups",
+    "place",
+    "spec_from_wire",
+    "spec_to_wire",
+]
 
 DEFAULT_GROUP = "main"
 MAX_LOCAL_PROCESSES = 64
