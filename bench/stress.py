@@ -1,6 +1,6 @@
 """Suite ``stress``: every numerical stress case (flowtact.stress) run on the real blocks, one verdict each.
 
-The cases live next to their blocks (``flowtact.blocks.<room>.stress_cases``); ``--quick`` runs the
+The cases live next to their blocks, registered in the entry-point group ``flowtact.stress_cases``; ``--quick`` runs the
 short variants (1e7-step long runs), the full run the 1e8-step ones. A case that crashes is a failed
 check with the exception in its detail (``flowtact.stress.run_case``), never a crashed suite. The
 same table is docs/numerical-stress.md (``python scripts/stress_outcomes.py``).
@@ -12,20 +12,11 @@ import time
 
 from flowtact.benchmark import Context, Suite
 
-#: Every room that has stress cases, in the order of the table (as scripts/stress_outcomes.py).
-MODULES = (
-    "flowtact.blocks.spiking.stress_cases",
-    "flowtact.blocks.signal.stress_cases",
-    "flowtact.blocks.touch.stress_cases",
-    "flowtact.blocks.teleop.stress_cases",
-    "flowtact.blocks.braille.stress_cases",
-)
-
 
 def run(ctx: Context) -> None:
     from flowtact.stress import collect, run_case
 
-    cases = collect(MODULES)
+    cases = collect()
     rows, raw = [], []
     for case in cases:
         ctx.step(f"{case.block}/{case.name}")

@@ -32,7 +32,7 @@ from flowtact.limits import (
 from flowtact.located import GraphError, GraphErrors, Loc, Located
 from flowtact.param_paths import graph_folder, path_fields, resolve_path, resolve_value
 from flowtact.params import ConfigError, did_you_mean
-from flowtact.registry import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
+from flowtact.registry import ModuleNotAllowedError, UnknownBlockError, allowing, load_block, role_block
 from flowtact.replay_spec import parse_port_map, split_replay
 from flowtact.safe_yaml import SafeYamlError, compose, load_value, read_graph_text
 
@@ -326,7 +326,11 @@ def _apply_replays(
     _drop_edges_into(doc, y, set(planned))
     consumed = {(m.group(1), m.group(2)) for m in map(_edge_match, doc.get("edges") or []) if m}
     recorded = {str(r).partition(".")[0].strip() for r in doc.get("record") or [] if isinstance(r, str)}
-    replay = load_block("replay")
+    try:
+        replay = role_block("replay")  # the library's block that plays a file (flowtact.roles)
+    except UnknownBlockError as e:
+        errors.extend(GraphError(loc, f"--replay {name}: {e}") for name, (loc, *_) in planned.items())
+        return
     for name, (loc, block, path, mapping) in planned.items():
         need = sorted(p for n, p in consumed if n == name)
         if not need and name not in recorded:
@@ -564,11 +568,10 @@ def _node(
     except ConfigError as e:
         if e.field in param_locs:
             ploc = param_locs[e.field]
-        elif e.field and "unknown parameter" not in e.rule:
+        elif e.field and e.unknown is None:
             ploc = y.loc("nodes", name, "params") if "params" in ndoc else loc
         else:
-            bad = re.search(r"unknown parameter '([^']+)'", e.rule)
-            key = bad.group(1) if bad else None
+            key = e.unknown
             ploc = (
                 y.key_loc("nodes", name, "params", key)
                 if key in (ndoc.get("params") or {})

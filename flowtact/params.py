@@ -23,11 +23,22 @@ __all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param
 
 
 class ConfigError(FlowtactError, ValueError):
-    """A parameter broke a rule: ``"<owner>: 'field' must be <rule>; got <value>"``."""
+    """A parameter broke a rule: ``"<owner>: 'field' must be <rule>; got <value>"``. ``unknown``:
+    the parameter given that the config does not have (so a caller can locate it without reading
+    the message)."""
 
-    def __init__(self, owner: str, field: str | None, message: str, *, type_error: bool = False) -> None:
+    def __init__(
+        self,
+        owner: str,
+        field: str | None,
+        message: str,
+        *,
+        type_error: bool = False,
+        unknown: str | None = None,
+    ) -> None:
         self.owner, self.field, self.rule = owner, field, message
         self.type_error = type_error  # the value had the wrong type (vs. broke a rule)
+        self.unknown = unknown
         where = f"'{field}' " if field else ""
         super().__init__(f"{owner}: {where}{message}")
 
@@ -158,7 +169,9 @@ class Config:
         fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
         for key in params:
             if key not in fields:
-                raise ConfigError(owner, None, f"unknown parameter '{key}'{did_you_mean(key, fields)}")
+                raise ConfigError(
+                    owner, None, f"unknown parameter '{key}'{did_you_mean(key, fields)}", unknown=key
+                )
         values = {}
         for name, f in fields.items():
             if name in params:
@@ -175,7 +188,7 @@ class Config:
         try:
             obj.check()
         except ConfigError as e:
-            raise ConfigError(owner, e.field, e.rule) from None
+            raise ConfigError(owner, e.field, e.rule, unknown=e.unknown) from None
         return obj
 
     def to_dict(self) -> dict[str, Any]:

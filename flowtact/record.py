@@ -99,6 +99,7 @@ __all__ = [
     "open_verified",
     "package_versions",
     "read_recording",
+    "spec_from_attrs",
     "stream_count",
     "stream_header",
     "stream_kind",
@@ -198,7 +199,9 @@ def _attr(value: Any) -> Any:
     return value.decode() if isinstance(value, bytes) else value
 
 
-def _spec_from_attrs(attrs: Mapping[str, Any], data: h5py.Dataset) -> StreamSpec:
+def spec_from_attrs(attrs: Mapping[str, Any], data: h5py.Dataset) -> StreamSpec:
+    """The StreamSpec a recorded stream's attributes describe (its data set fills in dtype and shape
+    when the attributes leave them out)."""
     events = bool(_attr(attrs.get("events", 0)))
     rate = float(_attr(attrs.get("rate_hz", math.nan)))
     n_units = int(_attr(attrs.get("n_units", -1)))
@@ -603,7 +606,7 @@ def stream_header(f: CheckedFile, name: str) -> StreamHeader:
     attrs = f.attrs(g)
     t, data = f.group(f"{where}/t"), f.group(f"{where}/data")
     try:
-        spec = _spec_from_attrs(attrs, data)
+        spec = spec_from_attrs(attrs, data)
     except (ValueError, TypeError, KeyError, RecursionError) as e:  # only unchecksummed (old) files get here
         raise RecordingCorrupted(
             f.path, where, f"attributes do not describe a stream ({shown(e, limit=200)})"

@@ -7,6 +7,11 @@ is imported only when the user allows it (``--allow-module MODULE`` on the comma
 code the user chose, e.g. the replay stand-ins in ``flowtact.blocks.signal.replay_ports``; never
 a ``__main__``, which would run that package's command).
 Nothing a file says widens the permission. See docs/security.md.
+
+Where the framework itself needs a library block (``--replay`` needs the block that plays a file),
+it asks for a **role** (:data:`ROLES`, :func:`role_block`), which an installed package fills in the
+``flowtact.roles`` entry-point group; the framework never names a library block itself (the layout
+test checks both).
 """
 
 from __future__ import annotations
@@ -31,9 +36,16 @@ __all__ = [
     "check_module_name",
     "load_block",
     "module_allowed",
+    "role_block",
 ]
 
 GROUP = "flowtact.blocks"
+ROLES_GROUP = "flowtact.roles"
+ROLES: dict[str, str] = {
+    "replay": "the source that plays a recorded file in place of a node (--replay): a Block class "
+    "with stand_in(block: str) -> str, the reference of its stand-in on that block's own output ports",
+}
+"""The roles the framework asks the library to fill: name -> what the block must be and do."""
 MODULE_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*\Z")
 """A dotted module name: what ``--allow-module`` and the module part of ``module:Class`` must be."""
 
@@ -89,6 +101,21 @@ def allowing(modules: Iterable[str]) -> Iterator[None]:
         yield
     finally:
         _ALLOWED.reset(token)
+
+
+def role_block(role: str) -> type[Block]:
+    """The block class an installed package registers for ``role`` (one of :data:`ROLES`) in the
+    ``flowtact.roles`` entry-point group; UnknownBlockError if none does, or it is not a Block."""
+    found = [ep for ep in entry_points(group=ROLES_GROUP) if ep.name == role]
+    if role not in ROLES or not found:
+        raise UnknownBlockError(
+            f"no installed package provides the '{role}' block ({ROLES_GROUP} entry points: "
+            f"{ROLES.get(role, 'not a role of flowtact')})"
+        )
+    cls = found[0].load()
+    if not (isinstance(cls, type) and issubclass(cls, Block)):
+        raise UnknownBlockError(f"the '{role}' role ({found[0].value}) is not a flowtact Block")
+    return cls
 
 
 def load_block(name: str, allow_modules: Iterable[str] = ()) -> type[Block]:

@@ -2,21 +2,25 @@
 
 The cases themselves live next to the blocks they stress (``flowtact.blocks.<room>.stress_cases``,
 each exposing ``CASES``), because the framework never imports the block library and the benchmark
-runner must find them in an installed wheel, where ``tests/`` does not exist. The tests, the
+runner must find them in an installed wheel, where ``tests/`` does not exist. Each room lists its
+``CASES`` in the entry-point group ``flowtact.stress_cases`` (``room = "module:CASES"``), and
+:func:`collect` finds them there: another package's blocks add their cases the same way. The tests, the
 outcome table (``python scripts/stress_outcomes.py`` → docs/numerical-stress.md) and the benchmark
 suite all call the same functions.
 """
 
 from __future__ import annotations
 
-import importlib
 import traceback
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["EPS", "Outcome", "StressCase", "collect", "markdown_table", "run_case"]
+__all__ = ["EPS", "GROUP", "Outcome", "StressCase", "collect", "markdown_table", "run_case"]
+
+GROUP = "flowtact.stress_cases"
+"""The entry-point group naming each room's list of stress cases."""
 
 #: float64 machine epsilon, the unit every derived tolerance is a multiple of.
 EPS = float(np.finfo(np.float64).eps)
@@ -73,11 +77,14 @@ def run_case(case: StressCase, full: bool = False) -> Outcome:
         )
 
 
-def collect(modules: Iterable[str]) -> list[StressCase]:
-    """The ``CASES`` of each named module, in order (e.g. ``flowtact.blocks.spiking.stress_cases``)."""
+def collect() -> list[StressCase]:
+    """Every registered stress case: each entry point of :data:`GROUP` (a room's list of
+    :class:`StressCase`), rooms in name order, each room's cases in its own order."""
+    from importlib.metadata import entry_points
+
     out: list[StressCase] = []
-    for name in modules:
-        out.extend(importlib.import_module(name).CASES)
+    for ep in sorted(entry_points(group=GROUP), key=lambda ep: ep.name):
+        out.extend(ep.load())
     return out
 
 

@@ -1,5 +1,6 @@
-"""The progress bar of long commands: a rich bar on a terminal, nothing anywhere else (rich is
-imported only when a bar is shown)."""
+"""The one progress bar of every long command (run, bench, sweep, training): a rich bar on a
+terminal, nothing anywhere else (rich is imported only when a bar is shown). What each command
+prints where there is no terminal (a line per suite, per N runs) is its own."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ class TerminalBar:
     otherwise every call does nothing, so callers need no branches of their own.
     """
 
-    def __init__(self, label: str, total: float, *, show: bool = True, count: bool = True,
+    def __init__(self, label: str, total: float | None, *, show: bool = True, count: bool = True,
                  stream: TextIO | None = None, force: bool | None = None, description: str = "") -> None:  # fmt: skip
         self._bar: Any = None
         stream = stream or sys.stderr
@@ -35,9 +36,14 @@ class TerminalBar:
         return self._bar is not None
 
     def update(self, **fields: Any) -> None:
-        """rich's ``Progress.update`` fields: ``advance``, ``completed``, ``description``."""
+        """rich's ``Progress.update`` fields: ``advance``, ``completed``, ``total``, ``description``."""
         if self._bar is not None:
             self._bar.update(self._task, **fields)
+
+    def print(self, text: str) -> None:
+        """``text`` on its own line above the bar (only when the bar is shown)."""
+        if self._bar is not None:
+            self._bar.console.print(text, markup=False, highlight=False)
 
     def close(self) -> None:
         if self._bar is not None:

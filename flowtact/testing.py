@@ -23,6 +23,7 @@ from flowtact.params import ConfigError
 __all__ = [
     "CHECKS",
     "ConformanceError",
+    "MemoryRecorder",
     "assert_same",
     "example_of",
     "infer_specs",
@@ -179,8 +180,9 @@ def run_source(
     return {p: concat(cs, out_specs[p]) for p, cs in outs.items()}
 
 
-class _Memory:
-    """An in-memory recorder: keeps every chunk written to each stream."""
+class MemoryRecorder:
+    """An in-memory recorder: keeps every chunk written to each stream (``chunks[stream]``), for
+    offline runs that want the streams back rather than a file."""
 
     def __init__(self) -> None:
         self.chunks: dict[str, list[Chunk]] = {}
@@ -253,7 +255,7 @@ def run_graph(
             resolve_graph_path(graph), overrides=overrides, replays=replays, allow_modules=allow_modules
         )
         plan = compile_graph(graph_def)
-        memory = _Memory()
+        memory = MemoryRecorder()
         InprocExecutor(plan, fast=True, tick_s=tick_s, recorder=memory).run(
             default_duration(plan, duration_s)
         )

@@ -22,7 +22,7 @@ def _fine() -> Outcome:
 
 def test_a_crashing_case_is_a_failed_check_and_the_suite_goes_on(monkeypatch):
     cases = [StressCase("crash", "toy", _crash), StressCase("fine", "toy", _fine)]
-    monkeypatch.setattr("flowtact.stress.collect", lambda _modules: cases)
+    monkeypatch.setattr("flowtact.stress.collect", lambda: cases)
     ctx = Context(stress.SUITE, quick=True)
     stress.SUITE.run(ctx)
     assert [c.passed for c in ctx.checks] == [False, True]
@@ -34,7 +34,7 @@ def test_a_crashing_case_is_a_failed_check_and_the_suite_goes_on(monkeypatch):
 
 def test_the_full_run_takes_each_case_s_full_variant(monkeypatch):
     short = StressCase("long", "toy", _crash, full=_fine)
-    monkeypatch.setattr("flowtact.stress.collect", lambda _modules: [short])
+    monkeypatch.setattr("flowtact.stress.collect", lambda: [short])
     ctx = Context(stress.SUITE, quick=False)
     stress.SUITE.run(ctx)
     assert [c.passed for c in ctx.checks] == [True] and "1e8" in ctx.notes[0]
@@ -47,6 +47,30 @@ def test_the_stress_suite_runs_every_case_through_the_runner(tmp_path, capsys):
     res = json.loads((tmp_path / "results" / "stress.json").read_text())
     from flowtact.stress import collect
 
-    assert len(res["checks"]) == len(collect(stress.MODULES)) >= 40
+    assert len(res["checks"]) == len(collect()) >= 40
     assert all(c["passed"] for c in res["checks"]), [c for c in res["checks"] if not c["passed"]]
     assert "Numerical stress outcomes" in (tmp_path / "REPORT.md").read_text()
+
+
+TOY_CASES = (StressCase("fine", "toy", _fine),)
+
+
+def test_every_room_with_stress_cases_is_registered_and_a_toy_room_is_found(monkeypatch):
+    """The rooms are found through the ``flowtact.stress_cases`` entry-point group, not a hand list:
+    every ``blocks/<room>/stress_cases.py`` is registered, and a package's own room joins in."""
+    from importlib import import_module, metadata
+    from pathlib import Path
+
+    from flowtact.stress import GROUP, collect
+
+    rooms = sorted(p.parent.name for p in (Path(__file__).parents[1] / "blocks").glob("*/stress_cases.py"))
+    expected = [c for r in rooms for c in import_module(f"flowtact.blocks.{r}.stress_cases").CASES]
+    assert len(rooms) >= 5 and collect() == expected
+    real = metadata.entry_points
+
+    def with_toy(*, group: str):
+        toy = metadata.EntryPoint(name="aaa_toy", value=f"{__name__}:TOY_CASES", group=GROUP)
+        return [*real(group=group), toy] if group == GROUP else real(group=group)
+
+    monkeypatch.setattr(metadata, "entry_points", with_toy)
+    assert collect() == [*TOY_CASES, *expected]

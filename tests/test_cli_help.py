@@ -8,7 +8,8 @@ import shlex
 
 import pytest
 
-from flowtact.cli import RUN_EXAMPLES, _parser, main, one_line_summary
+from flowtact.cli import build_parser, main, one_line_summary
+from flowtact.commands.run import RUN_EXAMPLES
 from flowtact.graph import shipped_graphs
 from flowtact.pictures.graph_figure import FORMATS
 
@@ -53,7 +54,7 @@ def test_run_help_has_examples_that_parse(capsys):
         ln.split("  #", 1)[0].strip() for ln in RUN_EXAMPLES.splitlines() if ln.startswith("  flowtact")
     ]
     assert len(examples) >= 5
-    parser = _parser()
+    parser = build_parser()
     for ex in examples:
         args = parser.parse_args(shlex.split(ex)[1:])  # exits (and fails the test) on a bad flag
         assert args.command == "run"

@@ -14,6 +14,7 @@ from hostile import TOUCH, run_measured
 
 from flowtact import cli
 from flowtact.cli import main
+from flowtact.commands import Command
 from flowtact.debug import ENV, HINT
 
 PEAK_MIB = 500  # the issue's bound on a refusal's peak memory
@@ -172,8 +173,10 @@ class _EntryPoint:
     def __init__(self, body):
         self.body = body
 
+    name, value = "x", "tests:x"
+
     def load(self):
-        return lambda argv: self.body(argv)
+        return Command(main=lambda argv: self.body(argv))
 
 
 def _raise(e: BaseException):
@@ -200,7 +203,7 @@ def plugin(monkeypatch):
     """Install a fake plugin command ``flowtact x`` running ``body``; returns the installer."""
 
     def install(body):
-        monkeypatch.setattr(cli, "plugin_commands", lambda: {"x": _EntryPoint(body)})
+        monkeypatch.setattr(cli, "find_commands", lambda: {"x": _EntryPoint(body)})
 
     monkeypatch.delenv(ENV, raising=False)
     return install
@@ -262,7 +265,7 @@ def test_a_plugin_that_cannot_be_loaded_is_one_line(monkeypatch, capsys):
         def load(self):
             raise ImportError("No module named 'gone'")
 
-    monkeypatch.setattr(cli, "plugin_commands", lambda: {"x": Broken()})
+    monkeypatch.setattr(cli, "find_commands", lambda: {"x": Broken()})
     assert main(["x"]) == 1
     err = capsys.readouterr().err
     assert err == f"flowtact x: error: No module named 'gone' {HINT}\n"

@@ -268,3 +268,20 @@ def test_a_delay_block_closes_a_loop_when_it_declares_the_fed_back_stream():
     assert ex.blocks["a"].got_feedback == 2000
     with pytest.raises(GraphErrors, match="declare the fed-back stream"):
         compile_graph(load(DELAY_LOOP.replace("units: N,", "units: mN,")))
+
+
+def test_an_unknown_parameter_is_located_at_its_key_whatever_its_spelling():
+    """The graph locates the unknown key from the error's data (ConfigError.unknown), not by reading
+    its message: a key with a quote in it is still pointed at, not its node."""
+    text = """
+    name: quoted
+    nodes:
+      src: {block: "toyblocks:Ramp"}
+      s:   {block: "toyblocks:Scale", params: {"ga'in": 2}}
+    edges:
+      - src.y -> s.x
+    record: [s.y]
+    """
+    with pytest.raises(GraphErrors) as e:
+        load(text)
+    assert "g.yaml:5:44: s (scale): unknown parameter 'ga'in' (did you mean 'gain'?)" in str(e.value)

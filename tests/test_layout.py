@@ -4,7 +4,10 @@
 * a generic family (signal, spiking, devices) never imports a domain;
 * a domain (touch, teleop, ...) never imports another domain;
 * every Block subclass defined in blocks/ is registered under its name (pyproject.toml entry
-  points), so the conformance suite runs on it.
+  points), so the conformance suite runs on it;
+* no module imports another module's private (``_name``) name (framework, blocks, bench, scripts);
+* the framework names no library block (no literal ``load_block("...")``): it asks for a role
+  (``flowtact.registry.ROLES``), which a registered block fills.
 
 Imports are read from the source (every ``import`` statement, including those inside functions).
 """
@@ -141,3 +144,74 @@ def test_every_benchmark_suite_in_bench_is_registered_under_its_name():
     missing = [f"{s.name} ({s.run.__module__})" for s in defined if registered.get(s.name) is not s]
     assert not missing, f"add these to [project.entry-points.'flowtact.bench']: {missing}"
     assert all(isinstance(s, Suite) for s in registered.values())
+
+
+def _private_imports(path: Path) -> list[str]:
+    """``from M import _name`` / ``import M._part`` in a file: a private name taken from another module."""
+    bad = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = []
+        if isinstance(node, ast.ImportFrom):
+            names = [f"from {'.' * node.level}{node.module or ''} import {a.name}" for a in node.names
+                     if a.name.startswith("_") and not a.name.startswith("__")]  # fmt: skip
+        elif isinstance(node, ast.Import):
+            names = [f"import {a.name}" for a in node.names
+                     if any(p.startswith("_") and not p.startswith("__") for p in a.name.split("."))]  # fmt: skip
+        bad += [f"{path.relative_to(ROOT)}:{node.lineno}: {n}" for n in names]
+    return bad
+
+
+def test_no_module_imports_another_modules_private_name():
+    """What a module keeps private (a leading underscore) is not another module's to import: share
+    it under a public name instead (issue 32). Attribute access (``mod._name``) is ruff's SLF001."""
+    folders = (
+        ("flowtact", "flowtact"),
+        ("blocks", "flowtact.blocks"),
+        ("bench", "flowtact.bench"),
+        ("scripts", "scripts"),
+    )
+    bad = [b for folder, pkg in folders for path, _ in _sources(folder, pkg) for b in _private_imports(path)]
+    assert not bad, bad
+
+
+def test_the_private_import_rule_sees_one(tmp_path, monkeypatch):
+    (tmp_path / "m.py").write_text("from flowtact.record import _attr\nimport os._x\nfrom a import __all__\n")
+    monkeypatch.setattr(f"{__name__}.ROOT", tmp_path)
+    assert _private_imports(tmp_path / "m.py") == [
+        "m.py:1: from flowtact.record import _attr",
+        "m.py:2: import os._x",
+    ]
+
+
+def _literal_block_lookups(path: Path) -> list[str]:
+    """``load_block("NAME")`` calls with a literal name: a library block named by the framework."""
+    bad = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)):
+            continue
+        func = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+        if func == "load_block":
+            bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: load_block({node.args[0].value!r})")
+    return bad
+
+
+def test_the_framework_asks_for_library_blocks_by_role_only():
+    """The framework never names a library block (``load_block("replay")`` hides a dependency on
+    the library from rule 1); it asks for a role, and every role is filled by a registered block."""
+    from importlib.metadata import entry_points
+
+    from flowtact.registry import ROLES, ROLES_GROUP, role_block
+
+    bad = [b for path, _ in _sources("flowtact", "flowtact") for b in _literal_block_lookups(path)]
+    assert not bad, bad
+    registered = {load_block(n) for n in block_names()}
+    assert {ep.name for ep in entry_points(group=ROLES_GROUP)} == set(ROLES)
+    for role in ROLES:
+        assert role_block(role) in registered, role
+    assert callable(role_block("replay").stand_in)  # type: ignore[attr-defined]
+
+
+def test_the_role_rule_sees_a_literal_block_name(tmp_path, monkeypatch):
+    (tmp_path / "m.py").write_text("from flowtact.registry import load_block\nx = load_block('replay')\n")
+    monkeypatch.setattr(f"{__name__}.ROOT", tmp_path)
+    assert _literal_block_lookups(tmp_path / "m.py") == ["m.py:2: load_block('replay')"]

@@ -42,19 +42,6 @@ class Reading:
     rate_hz: float = 250.0
 
 
-class _Keep:
-    """An in-memory recorder: every chunk written to each stream."""
-
-    def __init__(self) -> None:
-        self.chunks: dict[str, list[Any]] = {}
-
-    def write(self, stream: str, chunk: Any) -> None:
-        self.chunks.setdefault(stream, []).append(chunk)
-
-    def maybe_flush(self) -> None:
-        """Nothing to make durable in memory."""
-
-
 def char_windows(
     t: np.ndarray, char: np.ndarray, categories: Sequence[str] = CATEGORIES, gaps: Iterable[str] = GAPS
 ) -> tuple[np.ndarray, tuple[str, ...]]:
@@ -142,6 +129,7 @@ def read_line(
     from flowtact.graph import load_graph
     from flowtact.runtime.inproc import InprocExecutor
     from flowtact.source_ends import default_duration
+    from flowtact.testing import MemoryRecorder
 
     streams = ["scan.char", *(f"{LAYERS[k]}.spikes" for k in layers), *extra]
     path, yml = graph_text(
@@ -149,7 +137,7 @@ def read_line(
         tick_s=tick_s or None, record=streams,
     )  # fmt: skip
     plan = compile_graph(load_graph(path, text=yml))
-    memory = _Keep()
+    memory = MemoryRecorder()
     duration = default_duration(plan, duration_s)
     InprocExecutor(
         plan, fast=True, tick_s=tick_s or plan.graph.tick_s, recorder=memory, progress=progress

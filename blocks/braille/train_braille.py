@@ -34,6 +34,7 @@ from flowtact.blocks.spiking.nb_model import (
 )
 from flowtact.blocks.spiking.window_features import window_features
 from flowtact.command import CommandParser, run_command
+from flowtact.commands import Command
 from flowtact.errors import UsageError
 from flowtact.limits import MAX_SEED, cli_float, cli_int, format_bytes
 from flowtact.terminal_bar import TerminalBar
@@ -41,7 +42,7 @@ from flowtact.terminal_bar import TerminalBar
 from .cells import LETTERS
 from .reading import LAYERS, OPEN_GRAPH, graph_text, prefix_windows, read_line
 
-__all__ = ["HELDOUT_SEED", "build_parser", "main", "train_braille", "train_layers"]
+__all__ = ["COMMAND", "HELDOUT_SEED", "build_parser", "main", "train_braille", "train_layers"]
 
 #: Graph seeds from here up are the benchmark's held-out text; training never uses them.
 HELDOUT_SEED = 100_000
@@ -344,3 +345,7 @@ def _train(argv: list[str]) -> int:
             f"training accuracy {prov['training_accuracy']:.1%}; {time.perf_counter() - t0:.0f} s"
         )
     return 0
+
+
+COMMAND = Command(main=main)
+"""``flowtact train-braille``: parses its own arguments (entry-point group ``flowtact.commands``)."""

@@ -11,9 +11,10 @@ from importlib.metadata import entry_points
 from typing import Any
 
 from flowtact.command import run_command
+from flowtact.commands import Command
 from flowtact.errors import UsageError
 
-__all__ = ["GROUP", "main"]
+__all__ = ["COMMAND", "GROUP", "main"]
 
 GROUP = "flowtact.emulators"
 
@@ -26,7 +27,7 @@ def main(argv: Sequence[str]) -> int:
 
 def _help(emulators: dict[str, Any]) -> str:
     """``flowtact sim --help``: what it does, each device with its one-line summary, an example."""
-    from flowtact.cli import entry_point_summary
+    from flowtact.commands import entry_point_summary
 
     width = max((len(n) for n in emulators), default=0) + 2
     devices = "\n".join(f"  {n:<{width}}{entry_point_summary(ep)}" for n, ep in sorted(emulators.items()))
@@ -50,3 +51,7 @@ def _dispatch(argv: list[str]) -> int:
     if argv[0] not in emulators:
         raise UsageError(f"unknown device '{argv[0]}'; devices: {', '.join(sorted(emulators))}")
     return int(emulators[argv[0]].load()(argv[1:]) or 0)
+
+
+COMMAND = Command(main=main)
+"""``flowtact sim``: parses its own arguments (entry-point group ``flowtact.commands``)."""

@@ -16,12 +16,13 @@ from typing import Any
 import numpy as np
 
 from flowtact.command import CommandParser, run_command
+from flowtact.commands import Command
 from flowtact.errors import UsageError
 from flowtact.limits import cli_float
 
 from .hand import FINGERS
 
-__all__ = ["MAX_TOL_S", "fit_from_recording", "fit_linear_force", "main"]
+__all__ = ["COMMAND", "MAX_TOL_S", "fit_from_recording", "fit_linear_force", "main"]
 
 MAX_TOL_S = 1.0
 """Widest pairing tolerance for ``--tol-s``: samples a second apart are not the same moment."""
@@ -182,3 +183,7 @@ def _fit(argv: list[str]) -> int:
         with open(args.json, "w") as fh:
             json.dump(fit, fh, indent=1)
     return 0
+
+
+COMMAND = Command(main=main)
+"""``flowtact fit-force``: parses its own arguments (entry-point group ``flowtact.commands``)."""

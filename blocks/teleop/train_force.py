@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from flowtact.command import CommandParser, run_command
+from flowtact.commands import Command
 from flowtact.errors import UsageError
 from flowtact.limits import MAX_SEED, cli_float, cli_int
 from flowtact.terminal_bar import TerminalBar
@@ -43,6 +44,7 @@ from .cnn import ARCHS, TORCH_HINT, Arch, Preprocess, build_model, import_torch,
 from .hand import FINGERS
 
 __all__ = [
+    "COMMAND",
     "DEFAULT_CROP",
     "Dataset",
     "StopOnInterrupt",
@@ -878,6 +880,10 @@ class StopOnInterrupt:
     def __exit__(self, *exc: object) -> None:
         if self.previous is not None:
             signal.signal(signal.SIGINT, self.previous)
+
+
+COMMAND = Command(main=main)
+"""``flowtact train-force``: parses its own arguments (entry-point group ``flowtact.commands``)."""
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -17,7 +17,7 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import StreamSpec
-from flowtact.record import _spec_from_attrs, open_verified
+from flowtact.record import open_verified, spec_from_attrs
 from flowtact.record_integrity import RecordingCorrupted
 from flowtact.safe_text import shown
 
@@ -88,7 +88,7 @@ def open_recording(path: str | Path) -> tuple[h5py.File, dict[str, StreamSource]
             n = int(min(g["t"].shape[0], g["data"].shape[0]))
             end = g.attrs.get("end_s")
             end_s = None if end is None or not math.isfinite(float(end)) else float(end)
-            spec = _shown_spec(_spec_from_attrs(g.attrs, g["data"]))
+            spec = _shown_spec(spec_from_attrs(g.attrs, g["data"]))
             out[name] = StreamSource(label(name), spec, n, end_s, g["t"], g["data"])
         root = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
     except (ValueError, TypeError, KeyError, RecursionError) as e:

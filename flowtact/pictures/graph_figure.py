@@ -161,9 +161,9 @@ def _box_lines(plan: Plan, n: str) -> list[_Text]:
 
 def _groups(plan: Plan) -> dict[str, str]:
     """The process group of each active node, when the graph runs in more than one."""
-    from flowtact.runtime.placement import _default_group  # the rule the runtime places by
+    from flowtact.runtime.placement import default_groups  # the rule the runtime places by
 
-    groups = _default_group(plan)
+    groups = default_groups(plan)
     return groups if len(set(groups.values())) > 1 else {}
 
 

@@ -3,8 +3,8 @@
 Vector samples are labelled lines per channel in their units, categorical streams steps named on
 the axis, spike events rasters with firing rates, stimulation pulses pulse trains, frames a strip
 of thumbnails (see :mod:`flowtact.pictures.panels`). The file is read block by block
-(:mod:`flowtact.pictures.bounded_read`), so memory stays bounded whatever its size. ``paper=True`` draws the
-compact touch/slip figure instead (:mod:`flowtact.pictures.paper_figure`). matplotlib is the optional
+(:mod:`flowtact.pictures.bounded_read`), so memory stays bounded whatever its size. ``figure=NAME`` draws a
+figure a package registered instead (:mod:`flowtact.pictures.figures`). matplotlib is the optional
 ``plot`` extra, imported only here, with its Agg canvas (no GUI, no global backend switch).
 """
 
@@ -94,10 +94,16 @@ def recording_figure(
     streams: Sequence[str] | None = None,
     t_range: tuple[float | None, float | None] | None = None,
     *,
-    paper: bool = False,
+    figure: str | None = None,
 ) -> Any:
-    """The figure (a matplotlib Figure on an Agg canvas) of a recording or of its named streams."""
+    """The figure (a matplotlib Figure on an Agg canvas) of a recording or of its named streams;
+    ``figure``: the registered figure of that name (:mod:`flowtact.pictures.figures`) instead."""
     Figure, FigureCanvasAgg = need_matplotlib()
+    draw = None
+    if figure is not None:
+        from flowtact.pictures.figures import load_figure
+
+        draw = load_figure(figure)  # an unknown name is refused before the file is opened
     path = Path(source)
     if streams is None:  # refuse a figure of thousands of panels before verifying them all
         from flowtact.record import stream_count
@@ -110,10 +116,8 @@ def recording_figure(
             raise ValueError(f"{shown(path)}: nothing to plot (the recording holds no streams)")
         _check_count(path, len(sources))
         t0, t1 = time_span(sources, t_range)
-        if paper:
-            from flowtact.pictures.paper_figure import paper_figure
-
-            fig = paper_figure(Figure, sources, t0, t1)
+        if draw is not None:
+            fig = draw(Figure, sources, t0, t1)
             FigureCanvasAgg(fig)
             fig.suptitle(_title(path, root, ""), fontsize=8)
             return fig
@@ -146,11 +150,11 @@ def plot_recording(
     streams: Iterable[str] | None = None,
     t_range: tuple[float | None, float | None] | None = None,
     *,
-    paper: bool = False,
+    figure: str | None = None,
 ) -> Path:
     """Plot a recording to an image file (.png, .svg or .pdf, by suffix); return its path."""
-    fig = recording_figure(path, list(streams) if streams else None, t_range, paper=paper)
+    fig = recording_figure(path, list(streams) if streams else None, t_range, figure=figure)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=fig.dpi)  # DPI, or the paper figure's print resolution
+    fig.savefig(out, dpi=fig.dpi)  # DPI, or a registered figure's own (print) resolution
     return out

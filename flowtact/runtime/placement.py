@@ -19,7 +19,15 @@ from flowtact.deployment import ProcessDef
 from flowtact.graph import GraphError, GraphErrors
 from flowtact.runtime.worker_plan import ticks_mergeable
 
-__all__ = ["DEFAULT_GROUP", "MAX_LOCAL_PROCESSES", "Placement", "place", "spec_from_wire", "spec_to_wire"]
+__all__ = [
+    "DEFAULT_GROUP",
+    "MAX_LOCAL_PROCESSES",
+    "Placement",
+    "default_groups",
+    "place",
+    "spec_from_wire",
+    "spec_to_wire",
+]
 
 DEFAULT_GROUP = "main"
 MAX_LOCAL_PROCESSES = 64
@@ -161,7 +169,9 @@ class Placement:
         }
 
 
-def _default_group(plan: Plan) -> dict[str, str]:
+def default_groups(plan: Plan) -> dict[str, str]:
+    """Each active node's process group by the runtime's rule: its declared ``process``, else its
+    first producer's group, else the default group."""
     graph = plan.graph
     first_input: dict[str, str] = {}
     for e in plan.active_edges:
@@ -185,7 +195,7 @@ def place(plan: Plan, *, fast: bool) -> Placement:
     virtual-clock run is deterministic.
     """
     graph = plan.graph
-    group_of = _default_group(plan)
+    group_of = default_groups(plan)
     groups: dict[str, list[str]] = {}
     for n in plan.order:
         groups.setdefault(group_of[n], []).append(n)

@@ -1,4 +1,7 @@
-"""``flowtact sweep GRAPH``: the command line of :func:`flowtact.sweeps.api.sweep`.
+"""``flowtact sweep GRAPH``: run a graph over parameter grids and recordings: one table row per run.
+
+The command line of :func:`flowtact.sweeps.api.sweep`, registered as every command is
+(:data:`COMMAND`, entry-point group ``flowtact.commands``).
 
 Usage problems (a bad ``--set-grid``, a pattern matching nothing, an unknown metric, a missing
 extra) print one line and exit 2; runs that failed are rows of the table and make the exit status
@@ -14,29 +17,20 @@ import signal
 import sys
 from typing import Any
 
+from flowtact.commands import Command
+from flowtact.commands.graph_args import GRAPH_HELP, add_allow_module, parse_replays
 from flowtact.limits import cli_duration_seconds, cli_positive_seconds
 
-__all__ = ["add_sweep_parser", "run_sweep_command"]
+__all__ = ["COMMAND", "add_arguments", "run_sweep_command"]
 
 EXAMPLE = (
     "flowtact sweep touch --set-grid sa1.tau_s=0.005,0.01 --set-grid sa1.sigma=1,1.5 --out rates.parquet"
 )
 
 
-def add_sweep_parser(sub: Any) -> argparse.ArgumentParser:
-    """Add the ``sweep`` sub-command to the ``flowtact`` parser."""
-    from flowtact.cli import add_allow_module
-
-    sp = sub.add_parser(
-        "sweep",
-        help="run a graph over parameter grids and recordings: one table row per run",
-        description="Run GRAPH (--fast, in-process) once per row of a parameter grid × table × replayed "
-        "recordings, on local processes or Dask, and write one row per run (parameters, recording, "
-        f"metrics, provenance hash, status, error, seed, run time). Example: {EXAMPLE}",
-    )
-    sp.add_argument(
-        "graph", help="graph file (.yaml), a shipped graph name (touch, slip), or a recording (.h5)"
-    )
+def add_arguments(sp: argparse.ArgumentParser) -> None:
+    """The ``sweep`` command's arguments."""
+    sp.add_argument("graph", help=GRAPH_HELP)
     sp.add_argument("--set", dest="overrides", action="append", default=[], metavar="NODE.PARAM=VALUE",
                     help="a fixed override for every run (as in flowtact run); repeatable")  # fmt: skip
     add_allow_module(sp)
@@ -68,7 +62,6 @@ def add_sweep_parser(sub: Any) -> argparse.ArgumentParser:
         "--plot", metavar="FILE.png", help="also plot spike rates across the grid (needs the plot extra)"
     )
     sp.add_argument("--quiet", action="store_true", help="no progress and no table on stdout")
-    return sp
 
 
 def _positive_int(text: str) -> int:
@@ -83,7 +76,6 @@ def _positive_int(text: str) -> int:
 
 def run_sweep_command(args: argparse.Namespace) -> int:
     """Run the sweep the arguments describe; return the exit status."""
-    from flowtact.cli import _replays
     from flowtact.sweeps.grid import SweepSpecError
 
     def on_term(_signum: int, _frame: Any) -> None:
@@ -98,7 +90,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
             from flowtact.sweeps.plot import check_plot_extra
 
             check_plot_extra()
-        df = sweep(args.graph, grid=args.grid, table=args.table, replay=_replays(args.replays),
+        df = sweep(args.graph, grid=args.grid, table=args.table, replay=parse_replays(args.replays),
                    overrides=args.overrides, metrics=args.metrics, rmse=args.rmse, executor=args.executor,
                    workers=args.workers, scheduler=args.scheduler, out=args.out, duration_s=args.duration,
                    progress=not args.quiet, row_timeout_s=args.row_timeout, fresh=args.fresh,
@@ -150,3 +142,12 @@ def _row_label(r: Any) -> str:
         f"{k}={v}" for k, v in key["recordings"].items()
     ]
     return " ".join(parts) or "(the one run)"
+
+
+COMMAND = Command(
+    run=run_sweep_command,
+    add_arguments=add_arguments,
+    description="Run GRAPH (--fast, in-process) once per row of a parameter grid × table × replayed "
+    "recordings, on local processes or Dask, and write one row per run (parameters, recording, "
+    f"metrics, provenance hash, status, error, seed, run time). Example: {EXAMPLE}",
+)

@@ -238,7 +238,7 @@ def test_paper_figure_stacks_force_derivative_rasters_and_rates(tmp_path):
         rec.write("sa1.spikes", Chunk(np.arange(0.3, 1.0, 0.01), np.arange(70) % 4, end=1.0))  # 25/s per unit
         rec.write("fa1.spikes", Chunk(np.array([0.3, 0.301]), np.array([0, 1]), end=1.0))
         rec.write("sa1_stim.y", Chunk(np.array([0.3]), np.array([[0, 60.0, 200.0]]), end=1.0))
-    fig = recording_figure(path, paper=True)
+    fig = recording_figure(path, figure="paper")
     axes = fig.get_axes()
     assert [ax.get_ylabel() for ax in axes] == [
         "force\n[N]",
@@ -257,12 +257,14 @@ def test_paper_figure_stacks_force_derivative_rasters_and_rates(tmp_path):
 
 
 def test_paper_figure_refuses_a_recording_without_force_or_spikes(recording, tmp_path, capsys):
-    with pytest.raises(ValueError, match=r"--paper needs a spike event stream|--paper needs a force"):
-        recording_figure(recording, streams=["force.f"], paper=True)
+    with pytest.raises(
+        ValueError, match=r"paper figure needs a spike event stream|paper figure needs a force"
+    ):
+        recording_figure(recording, streams=["force.f"], figure="paper")
     assert (
         main(["plot", str(recording), "--streams", "state.y", "--paper", "-o", str(tmp_path / "x.png")]) == 1
     )
-    assert "--paper needs a force stream in N" in capsys.readouterr().err
+    assert "the paper figure needs a force stream in N" in capsys.readouterr().err
 
 
 # -- readers -------------------------------------------------------------------------------------
@@ -504,3 +506,49 @@ def test_a_posterior_over_26_letters_names_its_rows_by_letter(tmp_path):
         rec.write("decoder.posterior", Chunk(np.arange(30) * 0.1, p, end=3.0))
     heat = _one(recording_figure(path), "decoder.posterior", "heat map")
     assert [t.get_text() for t in heat.get_yticklabels()] == list(letters)
+
+
+# -- registered figures (entry-point group flowtact.figures) ---------------------------------------
+
+
+def _toy_figure(figure_cls, sources, t0, t1):
+    """A toy figure: one axis titled with the stream names it was given."""
+    fig = figure_cls(figsize=(2, 2), dpi=50)
+    ax = fig.subplots()
+    ax.set_title(",".join(sorted(sources)))
+    ax.set_xlim(t0, t1)
+    return fig
+
+
+@pytest.fixture
+def toy_figure(monkeypatch):
+    from importlib import metadata
+
+    from flowtact.pictures.figures import GROUP
+
+    real = metadata.entry_points
+
+    def with_toy(*, group: str):
+        toy = metadata.EntryPoint(name="toy", value=f"{__name__}:_toy_figure", group=GROUP)
+        return [*real(group=group), toy] if group == GROUP else real(group=group)
+
+    monkeypatch.setattr(metadata, "entry_points", with_toy)
+
+
+@pytest.mark.usefixtures("toy_figure")
+def test_a_registered_toy_figure_is_drawn_by_name(recording, tmp_path, capsys):
+    fig = recording_figure(recording, streams=["force.f", "state.y"], figure="toy")
+    assert fig.get_axes()[0].get_title() == "force.f,state.y"
+    assert main(["plot", str(recording), "--figure", "toy", "-o", str(tmp_path / "t.png")]) == 0
+    assert (tmp_path / "t.png").stat().st_size > 0
+    with pytest.raises(SystemExit):
+        main(["plot", "--help"])
+    listed = " ".join(capsys.readouterr().out.split())
+    assert "installed: paper: the compact paper-style touch/slip figure" in listed and "; toy: " in listed
+
+
+def test_an_unknown_figure_is_a_usage_error_with_a_guess(recording, tmp_path, capsys):
+    assert main(["plot", str(recording), "--figure", "papr", "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "--figure papr: no such figure (did you mean 'paper'?); registered figures: paper" in err
+    assert not (tmp_path / "x.png").exists()

@@ -64,7 +64,7 @@ def test_without_pandas_it_names_the_extra(toy: Path, monkeypatch, capsys) -> No
 
 
 def test_core_commands_do_not_import_pandas_or_dask() -> None:
-    code = ("import sys, flowtact, flowtact.cli; flowtact.cli._parser(); "
+    code = ("import sys, flowtact, flowtact.cli; flowtact.cli.build_parser(); "
             "print(sorted(m for m in ('pandas', 'pyarrow', 'dask', 'distributed') if m in sys.modules))")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

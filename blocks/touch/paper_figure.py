@@ -1,6 +1,9 @@
 """The compact paper-style touch/slip figure (after Rager et al., Fig. 4): force, its derivative,
 a spike raster per afferent population and their firing rates, stacked on one time axis.
 
+Registered as figure ``paper`` (entry-point group ``flowtact.figures``): ``flowtact plot REC.h5
+--paper -o fig.png`` is ``--figure paper``.
+
 Streams are picked by what they are, not by name alone: the force is ``force.f`` or the first
 sample stream in N, its derivative the first in N/s, the afferents every spike event stream
 (pulse streams excluded). Reading goes through :mod:`flowtact.pictures.bounded_read` (bounded memory).
@@ -42,7 +45,9 @@ def paper_streams(
     if force is None or not spikes:
         lacking = "a force stream in N" if force is None else "a spike event stream"
         have = ", ".join(f"{n} ({s.spec.describe()})" for n, s in sources.items())
-        raise ValueError(f"--paper needs {lacking} (a touch or slip recording); this one has: {have}")
+        raise ValueError(
+            f"the paper figure needs {lacking} (a touch or slip recording); this one has: {have}"
+        )
     return force, deriv, spikes
 
 
