@@ -364,13 +364,19 @@ class Block:
         for name, port in self.inputs.items():
             if not port.optional and name not in inputs:
                 raise SpecError(name, f"input '{name}' must be connected ({port.doc or 'required'})")
+        self.check_rates(inputs)
+
+    def check_rates(self, inputs: Mapping[str, StreamSpec]) -> None:
+        """Raise :class:`SpecError` when an input declared ``same_rate`` as another has a different rate."""
         for name, port in self.inputs.items():
             other = port.same_rate
             if other is None or name not in inputs or other not in inputs:
                 continue
             mine, theirs = inputs[name].rate_hz, inputs[other].rate_hz
             if not math.isclose(mine or 0.0, theirs or 0.0, rel_tol=1e-9):
-                raise SpecError(name, f"'{name}' is {_hz(mine)} but '{other}' is {_hz(theirs)} (read together)")
+                raise SpecError(
+                    name, f"'{name}' is {_hz(mine)} but '{other}' is {_hz(theirs)} (read together)"
+                )
 
     def restart(self) -> None:
         """Rebuild state from scratch (same config, same seed): a fresh, deterministic start."""

@@ -212,6 +212,7 @@ def _stream_specs(
         if n in broken:
             continue
         try:
+            blocks[n].check_rates(inputs)  # what the ports declare across inputs (same_rate)
             out = blocks[n].specs(inputs)
         except (SpecError, ConfigError) as err:  # a ConfigError here: a file the config names (a replay)
             loc = next(

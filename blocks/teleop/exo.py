@@ -35,7 +35,6 @@ finger pose: :func:`exo_forward` (eq. 3.3), :func:`finger_inverse` (eqs. 3.4–3
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
@@ -309,12 +308,6 @@ class FsrForceConfig(ft.BadDataConfig):
 class FsrForce(ft.Block):
     """FSR reading → signed force: eq. 3.10, minus the rest offset of the first 20 readings (§3.2.3).
 
-    Ports
-    -----
-    x : float64, shape (3,), units "ADC" — raw FSR readings 0..1023 (thumb, index, middle)
-    y : float64, shape (3,), units "N", labels FINGERS — F = ±(0.6867·e^(0.0023·R) − offset);
-        positive when the finger pushes towards closing against the servo
-
     Config
     ------
     See :class:`FsrForceConfig`; the defaults are the thesis' fit (eq. 3.10) and its 20 rest readings.
@@ -348,10 +341,23 @@ class FsrForce(ft.Block):
     config_cls = FsrForceConfig
     inputs = {
         "x": ft.Port(
-            dtype="float64", shape=(3,), units="ADC", require_rate=True, doc="raw FSR readings (ADC counts)"
+            dtype="float64",
+            shape=(3,),
+            units="ADC",
+            require_rate=True,
+            doc="raw FSR readings 0..1023 (thumb, index, middle)",
         )
     }
-    outputs = {"y": ft.Port(dtype="float64", shape=(3,), units="N", doc="signed FSR force per finger")}
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            labels=FINGERS,
+            doc="signed force F = ±(0.6867·e^(0.0023·R) − offset) per finger; positive when the finger "
+            "pushes towards closing against the servo",
+        )
+    }
     counter_docs = {
         "out_of_range": "samples with a reading outside [0, adc_max] (a garbled serial line): treated as "
         "NaN, so on_bad_data applies (and counts them too)",
@@ -362,11 +368,6 @@ class FsrForce(ft.Block):
         "nonfinite_hold": "samples with a NaN/inf or out-of-range reading, held at the last good reading "
         "(0 before any; on_bad_data: hold): bad data came from the device",
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        return {
-            "y": ft.StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=inputs["x"].rate_hz, labels=FINGERS)
-        }
 
     def reset(self) -> None:
         cfg = self.config
@@ -476,12 +477,6 @@ class ExoKinematicsConfig(ft.BadDataConfig):
 class ExoKinematics(ft.Block):
     """Exoskeleton angles φ → fingertip position s_Q (FK, eq. 3.3) and finger joint angles θ (IK, eqs. 3.4–3.8).
 
-    Ports
-    -----
-    phi : float64, shape (3, 3), units "rad" — [φ1 (servo), φ2, φ3] per finger (thumb's φ3 unused)
-    s_q : float64, shape (3, 2), units "mm" — attachment point on the distal phalanx, MCP at the origin
-    theta : float64, shape (3, 3), units "rad" — [MCP, PIP, DIP] per finger; thumb [MCP, IP, 0]
-
     Config
     ------
     See :class:`ExoKinematicsConfig`; the module docstring tabulates the default geometry (assumed:
@@ -518,13 +513,21 @@ class ExoKinematics(ft.Block):
             shape=(3, 3),
             units="rad",
             require_rate=True,
-            doc="exoskeleton joint angles φ1..φ3",
+            doc="[φ1 (servo), φ2, φ3] per finger (the thumb's φ3 unused)",
         )
     }
     outputs = {
-        "s_q": ft.Port(dtype="float64", shape=(3, 2), units="mm", doc="attachment point s_Q per finger (FK)"),
+        "s_q": ft.Port(
+            dtype="float64",
+            shape=(3, 2),
+            units="mm",
+            doc="attachment point s_Q on the distal phalanx per finger, MCP at the origin (FK)",
+        ),
         "theta": ft.Port(
-            dtype="float64", shape=(3, 3), units="rad", doc="finger joint angles θ per finger (IK)"
+            dtype="float64",
+            shape=(3, 3),
+            units="rad",
+            doc="[MCP, PIP, DIP] per finger; the thumb [MCP, IP, 0] (IK)",
         ),
     }
     counter_docs = {
@@ -532,13 +535,6 @@ class ExoKinematics(ft.Block):
         "nearest reachable one (θ approximate): noise, or a wrong geometry if frequent",
         **ft.nonfinite_counter_docs("angle samples on 'phi'"),
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        rate = inputs["phi"].rate_hz
-        return {
-            "s_q": ft.StreamSpec(shape=(N_FINGERS, 2), units="mm", rate_hz=rate),
-            "theta": ft.StreamSpec(shape=(N_FINGERS, 3), units="rad", rate_hz=rate),
-        }
 
     def reset(self) -> None:
         self._last: np.ndarray | None = None
@@ -603,13 +599,6 @@ class FingertipForceConfig(ft.BadDataConfig):
 class FingertipForce(ft.Block):
     """Fingertip force F_f from the FSR force and the exoskeleton pose: eq. 3.9, signed like the FSR force.
 
-    Ports
-    -----
-    fsr : float64, shape (3,), units "N" — signed FSR force (fsr_force, low-passed)
-    phi : float64, shape (3, 3), units "rad" — exoskeleton angles of the same device packets
-    f : float64, shape (3,), units "N", labels FINGERS — signed fingertip force: F·|w(α)|
-    f_vec : float64, shape (3, 2), units "N" — the vector F·w(α) (eq. 3.9 exactly when F ≥ 0)
-
     Config
     ------
     See :class:`FingertipForceConfig`.
@@ -642,19 +631,37 @@ class FingertipForce(ft.Block):
     config_cls = FingertipForceConfig
     inputs = {
         "fsr": ft.Port(
-            dtype="float64", shape=(3,), units="N", require_rate=True, doc="signed FSR force per finger"
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            require_rate=True,
+            doc="signed FSR force per finger (fsr_force, low-passed)",
         ),
         "phi": ft.Port(
             dtype="float64",
             shape=(3, 3),
             units="rad",
             require_rate=True,
-            doc="exoskeleton joint angles φ1..φ3",
+            same_rate="fsr",
+            doc="exoskeleton angles φ1..φ3 of the same device packets",
         ),
     }
     outputs = {
-        "f": ft.Port(dtype="float64", shape=(3,), units="N", doc="signed fingertip force per finger"),
-        "f_vec": ft.Port(dtype="float64", shape=(3, 2), units="N", doc="fingertip force vector per finger"),
+        "f": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            rate="fsr",
+            labels=FINGERS,
+            doc="signed fingertip force per finger: F·|w(α)|",
+        ),
+        "f_vec": ft.Port(
+            dtype="float64",
+            shape=(3, 2),
+            units="N",
+            rate="fsr",
+            doc="the fingertip force vector F·w(α) per finger (eq. 3.9 exactly when F ≥ 0)",
+        ),
     }
     counter_docs = {
         "nonfinite_drop": "instants where 'fsr' or 'phi' had NaN/inf, removed from both (on_bad_data: "
@@ -664,17 +671,6 @@ class FingertipForce(ft.Block):
         "unpaired_at_end": "samples of 'fsr' or 'phi' with no partner on the other input when the stream "
         "ended: not used (the inputs delivered different numbers of samples)",
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        rate = inputs["fsr"].rate_hz
-        if not math.isclose(inputs["phi"].rate_hz or 0.0, rate or 0.0, rel_tol=1e-9):
-            raise ft.SpecError(
-                "phi", f"'phi' is {inputs['phi'].rate_hz:g} Hz but 'fsr' is {rate:g} Hz (one packet)"
-            )
-        return {
-            "f": ft.StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=rate, labels=FINGERS),
-            "f_vec": ft.StreamSpec(shape=(N_FINGERS, 2), units="N", rate_hz=rate),
-        }
 
     def reset(self) -> None:
         self._align = ft.Aligner(self.node, self.input_specs, ["fsr", "phi"], tol_s=self.config.tol_s)
@@ -752,11 +748,6 @@ class GripperCommandConfig(ft.BadDataConfig):
 class GripperCommand(ft.Block):
     """Finger pose → gripper command in [0, 1] per finger: the sum of finger angles scaled between open and closed.
 
-    Ports
-    -----
-    x : float64, shape (3, 3), units "rad" — finger joint angles θ (exo_kinematics.theta)
-    y : float64, shape (3,), units "1", labels FINGERS — 0 fully open … 1 fully closed
-
     Config
     ------
     See :class:`GripperCommandConfig`: the two calibration poses of §3.2.3, as sums of angles.
@@ -787,20 +778,19 @@ class GripperCommand(ft.Block):
             shape=(3, 3),
             units="rad",
             require_rate=True,
-            doc="finger joint angles θ per finger",
+            doc="finger joint angles θ per finger (exo_kinematics.theta)",
         )
     }
     outputs = {
         "y": ft.Port(
-            dtype="float64", shape=(3,), units="1", doc="gripper command per finger, 0 open, 1 closed"
+            dtype="float64",
+            shape=(3,),
+            units="1",
+            labels=FINGERS,
+            doc="gripper command per finger, 0 fully open … 1 fully closed",
         )
     }
     counter_docs = ft.nonfinite_counter_docs("pose samples on 'x'")
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        return {
-            "y": ft.StreamSpec(shape=(N_FINGERS,), units="1", rate_hz=inputs["x"].rate_hz, labels=FINGERS)
-        }
 
     def reset(self) -> None:
         self._open = np.asarray(self.config.open_rad, np.float64)
