@@ -8,7 +8,6 @@ column 0 engage (0.0 / 1.0), column 1 the deviation from the contact position in
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
@@ -108,13 +107,6 @@ class ForceFeedbackConfig(ft.Config):
 class ForceFeedback(ft.Block):
     """Force-feedback controller per finger: engage on contact, release on negative finger force, P control.
 
-    Ports
-    -----
-    target : float64, shape (3,), units "N" — contact force F_T at the TacTips (≈ 40 Hz)
-    finger : float64, shape (3,), units "N" — signed fingertip force F_f (exo rate; drives the output)
-    cmd : float64, shape (3, 2), units "us" — per finger [engage 0/1, deviation µs], one row per
-        ``finger`` sample, plus one disengaging row when the ``finger`` stream stalls
-
     Config
     ------
     See :class:`ForceFeedbackConfig`. Defaults: variable feedback, K = (80, 100, 100) µs/N.
@@ -182,18 +174,26 @@ class ForceFeedback(ft.Block):
             shape=(3,),
             units="N",
             require_rate=True,
-            doc="contact force F_T at the TacTips, N",
+            doc="contact force F_T at the TacTips (≈ 40 Hz)",
         ),
         "finger": ft.Port(
             dtype="float64",
             shape=(3,),
             units="N",
             require_rate=True,
-            doc="signed fingertip force F_f, N (drives)",
+            doc="signed fingertip force F_f (exo rate; drives the output)",
         ),
     }
     outputs = {
-        "cmd": ft.Port(dtype="float64", shape=(3, 2), units="us", doc="[engage 0/1, deviation µs] per finger")
+        "cmd": ft.Port(
+            dtype="float64",
+            shape=(3, 2),
+            units="us",
+            rate="finger",
+            labels=_CMD_LABELS,
+            doc="per finger [engage 0/1, deviation µs], one row per finger sample, plus one disengaging "
+            "row when the finger stream stalls",
+        )
     }
     counter_docs = {
         "stalled": "times live fingers were disengaged because an input had no valid data for stall_s "
@@ -214,11 +214,6 @@ class ForceFeedback(ft.Block):
         "out_of_range_finger": "finger samples with |F| > max_force_n on a finger (implausible): ignored "
         "like NaN",
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        return {
-            "cmd": ft.StreamSpec(shape=_CMD, units="us", rate_hz=inputs["finger"].rate_hz, labels=_CMD_LABELS)
-        }
 
     def reset(self) -> None:
         cfg = self.config

@@ -7,7 +7,6 @@ this block stands in for both: gripper commands in, true contact forces out.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,12 +113,6 @@ class GraspSimConfig(ft.BadDataConfig):
 class GraspSim(ft.Block):
     """Simulated T-MO gripper closing on an object: gripper command in, true contact force per finger out.
 
-    Ports
-    -----
-    grip : float64, shape (3,), units "1" — gripper command per finger, 0 open … 1 closed
-    force : float64, shape (3,), units "N", labels FINGERS — true contact force at each fingertip
-    object : float64, shape (), units "1" — index into ``object_names`` of the object in hand
-
     Config
     ------
     See :class:`GraspSimConfig`. Defaults: a soft "strawberry" (4 N per unit closure) and a firm
@@ -161,31 +154,25 @@ class GraspSim(ft.Block):
             shape=(3,),
             units="1",
             require_rate=True,
-            doc="gripper command per finger, 0 open, 1 closed",
+            doc="gripper command per finger, 0 open … 1 closed",
         )
     }
     outputs = {
-        "force": ft.Port(dtype="float64", shape=(3,), units="N", doc="true contact force per finger, N"),
+        "force": ft.Port(
+            dtype="float64", shape=(3,), units="N", labels=FINGERS, doc="true contact force at each fingertip"
+        ),
         "object": ft.Port(
             dtype="float64",
             shape=(),
             units="1",
-            doc="index of the object in hand (categorical: object_names)",
+            categories="object_names",
+            doc="index into object_names of the object in hand",
         ),
     }
     counter_docs = {
         "clipped": "command samples with a finger outside [0, 1] (beyond open or closed): clipped into range",
         **ft.nonfinite_counter_docs("command samples on 'grip'"),
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        g = inputs["grip"]
-        return {
-            "force": ft.StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=g.rate_hz, labels=FINGERS),
-            "object": ft.StreamSpec(
-                shape=(), units="1", rate_hz=g.rate_hz, categories=tuple(self.config.object_names)
-            ),
-        }
 
     def reset(self) -> None:
         cfg = self.config

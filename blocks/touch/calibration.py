@@ -7,7 +7,6 @@ gauges 1..4; gauges 1 and 3 lie on the x axis, 2 and 4 on the y axis (blocks/tou
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
@@ -97,13 +96,6 @@ class GaugeForceConfig(ft.BadDataConfig):
 class GaugeForce(ft.Block):
     """Force [Fx, Fy, Fz] from the four strain gauges: eq. 1 (F = A·r) or eq. 2 of Rager et al.
 
-    Ports
-    -----
-    r : float64, shape (4,), units "1" — ΔR/R of gauges 1..4
-    ref : float64, shape (), units "1", optional — reference gauge, subtracted from every gauge
-        (temperature compensation); must be sample-aligned with ``r``
-    f : float64, shape (3,), units "N", labels (Fx, Fy, Fz)
-
     Config
     ------
     See :class:`GaugeForceConfig`. ``reduced`` (default): Fx = (r3 − r1)/Xs, Fy = (r2 − r4)/Ys,
@@ -143,10 +135,16 @@ class GaugeForce(ft.Block):
             units="1",
             optional=True,
             require_rate=True,
-            doc="reference gauge ΔR/R (temperature)",
+            same_rate="r",
+            doc="reference gauge ΔR/R, subtracted from every gauge (temperature compensation); must be "
+            "sample-aligned with r",
         ),
     }
-    outputs = {"f": ft.Port(dtype="float64", shape=(3,), units="N", doc="force [Fx, Fy, Fz] in N")}
+    outputs = {
+        "f": ft.Port(
+            dtype="float64", shape=(3,), units="N", rate="r", labels=_LABELS, doc="force [Fx, Fy, Fz]"
+        )
+    }
     counter_docs = {
         "nonfinite_drop": "instants where 'r' or 'ref' had NaN/inf, removed (on_bad_data: drop): "
         "upstream sent bad data",
@@ -159,12 +157,6 @@ class GaugeForce(ft.Block):
         "tare_short": "the stream ended before tare_samples samples arrived: the tare offset is the mean "
         "of fewer samples",
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        r = inputs["r"]
-        if "ref" in inputs and not math.isclose(inputs["ref"].rate_hz or 0.0, r.rate_hz or 0.0, rel_tol=1e-9):
-            raise ft.SpecError("ref", f"'ref' is {inputs['ref'].rate_hz:g} Hz but 'r' is {r.rate_hz:g} Hz")
-        return {"f": ft.StreamSpec(dtype="float64", shape=(3,), units="N", rate_hz=r.rate_hz, labels=_LABELS)}
 
     def reset(self) -> None:
         self._a = self.config.calibration_matrix()
@@ -252,11 +244,6 @@ class ShearAngleConfig(ft.BadDataConfig):
 class ShearAngle(ft.Block):
     """Direction of the shear force from the gauges: Θ = atan2(r2 − r4, r3 − r1) (eq. 3, Rager et al.).
 
-    Ports
-    -----
-    r : float64, shape (4,), units "1" — ΔR/R of gauges 1..4
-    theta : float64, shape (), units "rad", in (−π, π]; 0 along +x (gauge 3), π/2 along +y (gauge 2)
-
     Config
     ------
     See :class:`ShearAngleConfig` (only the bad-data policy).
@@ -282,11 +269,15 @@ class ShearAngle(ft.Block):
     inputs = {
         "r": ft.Port(dtype="float64", shape=(4,), units="1", require_rate=True, doc="ΔR/R of gauges 1..4")
     }
-    outputs = {"theta": ft.Port(dtype="float64", shape=(), units="rad", doc="shear angle in radians")}
+    outputs = {
+        "theta": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="rad",
+            doc="shear angle in (−π, π]; 0 along +x (gauge 3), π/2 along +y (gauge 2)",
+        )
+    }
     counter_docs = ft.nonfinite_counter_docs("gauge samples")
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        return {"theta": ft.StreamSpec(dtype="float64", shape=(), units="rad", rate_hz=inputs["r"].rate_hz)}
 
     def reset(self) -> None:
         self._last: np.ndarray | None = None
