@@ -459,10 +459,11 @@ class Source(Block):
             raise RuntimeError(f"{self.node}: bind() the source before ticking it")
         return self.step(now, **self._inputs(chunks))
 
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Mapping[str, StreamSpec]) -> float | None:  # noqa: ARG002 - sources use it
         """Graph time after which this source emits nothing more (a played-back file's end), or None
-        when it never ends. A run without a duration lasts until its sources' ends
-        (:mod:`flowtact.source_ends`); called after ``specs``."""
+        when it never ends. ``inputs`` are the specs of its connected inputs, as ``specs`` gets them
+        (a scan steered by a speed input ends later). A run without a duration lasts until its
+        sources' ends (:mod:`flowtact.source_ends`); called after ``specs``."""
         return None
 
     @staticmethod

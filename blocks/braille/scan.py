@@ -101,25 +101,6 @@ def _samples_at(x0: float, x_end: float, step: float) -> int:
 class BrailleScan(ft.Source):
     """A fingertip of 24 capacitive taxels (6 × 4) under a neoprene cover scanning a line of Braille.
 
-    Ports
-    -----
-    speed : float64 (), "mm/s", optional, delayed (the closed loop feeds it one tick late)
-        Commanded scanning speed; clamped to [min_speed_mm_s, max_speed_mm_s]. Unconnected: the
-        constant ``speed_mm_s``.
-    lateral : float64 (), "mm", optional, delayed
-        Lateral correction added to ``y_offset_mm`` (clamped to ±max_lateral_mm); 0 before any.
-    taxels : float64 (24,), "1" (ΔC/C0), labels r{row}c{col}
-        Relative capacitance change of each taxel, ``j = row·4 + col``; row 0 is the top row
-        (+Y, dots 1 and 4), column 0 the trailing one (the finger moves towards +X).
-    char : float64 (), categorical: gap, a … z, space
-        The letter whose cell lies under the finger's centre (its two dot columns ± a dot
-        radius), else ``gap``. Ground truth for decoders: a run of equal values is one
-        character window.
-    position : float64 (), "mm"
-        The finger centre along the line; cell k spans [k, k + 1)·cell pitch (10.2 mm scaled).
-    y : float64 (), "mm"
-        The finger centre across the line (0 = on the middle dot row): offset + correction.
-
     Config
     ------
     See the field docs (``flowtact blocks braille_scan``). The text is ``text`` or, with
@@ -164,19 +145,57 @@ class BrailleScan(ft.Source):
     config_cls = BrailleScanConfig
     inputs = {
         "speed": ft.Port(
-            dtype="float64", shape=(), units="mm/s", optional=True, delay=True, doc="commanded scanning speed"
+            dtype="float64",
+            shape=(),
+            units="mm/s",
+            optional=True,
+            delay=True,
+            doc="commanded scanning speed, clamped to [min_speed_mm_s, max_speed_mm_s]; unconnected: the "
+            "constant speed_mm_s",
         ),
         "lateral": ft.Port(
-            dtype="float64", shape=(), units="mm", optional=True, delay=True, doc="lateral (±Y) correction"
+            dtype="float64",
+            shape=(),
+            units="mm",
+            optional=True,
+            delay=True,
+            doc="lateral (±Y) correction added to y_offset_mm (clamped to ±max_lateral_mm); 0 before any",
         ),
     }
     outputs = {
-        "taxels": ft.Port(dtype="float64", shape=(ROWS * COLS,), units="1", doc="ΔC/C0 of the 24 taxels"),
-        "char": ft.Port(
-            dtype="float64", shape=(), units="1", categories=CATEGORIES, doc="letter under the finger"
+        "taxels": ft.Port(
+            dtype="float64",
+            shape=(ROWS * COLS,),
+            units="1",
+            rate="rate_hz",
+            labels=TAXEL_LABELS,
+            doc="relative capacitance change ΔC/C0 of each taxel, ``j = row·4 + col``; row 0 is the top "
+            "row (+Y, dots 1 and 4), column 0 the trailing one (the finger moves towards +X)",
         ),
-        "position": ft.Port(dtype="float64", shape=(), units="mm", doc="finger centre along the line"),
-        "y": ft.Port(dtype="float64", shape=(), units="mm", doc="finger centre across the line"),
+        "char": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="1",
+            rate="rate_hz",
+            categories=CATEGORIES,
+            doc="the letter whose cell lies under the finger's centre (its two dot columns ± a dot "
+            "radius), else ``gap``. Ground truth for decoders: a run of equal values is one character "
+            "window",
+        ),
+        "position": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm",
+            rate="rate_hz",
+            doc="the finger centre along the line; cell k spans [k, k + 1)·cell pitch (10.2 mm scaled)",
+        ),
+        "y": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm",
+            rate="rate_hz",
+            doc="the finger centre across the line (0 = on the middle dot row): offset + correction",
+        ),
     }
     counter_docs = {
         "speed_clamped": "speed samples outside [min_speed_mm_s, max_speed_mm_s] (0, negative or too fast), "
@@ -185,19 +204,9 @@ class BrailleScan(ft.Source):
         **ft.nonfinite_counter_docs("speed or lateral samples"),
     }
 
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        self._steered = "speed" in inputs
-        rate = self.config.rate_hz
-        return {
-            "taxels": ft.StreamSpec("float64", (ROWS * COLS,), "1", rate, labels=TAXEL_LABELS),
-            "char": ft.StreamSpec("float64", (), "1", rate, categories=CATEGORIES),
-            "position": ft.StreamSpec("float64", (), "mm", rate),
-            "y": ft.StreamSpec("float64", (), "mm", rate),
-        }
-
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Mapping[str, ft.StreamSpec]) -> float | None:
         c = self.config
-        v = c.min_speed_mm_s if getattr(self, "_steered", False) else self._clamp_speed(c.speed_mm_s)
+        v = c.min_speed_mm_s if "speed" in inputs else self._clamp_speed(c.speed_mm_s)
         x0, x_end = c.track()
         return _samples_at(x0, x_end, v / c.rate_hz) / c.rate_hz
 

@@ -379,7 +379,7 @@ class Replay(ft.Source):
             )
         return float(c.rate_hz)
 
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Any) -> float | None:  # noqa: ARG002 — a source: its end comes from its file
         """Graph time just past the last sample (one sample period after it; an event stream's
         recorded end), or None when looping or empty. Known once ``specs`` has read the file."""
         src = self._src

@@ -253,9 +253,11 @@ class ReplayPorts:
                 None, f"port '{port}' of {block} is in '{declared.units}'; {given} is in '{spec.units}'"
             )
 
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Any) -> float | None:  # noqa: ARG002 — a source: its end comes from its file
         """The latest end of the played ports (None: nothing to play)."""
-        ends = [e for p, r in self._players.items() if p in self.demanded and (e := r.ends_at()) is not None]
+        ends = [
+            e for p, r in self._players.items() if p in self.demanded and (e := r.ends_at({})) is not None
+        ]
         return max(ends, default=None)
 
     # -- run time ----------------------------------------------------------------------------
