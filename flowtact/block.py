@@ -113,7 +113,6 @@ class Port:
             rate = inputs[self.rate].rate_hz
         else:
             rate = getattr(config, self.rate)
-            rate = None if rate is None else float(rate)
         if self.labels is not None:
             labels = _names(config, self.labels)
         else:

@@ -11,7 +11,6 @@ import stat
 import subprocess
 import time
 from collections import OrderedDict, deque
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -151,26 +150,6 @@ class _Sample:
 class SerialIo(ft.Source):
     """Exchange packets with the exoskeleton over a serial line, stamped in graph time.
 
-    Ports
-    -----
-    cmd : float64 (3, 2) "us", optional, delayed (closes the control loop)
-        Per finger (thumb, index, middle): column 0 engage (≥ 0.5 engages), column 1 deviation
-        from the contact position in µs of PWM (positive lets the finger close further). The
-        latest sample that arrived since the last step is sent; NaN/inf never reach the line.
-    angles : float64 (3, 3) "rad"
-        Exoskeleton joint angles φ1 (servo encoder), φ2, φ3 (passive) per finger.
-    fsr : float64 (3,) "ADC"
-        Raw FSR readings 0..1023 (eq. 3.10 is applied downstream).
-    engaged : float64 (3,) "1"
-        The device's own report of which servos are engaged (1.0) — the echo of the commands.
-    device_t : float64 () "s"
-        The device's clock (its µs counter, unwrapped), for diagnosing the alignment.
-    rtt : float64 () "s"
-        Round trip of the latest acknowledged command (host send → device ack read), NaN before.
-    send_t : float64 () "s"
-        The true sampling time in graph time when the device sends the optional ``h=`` field
-        (emulators with ``--truth``, and ``port: sim``); NaN otherwise. For testing the alignment.
-
     Config
     ------
     See the field docs (``flowtact blocks serial_io``). ``port`` picks one of three back ends.
@@ -243,19 +222,58 @@ class SerialIo(ft.Source):
             units="us",
             delay=True,
             optional=True,
-            doc="servo commands per finger: [engage 0/1, deviation µs] (one-step delayed: the loop)",
+            doc="per finger (thumb, index, middle): column 0 engage (≥ 0.5 engages), column 1 deviation "
+            "from the contact position in µs of PWM (positive lets the finger close further). The latest "
+            "sample that arrived since the last step is sent; NaN/inf never reach the line. One step "
+            "delayed: it closes the control loop",
         )
     }
     outputs = {
-        "angles": ft.Port(dtype="float64", shape=(N_FINGERS, 3), units="rad", doc="joint angles φ1, φ2, φ3"),
-        "fsr": ft.Port(dtype="float64", shape=(N_FINGERS,), units="ADC", doc="raw FSR readings 0..1023"),
-        "engaged": ft.Port(dtype="float64", shape=(N_FINGERS,), units="1", doc="servo engaged (device echo)"),
-        "device_t": ft.Port(dtype="float64", shape=(), units="s", doc="the device's own clock, unwrapped"),
+        "angles": ft.Port(
+            dtype="float64",
+            shape=(N_FINGERS, 3),
+            units="rad",
+            rate="rate_hz",
+            labels=ANGLE_LABELS,
+            doc="exoskeleton joint angles φ1 (servo encoder), φ2, φ3 (passive) per finger",
+        ),
+        "fsr": ft.Port(
+            dtype="float64",
+            shape=(N_FINGERS,),
+            units="ADC",
+            rate="rate_hz",
+            labels=FINGERS,
+            doc="raw FSR readings 0..1023 (eq. 3.10 is applied downstream)",
+        ),
+        "engaged": ft.Port(
+            dtype="float64",
+            shape=(N_FINGERS,),
+            units="1",
+            rate="rate_hz",
+            labels=FINGERS,
+            doc="the device's own report of which servos are engaged (1.0): the echo of the commands",
+        ),
+        "device_t": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="s",
+            rate="rate_hz",
+            doc="the device's clock (its µs counter, unwrapped), for diagnosing the alignment",
+        ),
         "rtt": ft.Port(
-            dtype="float64", shape=(), units="s", doc="round trip of the latest acknowledged command"
+            dtype="float64",
+            shape=(),
+            units="s",
+            rate="rate_hz",
+            doc="round trip of the latest acknowledged command (host send → device ack read), NaN before",
         ),
         "send_t": ft.Port(
-            dtype="float64", shape=(), units="s", doc="true sampling time if the device sends it"
+            dtype="float64",
+            shape=(),
+            units="s",
+            rate="rate_hz",
+            doc="the true sampling time in graph time when the device sends the optional ``h=`` field "
+            "(emulators with ``--truth``, and ``port: sim``); NaN otherwise. For testing the alignment",
         ),
     }
     counter_docs = {
@@ -295,18 +313,6 @@ class SerialIo(ft.Source):
         self._logged: set[str] = set()
 
     # -- compile time -------------------------------------------------------------------------
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
-        c = self.config
-        rate = c.rate_hz
-        return {
-            "angles": ft.StreamSpec("float64", (N_FINGERS, 3), "rad", rate, labels=ANGLE_LABELS),
-            "fsr": ft.StreamSpec("float64", (N_FINGERS,), "ADC", rate, labels=FINGERS),
-            "engaged": ft.StreamSpec("float64", (N_FINGERS,), "1", rate, labels=FINGERS),
-            "device_t": ft.StreamSpec("float64", (), "s", rate),
-            "rtt": ft.StreamSpec("float64", (), "s", rate),
-            "send_t": ft.StreamSpec("float64", (), "s", rate),
-        }
-
     @classmethod
     def example(cls) -> ft.Example:
         return ft.Example(params={"port": "sim", "rate_hz": 100.0}, rate_hz=100.0, duration_s=1.0)

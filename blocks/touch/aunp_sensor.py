@@ -7,7 +7,6 @@ graph's force reconstruction and afferent models can be checked against the trut
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
@@ -115,18 +114,6 @@ class AunpSensorConfig(ft.Config):
 class AunpSensor(ft.Source):
     """Synthetic four-gauge AuNP tactile sensor (Rager et al.) playing touch, slip or rest trials.
 
-    Ports
-    -----
-    r : float64 (4,), units "1"
-        ΔR/R of gauges 1..4 (eq. 2 layout: gauges 1 and 3 on the x axis, 2 and 4 on the y axis)
-        including the common temperature term and white noise.
-    ref : float64 (), units "1"
-        The reference gauge: no strain, same temperature term, own noise.
-    temp_c : float64 (), units "degC"
-        The sensor temperature.
-    force : float64 (3,), units "N", labels (Fx, Fy, Fz)
-        The TRUE force on the bump, for evaluation (noise- and drift-free).
-
     Config
     ------
     See the field docs (``flowtact blocks aunp_sensor``). Units are in the field names.
@@ -200,27 +187,29 @@ class AunpSensor(ft.Source):
 
     config_cls = AunpSensorConfig
     outputs = {
-        "r": ft.Port(shape=(4,), units="1", doc="ΔR/R of gauges 1..4 (strain + temperature + noise)"),
-        "ref": ft.Port(
-            shape=(), units="1", doc="ΔR/R of the unstrained reference gauge (temperature + noise)"
+        "r": ft.Port(
+            shape=(4,),
+            units="1",
+            rate="rate_hz",
+            labels=("r1", "r2", "r3", "r4"),
+            doc="ΔR/R of gauges 1..4 (eq. 2 layout: gauges 1 and 3 on the x axis, 2 and 4 on the y axis), "
+            "including the common temperature term and white noise",
         ),
-        "temp_c": ft.Port(shape=(), units="degC", doc="sensor temperature"),
-        "force": ft.Port(shape=(3,), units="N", doc="true force [Fx, Fy, Fz] on the bump, for evaluation"),
+        "ref": ft.Port(
+            shape=(),
+            units="1",
+            rate="rate_hz",
+            doc="ΔR/R of the reference gauge: no strain, the same temperature term, its own noise",
+        ),
+        "temp_c": ft.Port(shape=(), units="degC", rate="rate_hz", doc="the sensor temperature"),
+        "force": ft.Port(
+            shape=(3,),
+            units="N",
+            rate="rate_hz",
+            labels=("Fx", "Fy", "Fz"),
+            doc="the TRUE force on the bump, for evaluation (noise- and drift-free)",
+        ),
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
-        rate = self.config.rate_hz
-        labels = {"r": ("r1", "r2", "r3", "r4"), "force": ("Fx", "Fy", "Fz")}
-        return {
-            name: ft.StreamSpec(
-                dtype="float64",
-                shape=p.shape or (),
-                units=p.units or "1",
-                rate_hz=rate,
-                labels=labels.get(name),
-            )
-            for name, p in self.outputs.items()
-        }
 
     def reset(self) -> None:
         self.i = 0
