@@ -77,17 +77,6 @@ class SpeedControllerConfig(ft.Config):
 class SpeedController(ft.Block):
     """Scanning speed from the decoder's confidence (slow when unsure), bounded and rate-limited.
 
-    Ports
-    -----
-    posterior : float64 (n_classes,), with a rate
-        A posterior per sample, e.g. ``naive_bayes.running``.
-    lateral_error : float64 (), mm, with a rate (optional)
-        An estimate of the finger's lateral (±Y) offset from the line; connect it to get ``lateral``.
-    speed : float64 (), mm/s, one per posterior sample
-        The commanded scanning speed, always within [min_speed_mm_s, max_speed_mm_s].
-    lateral : float64 (), mm, one per lateral_error sample
-        The lateral correction, within ±max_lateral_mm.
-
     Config
     ------
     Speed bounds, the confidence measure and its ``unsure``/``sure`` corners, the rate limit, and
@@ -117,19 +106,37 @@ class SpeedController(ft.Block):
 
     config_cls = SpeedControllerConfig
     inputs = {
-        "posterior": ft.Port(dtype="float64", ndim=(1,), require_rate=True, doc="posterior over the classes"),
+        "posterior": ft.Port(
+            dtype="float64",
+            ndim=(1,),
+            require_rate=True,
+            doc="a posterior per sample, shape (n_classes,), e.g. naive_bayes.running",
+        ),
         "lateral_error": ft.Port(
             dtype="float64",
             shape=(),
             units="mm",
             optional=True,
             require_rate=True,
-            doc="lateral offset estimate, mm",
+            doc="an estimate of the finger's lateral (±Y) offset from the line; connect it to get lateral",
         ),
     }
     outputs = {
-        "speed": ft.Port(dtype="float64", shape=(), units="mm/s", doc="commanded scanning speed"),
-        "lateral": ft.Port(dtype="float64", shape=(), units="mm", doc="lateral correction"),
+        "speed": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm/s",
+            doc=(
+                "the commanded scanning speed, always within [min_speed_mm_s, max_speed_mm_s], one per "
+                "posterior sample"
+            ),
+        ),
+        "lateral": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm",
+            doc="the lateral correction, within ±max_lateral_mm, one per lateral_error sample",
+        ),
     }
     counter_docs = {
         "clamped": "speed targets cut to the minimum or maximum (confidence below unsure or above sure): normal",

@@ -34,11 +34,6 @@ class DelayConfig(ft.Config):
 class Delay(ft.Block):
     """One-tick delay: passes its input through unchanged so a graph can close a feedback loop.
 
-    Ports
-    -----
-    x : any dtype and shape (declared ``delay=True``: it receives data one executor tick late)
-    y : the same samples with the same timestamps, dtype, shape, units and rate as ``x``
-
     Config
     ------
     dtype, shape, units, rate_hz: what the fed-back stream carries. Inside a loop the compiler
@@ -63,8 +58,16 @@ class Delay(ft.Block):
     """
 
     config_cls = DelayConfig
-    inputs = {"x": ft.Port(dtype=None, delay=True, doc="samples to pass on (one tick late)")}
-    outputs = {"y": ft.Port(dtype=None, doc="the same samples, unchanged")}
+    inputs = {
+        "x": ft.Port(
+            dtype=None, delay=True, doc="any dtype and shape: it receives data one executor tick late"
+        )
+    }
+    outputs = {
+        "y": ft.Port(
+            dtype=None, doc="the same samples with the same timestamps, dtype, shape, units and rate as x"
+        )
+    }
 
     def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         if "x" in inputs:

@@ -89,11 +89,6 @@ class LowpassConfig(ft.BadDataConfig):
 class Lowpass(ft.Block):
     """First-order (one-pole) low-pass per channel, stepped on the samples' own timestamps.
 
-    Ports
-    -----
-    x : float64, any shape, any units, sampled — e.g. the three FSR forces in N
-    y : float64, same shape, units, rate and labels as ``x``
-
     Config
     ------
     See :class:`LowpassConfig`.
@@ -128,8 +123,16 @@ class Lowpass(ft.Block):
     """
 
     config_cls = LowpassConfig
-    inputs = {"x": ft.Port(dtype="float64", require_rate=True, doc="signal, any shape")}
-    outputs = {"y": ft.Port(dtype="float64", doc="low-passed signal, same shape and units")}
+    inputs = {
+        "x": ft.Port(
+            dtype="float64",
+            require_rate=True,
+            doc="signal, any shape and units (e.g. the three FSR forces in N)",
+        )
+    }
+    outputs = {
+        "y": ft.Port(dtype="float64", doc="low-passed signal: the same shape, units, rate and labels as x")
+    }
     counter_docs = {
         "nonincreasing_t": "samples stamped at or before the previous one: they did not move the filter "
         "(the output repeats); timestamps went wrong upstream",

@@ -94,13 +94,6 @@ class _Source:
 class Replay(ft.Source):
     """Play back a stream from a .h5 recording, a .npz or a .csv file, in graph time.
 
-    Ports
-    -----
-    y : the file's dtype and sample shape
-        The recorded stream with its recorded units, rate and channel labels (.h5), or the array /
-        columns of a .npz / .csv file. When the recorded stream is an event stream (spike times
-        + unit index) so is ``y``, and each chunk carries the watermark ``end = now``.
-
     Config
     ------
     See the field docs (``flowtact blocks replay``).
@@ -157,7 +150,12 @@ class Replay(ft.Source):
             dtype=None,
             shape=None,
             units=None,
-            doc="the played-back stream: recorded dtype, shape, units, rate (events if recorded as events)",
+            doc=(
+                "the recorded stream with the file's dtype, sample shape, units, rate and channel labels "
+                "(.h5), or the array / columns of a .npz / .csv file. When the recorded stream is an "
+                "event stream (spike times + unit index) so is y, and each chunk carries the watermark "
+                "end = now"
+            ),
         )
     }
     counter_docs = {

@@ -57,14 +57,13 @@ class ReplayPortsConfig(ft.Config):
 class ReplayPorts:
     """Play a file back in place of a node of another block, on that block's output ports.
 
-    Ports
-    -----
-    The replaced block's output ports, with their declared dtype, shape and units; the rate comes
-    from the file's time stamps (or the recording). A port the file does not provide emits nothing
-    and has no stream (recording it is skipped, with a note); one listed in ``need`` must be there.
-
     Notes
     -----
+    It has the replaced block's output ports, with their declared dtype, shape and units; the rate
+    comes from the file's time stamps (or the recording). A port the file does not provide emits
+    nothing and has no stream (recording it is skipped, with a note); one listed in ``need`` must be
+    there.
+
     Finding a port's data, unless ``ports`` maps it: in a ``.h5`` recording the stream
     ``<node>.<port>`` (the node's own recorded output); in a ``.npz`` the array named like the port;
     in a ``.csv`` the column named like the port (one value per sample) or the columns ``port[0]``,

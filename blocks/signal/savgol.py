@@ -237,13 +237,6 @@ class SavGolConfig(ft.BadDataConfig):
 class SavGol(ft.Block):
     """Streaming Savitzky–Golay smoother/differentiator, per channel, in physical units per second.
 
-    Ports
-    -----
-    x : float64, shape () or (C,), any units, sampled
-        Signal; channels are filtered independently along time.
-    y : float64, same shape as ``x``; units ``u`` (deriv 0), ``u/s`` (1), ``u/s^2`` (2) ...
-        The estimate of the ``deriv``-th derivative. Same rate and labels as ``x``.
-
     Config
     ------
     See :class:`SavGolConfig`; defaults are window 5, order 4, centred, zero padded, first
@@ -300,9 +293,22 @@ class SavGol(ft.Block):
     name = "savgol"
     config_cls = SavGolConfig
     inputs = {
-        "x": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="signal, shape () or (channels,)")
+        "x": ft.Port(
+            dtype="float64",
+            ndim=(0, 1),
+            require_rate=True,
+            doc="signal; channels are filtered independently along time",
+        )
     }
-    outputs = {"y": ft.Port(dtype="float64", doc="smoothed signal or its derivative, per second")}
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            doc=(
+                "the estimate of the deriv-th derivative: the shape, rate and labels of x; units u (deriv"
+                " 0), u/s (1), u/s^2 (2) ... for x in u"
+            ),
+        )
+    }
     counter_docs = {
         **ft.nonfinite_counter_docs("samples on 'x'"),
         "sample_gaps": "intervals between samples longer than 1.5 periods (missing or dropped samples): the "

@@ -73,12 +73,6 @@ class WeightedSumConfig(ft.BadDataConfig):
 class WeightedSum(ft.Block):
     """Weighted sum of up to four sampled inputs: the drive of an afferent population.
 
-    Ports
-    -----
-    x1 : float64, shape () or (C1,), sampled — required
-    x2, x3, x4 : float64, shape () or (Ck,), optional
-    y : float64, shape (), units ``units`` — ``bias + Σ_k w_k · x_k`` per sample, stamped like x1
-
     Config
     ------
     See :class:`WeightedSumConfig`. ``expect_units`` makes the units part of the weights' meaning:
@@ -119,13 +113,24 @@ class WeightedSum(ft.Block):
     config_cls = WeightedSumConfig
     inputs = {
         "x1": ft.Port(
-            dtype="float64", ndim=(0, 1), require_rate=True, doc="first input (the output's clock)"
+            dtype="float64",
+            ndim=(0, 1),
+            require_rate=True,
+            doc="first input, required: the output is stamped like it (its clock)",
         ),
         "x2": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="second input"),
         "x3": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="third input"),
         "x4": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="fourth input"),
     }
-    outputs = {"y": ft.Port(dtype="float64", shape=(), doc="weighted sum, one value per sample")}
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            shape=(),
+            doc=(
+                "bias + Σ_k w_k · x_k per sample, stamped like x1, in the units given by the units parameter"
+            ),
+        )
+    }
     counter_docs = {
         "nonfinite_drop": "instants where an input had NaN/inf, removed from every input (on_bad_data: "
         "drop): upstream sent bad data",

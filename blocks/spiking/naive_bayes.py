@@ -48,26 +48,6 @@ class NaiveBayesConfig(ft.Config):
 class NaiveBayes(ft.Block):
     """Naive Bayes decoding of spike windows: a posterior over the classes and a decision per window.
 
-    Ports
-    -----
-    spikes : events, int64 unit index, n_units = the model's
-        The population's spikes (e.g. ``nlif.spikes``), watermarked (``Chunk.end``).
-    window : int or float sample stream, shape (), with a rate
-        What is under the sensor: a categorical stream (e.g. the character); a window is a maximal
-        run of one value that is not named in ``gap``. Without categories, values < 0 are gaps;
-        float values that are no whole number (NaN) are gaps too (``unknown_window_values``).
-    posterior : float64 (n_classes,), one sample per finished window, stamped at its end, no rate
-        p(class | features of the window); the channels are named after the classes.
-    decision : int64 categorical (the classes), one sample per finished window, stamped at its end
-        The most probable class (the first of equals).
-    running : float64 (n_classes,), at the window stream's rate
-        At each window sample t: the posterior from the spikes since the window began up to
-        t + 1/rate, scored with the unit-marginal model (the per-unit counts over all sub-bins,
-        since where the window ends is not known yet) with its evidence scaled by the model's
-        ``running_temperature`` (a calibration: see ``nb_model``); in a gap, the last window's posterior
-        (the prior before the first). What a speed controller reads; a latency model refuses to
-        run when this output is consumed (a latency needs the window's end).
-
     Config
     ------
     ``model`` (the file; its features, classes, units and sub-bins come from it) and ``gap``.
@@ -93,18 +73,57 @@ class NaiveBayes(ft.Block):
 
     config_cls = NaiveBayesConfig
     inputs = {
-        "spikes": ft.Port(dtype="int64", shape=(), events=True, doc="spike times and unit indices"),
+        "spikes": ft.Port(
+            dtype="int64",
+            shape=(),
+            events=True,
+            doc=(
+                "the population's spikes (e.g. nlif.spikes), watermarked (Chunk.end); n_units must be the"
+                " model's"
+            ),
+        ),
         "window": ft.Port(
-            dtype=None, shape=(), require_rate=True, doc="categorical: what is under the sensor"
+            dtype=None,
+            shape=(),
+            require_rate=True,
+            doc=(
+                "what is under the sensor: a categorical stream (e.g. the character), int or float, with "
+                "a rate; a window is a maximal run of one value that is not named in gap. Without "
+                "categories, values < 0 are gaps; float values that are no whole number (NaN) are gaps "
+                "too (unknown_window_values)"
+            ),
         ),
     }
     outputs = {
-        "posterior": ft.Port(dtype="float64", units="1", doc="posterior per finished window, at its end"),
+        "posterior": ft.Port(
+            dtype="float64",
+            units="1",
+            doc=(
+                "p(class | features of the window), shape (n_classes,), one sample per finished window, "
+                "stamped at its end, no rate; the channels are named after the classes"
+            ),
+        ),
         "decision": ft.Port(
-            dtype="int64", shape=(), units="1", doc="most probable class per finished window"
+            dtype="int64",
+            shape=(),
+            units="1",
+            doc=(
+                "the most probable class (the first of equals), categorical (the classes), one sample per"
+                " finished window, stamped at its end"
+            ),
         ),
         "running": ft.Port(
-            dtype="float64", units="1", doc="posterior of the window so far, per window sample"
+            dtype="float64",
+            units="1",
+            doc=(
+                "at each window sample t (at the window stream's rate): the posterior from the spikes "
+                "since the window began up to t + 1/rate, scored with the unit-marginal model (the "
+                "per-unit counts over all sub-bins, since where the window ends is not known yet) with "
+                "its evidence scaled by the model's running_temperature (a calibration: see nb_model); in"
+                " a gap, the last window's posterior (the prior before the first). What a speed "
+                "controller reads; a latency model refuses to run when this output is consumed (a latency"
+                " needs the window's end)"
+            ),
         ),
     }
     counter_docs = {

@@ -163,17 +163,6 @@ class PulsesConfig(ft.BadDataConfig):
 class Pulses(ft.Block):
     """Spikes → stimulation pulses, one per spike, always inside a safety envelope.
 
-    Ports
-    -----
-    spikes : events, int (unit index), n_units ≤ max_units
-        The spike trains to deliver (e.g. an ``nlif`` population's ``spikes``).
-    amplitude : float64 () or (n_units,), units "uA", optional
-        Requested amplitude, sample-and-hold: a spike at time t uses the latest sample at or
-        before t (``amplitude_ua`` before the first sample). Unconnected: ``amplitude_ua``.
-    y : events, float64 (3,), labels (unit, amplitude_ua, width_us)
-        One row per delivered pulse, stamped with the spike time (pulse onset). ``Chunk.end`` is
-        the watermark: no pulse before it will follow.
-
     Config
     ------
     See the field docs (``flowtact blocks pulses``). ``check()`` rejects a nominal pulse outside
@@ -227,15 +216,34 @@ class Pulses(ft.Block):
     config_cls = PulsesConfig
     inputs = {
         "spikes": ft.Port(
-            dtype=None, shape=(), events=True, doc="spike events (t = time, data = unit index)"
+            dtype=None,
+            shape=(),
+            events=True,
+            doc=(
+                "the spike trains to deliver (e.g. an nlif population's spikes): t = time, data = unit "
+                "index, n_units ≤ max_units"
+            ),
         ),
         "amplitude": ft.Port(
-            dtype="float64", units="uA", optional=True, doc="requested amplitude per unit or for all (µA)"
+            dtype="float64",
+            units="uA",
+            optional=True,
+            doc=(
+                "requested amplitude, shape () or (n_units,), sample-and-hold: a spike at time t uses the"
+                " latest sample at or before t (amplitude_ua before the first sample). Unconnected: "
+                "amplitude_ua"
+            ),
         ),
     }
     outputs = {
         "y": ft.Port(
-            dtype="float64", shape=(3,), events=True, doc="delivered pulses: [unit, amplitude_ua, width_us]"
+            dtype="float64",
+            shape=(3,),
+            events=True,
+            doc=(
+                "one row [unit, amplitude_ua, width_us] per delivered pulse, stamped with the spike time "
+                "(pulse onset). Chunk.end is the watermark: no pulse before it will follow"
+            ),
         ),
     }
     counter_docs = {

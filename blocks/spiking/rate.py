@@ -27,13 +27,6 @@ class RateConfig(ft.Config):
 class Rate(ft.Block):
     """Firing rate of a spike stream in fixed time bins (spikes/s).
 
-    Ports
-    -----
-    spikes : events, int64 unit index (needs the stream's n_units)
-        The spike stream, e.g. ``nlif.spikes``.
-    y : float64, shape (n_units,) (mode unit) or () (mode population), spikes/s, at 1/bin_s Hz
-        Bin ``k`` covers ``[k·bin_s, (k+1)·bin_s)`` and is stamped at its start ``k·bin_s``.
-
     Config
     ------
     ``bin_s`` (default 20 ms, the paper's rate checks) and ``mode``; see the field docs.
@@ -60,8 +53,24 @@ class Rate(ft.Block):
     """
 
     config_cls = RateConfig
-    inputs = {"spikes": ft.Port(dtype="int64", shape=(), events=True, doc="spike times and unit indices")}
-    outputs = {"y": ft.Port(dtype="float64", units="spikes/s", doc="rate per bin, stamped at the bin start")}
+    inputs = {
+        "spikes": ft.Port(
+            dtype="int64",
+            shape=(),
+            events=True,
+            doc="the spike stream (e.g. nlif.spikes); needs the stream's n_units",
+        )
+    }
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            units="spikes/s",
+            doc=(
+                "rate per bin, shape (n_units,) (mode unit) or () (mode population), at 1/bin_s Hz: bin k"
+                " covers [k·bin_s, (k+1)·bin_s) and is stamped at its start k·bin_s"
+            ),
+        )
+    }
     counter_docs = {
         "late_events": "spikes older than a bin already emitted (the producer broke its watermark): "
         "ignored, so those rates are too low; a fault upstream",

@@ -123,14 +123,6 @@ def _integrate(
 class Synapse(ft.Block):
     """Synaptic currents of a target population from a source population's spikes (sparse weights, exponential decay).
 
-    Ports
-    -----
-    spikes : events, int64 source index (needs the stream's n_units = number of sources)
-    y : float64, shape (n_targets,), units "1", at rate_hz
-        Sample ``k`` (stamped ``k/rate_hz``) is the current after bin ``k`` = [k, k + 1)/rate_hz:
-        ``y[k] = e^(−dt/τ)·y[k−1] + W·c[k]`` with ``c[k]`` the spike counts of each source in that
-        bin: a spike adds its weight at once, then decays with ``tau_s``.
-
     Config
     ------
     Either ``weights`` (dense, n_targets × n_sources) or ``grid`` + ``n_targets`` + ``fan_in`` +
@@ -160,8 +152,26 @@ class Synapse(ft.Block):
     """
 
     config_cls = SynapseConfig
-    inputs = {"spikes": ft.Port(dtype="int64", shape=(), events=True, doc="spike times and source indices")}
-    outputs = {"y": ft.Port(dtype="float64", units="1", doc="current of each target, per bin")}
+    inputs = {
+        "spikes": ft.Port(
+            dtype="int64",
+            shape=(),
+            events=True,
+            doc="spike times and source indices (needs the stream's n_units = number of sources)",
+        )
+    }
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            units="1",
+            doc=(
+                "current of each target, shape (n_targets,), at rate_hz: sample k (stamped k/rate_hz) is "
+                "the current after bin k = [k, k + 1)/rate_hz: y[k] = e^(−dt/τ)·y[k−1] + W·c[k] with c[k]"
+                " the spike counts of each source in that bin: a spike adds its weight at once, then "
+                "decays with tau_s"
+            ),
+        )
+    }
     counter_docs = {
         "late_events": "spikes older than a bin already emitted (the producer broke its watermark): "
         "ignored, so those currents are too low; a fault upstream",

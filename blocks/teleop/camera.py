@@ -144,16 +144,6 @@ class _Capture:
 class Camera(ft.Source):
     """Gray frames from 1–3 cameras, video files or image folders (the TacTips' cameras), at a set FPS.
 
-    Ports
-    -----
-    frames : uint8 (n, H, W), units "DN"
-        One gray frame per device (axis 0 in ``devices`` order: thumb, index, middle for three),
-        ``(H, W) = (size[1], size[0])``, default (240, 320): the ``tactip_sim`` stream.
-    device_t : float64 (n,), units "s"
-        Each frame's own time stamp: a video's position (``CAP_PROP_POS_MSEC``), an image
-        folder's frame index / ``fps``, a live camera's driver time stamp (or ``time.monotonic()``
-        at the read when the driver gives none).
-
     Config
     ------
     See the field docs (``flowtact blocks camera``).
@@ -193,8 +183,22 @@ class Camera(ft.Source):
     config_cls = CameraConfig
     requires = {"cv2": "vision"}
     outputs = {
-        "frames": ft.Port(dtype="uint8", units="DN", doc="gray frames, one per device, (n, H, W)"),
-        "device_t": ft.Port(units="s", doc="each frame's own time stamp (video position, driver stamp)"),
+        "frames": ft.Port(
+            dtype="uint8",
+            units="DN",
+            doc=(
+                "one gray frame per device (axis 0 in devices order: thumb, index, middle for three), (H,"
+                " W) = (size[1], size[0]), default (240, 320): the tactip_sim stream"
+            ),
+        ),
+        "device_t": ft.Port(
+            units="s",
+            doc=(
+                "each frame's own time stamp: a video's position (CAP_PROP_POS_MSEC), an image folder's "
+                "frame index / fps, a live camera's driver time stamp (or time.monotonic() at the read "
+                "when the driver gives none)"
+            ),
+        ),
     }
     counter_docs = {
         "ended": "a video file or image folder ran out of frames (loop: false): no frames after that; "

@@ -494,16 +494,6 @@ class CnnForceConfig(ft.Config):
 class CnnForce(ft.Block):
     """Contact force per TacTip from its camera frame with a trained CNN (one batched call per frame).
 
-    Ports
-    -----
-    x : uint8, shape (S, H, W), units "DN", sampled
-        One gray frame per sensor (S = 3: thumb, index, middle). Either whole frames of the size the
-        checkpoint was trained on (its ``preprocess.input_hw``; the block applies the checkpoint's
-        crop) or frames already cropped to the checkpoint's crop size (e.g. from a ``crop`` node with
-        the same window: the block then trusts that the window is the same).
-    y : float64, shape (S,), units "N", same rate; labels (thumb, index, middle) when S = 3
-        Estimated contact force per sensor, stamped like the frame; ``end`` follows ``x``'s watermark.
-
     Config
     ------
     See :class:`CnnForceConfig`. ``checkpoint: null`` uses the shipped model
@@ -553,11 +543,24 @@ class CnnForce(ft.Block):
             units="DN",
             ndim=(3,),
             require_rate=True,
-            doc="gray frames, one per sensor: (S, H, W) uint8",
+            doc=(
+                "one gray frame per sensor (S = 3: thumb, index, middle). Either whole frames of the size"
+                " the checkpoint was trained on (its preprocess.input_hw; the block applies the "
+                "checkpoint's crop) or frames already cropped to the checkpoint's crop size (e.g. from a "
+                "crop node with the same window: the block then trusts that the window is the same)"
+            ),
         )
     }
     outputs = {
-        "y": ft.Port(dtype="float64", shape=None, units="N", doc="estimated contact force per sensor (S,)")
+        "y": ft.Port(
+            dtype="float64",
+            shape=None,
+            units="N",
+            doc=(
+                "estimated contact force per sensor, shape (S,), at x's rate, stamped like the frame; "
+                "labels thumb, index, middle when S = 3; end follows x's watermark"
+            ),
+        )
     }
 
     def __init__(self, *args: Any, **kw: Any) -> None:

@@ -49,11 +49,6 @@ class LinearForceConfig(ft.BadDataConfig):
 class LinearForce(ft.Block):
     """Contact force from SSIM per sensor: F = intercept + slope·SSIM (White 2023, Table 4.2's model).
 
-    Ports
-    -----
-    x : float64, shape (n,) or (), units "1" — SSIM per sensor (``ssim.y``)
-    y : float64, same shape, units "N" — estimated contact force F_T per sensor
-
     Config
     ------
     See :class:`LinearForceConfig`. The defaults are a placeholder line (F = 17 − 20·SSIM N,
@@ -82,8 +77,18 @@ class LinearForce(ft.Block):
 
     name = "linear_force"
     config_cls = LinearForceConfig
-    inputs = {"x": ft.Port(dtype="float64", units="1", ndim=(0, 1), require_rate=True, doc="SSIM per sensor")}
-    outputs = {"y": ft.Port(dtype="float64", units="N", doc="estimated contact force per sensor")}
+    inputs = {
+        "x": ft.Port(
+            dtype="float64",
+            units="1",
+            ndim=(0, 1),
+            require_rate=True,
+            doc="SSIM per sensor (ssim.y), shape (n,) or ()",
+        )
+    }
+    outputs = {
+        "y": ft.Port(dtype="float64", units="N", doc="estimated contact force F_T per sensor, the shape of x")
+    }
     counter_docs = ft.nonfinite_counter_docs("SSIM samples on 'x'")
 
     def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:

@@ -133,11 +133,6 @@ class CropConfig(ft.Config):
 class Crop(ft.Block):
     """Crop each sensor's frame to a window (White 2023: 320×240 → 90×240 around the pins).
 
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — frames, one per sensor
-    y : uint8, shape (n, height_px, width_px), units "DN" — the crops (contiguous copies)
-
     Config
     ------
     See :class:`CropConfig`. Default: the thesis's 240 wide × 90 high crop, centred in a
@@ -170,7 +165,7 @@ class Crop(ft.Block):
             units="DN",
             ndim=(3,),
             require_rate=True,
-            doc="cropped frames (sensors, height_px, width_px)",
+            doc="the crops (contiguous copies), (sensors, height_px, width_px)",
         )
     }
 
@@ -230,11 +225,6 @@ class AdaptiveThresholdConfig(ft.Config):
 class AdaptiveThreshold(ft.Block):
     """Gaussian adaptive threshold of each sensor's frame (White 2023, eq. 3.1: T = mean_G(I_L) − C).
 
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — frames
-    y : uint8, same shape, units "DN" — 255 where the pixel exceeds its threshold T, else 0
-
     Config
     ------
     See :class:`AdaptiveThresholdConfig`: the thesis's C = −25 and radius 15.
@@ -266,11 +256,14 @@ class AdaptiveThreshold(ft.Block):
         "x": ft.Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
     }
     outputs = {
-        "y": ft.Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="binary images (0 or 255)")
+        "y": ft.Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            labels=(),
+            doc="the same shape as x: 255 where the pixel exceeds its threshold T, else 0",
+        )
     }
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        return {"y": inputs["x"].with_(labels=None)}
 
     def reset(self) -> None:
         import cv2
@@ -406,15 +399,6 @@ class BlobDetectConfig(ft.Config):
 class BlobDetect(ft.Block):
     """Pin positions by OpenCV's SimpleBlobDetector with the thesis's per-sensor parameters (Table 3.1).
 
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — raw (cropped) grayscale frames
-    pins : float64, shape (n, max_pins, 3), units "px"
-        Rows (x, y, diameter) of the detected blobs in the input image's pixel coordinates
-        (pixel centres at integers, x = column, y = row), sorted by y then x; NaN rows after
-        the last blob when fewer than ``max_pins`` were found.
-    count : float64, shape (n,), units "1" — blobs detected per sensor (may exceed max_pins)
-
     Config
     ------
     See :class:`BlobDetectConfig`. Thresholds, area, circularity, inertia ratio and convexity
@@ -448,14 +432,24 @@ class BlobDetect(ft.Block):
     requires = {"cv2": "vision"}
     inputs = {
         "x": ft.Port(
-            dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="grayscale frames (sensors, H, W)"
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            require_rate=True,
+            doc="raw (cropped) grayscale frames (sensors, H, W)",
         )
     }
     outputs = {
         "pins": ft.Port(
-            dtype="float64", units="px", doc="(sensors, max_pins, 3) rows x, y, diameter; NaN rows unused"
+            dtype="float64",
+            units="px",
+            doc=(
+                "rows (x, y, diameter) of the detected blobs in the input image's pixel coordinates "
+                "(pixel centres at integers, x = column, y = row), sorted by y then x; NaN rows after the"
+                " last blob when fewer than max_pins were found"
+            ),
         ),
-        "count": ft.Port(dtype="float64", units="1", doc="number of blobs detected per sensor"),
+        "count": ft.Port(dtype="float64", units="1", doc="blobs detected per sensor (may exceed max_pins)"),
     }
     counter_docs = {
         "pins_dropped": "blobs beyond max_pins in an image: the smallest left out of 'pins' ('count' "
@@ -601,12 +595,6 @@ class BlobMaskConfig(ft.Config):
 class BlobMask(ft.Block):
     """Keep only the pins: each frame masked to circles at the detected blobs (White 2023, Fig. 3.1 d).
 
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — frames (the ones the blobs were detected on)
-    pins : float64, shape (n, P, 3), units "px" — ``blob_detect.pins`` rows (x, y, diameter)
-    y : uint8, shape (n, H, W), units "DN" — the frame inside the circles, 0 elsewhere
-
     Config
     ------
     See :class:`BlobMaskConfig`: ``scale`` 1 keeps a disc of the blob's own diameter.
@@ -642,11 +630,17 @@ class BlobMask(ft.Block):
             units="px",
             ndim=(3,),
             require_rate=True,
-            doc="pin rows (x, y, diameter) per sensor, NaN rows ignored",
+            doc="blob_detect.pins rows (x, y, diameter) per sensor, NaN rows ignored",
         ),
     }
     outputs = {
-        "y": ft.Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames masked to the pins")
+        "y": ft.Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            require_rate=True,
+            doc="the frame inside the circles, 0 elsewhere",
+        )
     }
     counter_docs = {
         "unpaired_at_end": "frames or pin rows with no partner on the other input when the stream ended: "

@@ -281,15 +281,6 @@ class SsimConfig(ft.BadDataConfig):
 class Ssim(ft.Block):
     """Mean SSIM of each sensor's image against a reference captured at start-up (White 2023, eq. 3.2).
 
-    Ports
-    -----
-    x : uint8, shape (n, H, W) (n sensors; H, W >= 7) or (H, W), units "DN"
-        Frames: raw, cropped, thresholded or masked images (any uint8 image with range 0..255).
-    recapture : float64, shape (), units "1", optional
-        A sample > 0.5 at time t makes the first frame with time >= t the start of a new reference.
-    y : float64, shape (n,) (or () for (H, W) frames), units "1", labels thumb/index/middle for n = 3
-        Mean SSIM of each sensor's frame against its reference, one sample per frame, same times.
-
     Config
     ------
     See :class:`SsimConfig`: ``precision`` (float64 default, float32 fast mode) and
@@ -347,7 +338,10 @@ class Ssim(ft.Block):
             units="DN",
             ndim=(2, 3),
             require_rate=True,
-            doc="frames (n, H, W) uint8, one image per sensor",
+            doc=(
+                "frames (n, H, W) (n sensors; H, W ≥ 7) or (H, W): raw, cropped, thresholded or masked "
+                "images (any uint8 image with range 0..255)"
+            ),
         ),
         "recapture": ft.Port(
             dtype="float64",
@@ -358,7 +352,14 @@ class Ssim(ft.Block):
         ),
     }
     outputs = {
-        "y": ft.Port(dtype="float64", units="1", doc="mean SSIM of each sensor's frame vs its reference")
+        "y": ft.Port(
+            dtype="float64",
+            units="1",
+            doc=(
+                "mean SSIM of each sensor's frame against its reference, shape (n,) (or () for (H, W) "
+                "frames), one sample per frame, same times; labels thumb, index, middle for n = 3"
+            ),
+        )
     }
     counter_docs = {
         "recaptures": "frames that started a new reference after a recapture request: expected when "

@@ -557,19 +557,6 @@ def _count_frames(mark: float, fps: float, *, strict: bool) -> int:
 class TactipSim(ft.Source):
     """Three emulated TacTips (thumb, index, middle): 30-pin camera frames and the true contact force.
 
-    Ports
-    -----
-    force (input, optional) : float64 (3,), units "N"
-        True contact force from a gripper simulator (closed loop). When connected, frame ``k``
-        renders the latest force sample with ``t <= k / fps`` (0 before the first) at the contact
-        position ``contact_mm``, and the scenario is not used.
-    frames : uint8 (3, 240, 320), units "DN"
-        Gray camera frames, axis 0 = ``FINGERS`` (thumb, index, middle), at ``fps``.
-    force : float64 (3,), units "N", labels FINGERS
-        The contact force each frame shows (scenario truth, or the input sample used).
-    contact : float64 (3, 2), units "mm"
-        Contact centre (x along the finger, y across, from the pin-array centre) of each frame.
-
     Config
     ------
     See the field docs (``flowtact blocks tactip_sim``). Units are in the field names.
@@ -650,42 +637,35 @@ class TactipSim(ft.Source):
             shape=(N_FINGERS,),
             units="N",
             optional=True,
-            doc="true contact force per sensor from a gripper simulator (replaces the scenario)",
+            doc="true contact force from a gripper simulator (closed loop). When connected, frame k "
+            "renders the latest force sample with t ≤ k / fps (0 before the first) at the contact "
+            "position contact_mm, and the scenario is not used",
         )
     }
     outputs = {
         "frames": ft.Port(
-            dtype="uint8", shape=(N_FINGERS, HEIGHT, WIDTH), units="DN", doc="gray camera frames"
+            dtype="uint8",
+            shape=(N_FINGERS, HEIGHT, WIDTH),
+            units="DN",
+            rate="fps",
+            doc="gray camera frames, axis 0 = FINGERS (thumb, index, middle)",
         ),
-        "force": ft.Port(shape=(N_FINGERS,), units="N", doc="true contact force shown by each frame"),
-        "contact": ft.Port(shape=(N_FINGERS, 2), units="mm", doc="contact centre (x, y) of each frame"),
+        "force": ft.Port(
+            shape=(N_FINGERS,),
+            units="N",
+            rate="fps",
+            labels=FINGERS,
+            doc="the contact force each frame shows (scenario truth, or the input sample used)",
+        ),
+        "contact": ft.Port(
+            shape=(N_FINGERS, 2),
+            units="mm",
+            rate="fps",
+            labels=tuple(f"{f} {a}" for f in FINGERS for a in "xy"),
+            doc="contact centre (x along the finger, y across, from the pin-array centre) of each frame",
+        ),
     }
     counter_docs = ft.nonfinite_counter_docs("force samples on 'force'")
-
-    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
-        spec = inputs.get("force")
-        if spec is not None:
-            if spec.events:
-                raise ft.SpecError("force", "expects a sampled force stream, got events")
-            if spec.units != "N":
-                raise ft.SpecError("force", f"expects units N, got {spec.units!r} ({spec.describe()})")
-            if tuple(spec.shape) != (N_FINGERS,):
-                raise ft.SpecError(
-                    "force", f"expects one force per sensor, shape ({N_FINGERS},); got {spec.describe()}"
-                )
-        rate = self.config.fps
-        return {
-            "frames": ft.StreamSpec(
-                dtype="uint8", shape=(N_FINGERS, HEIGHT, WIDTH), units="DN", rate_hz=rate
-            ),
-            "force": ft.StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=rate, labels=FINGERS),
-            "contact": ft.StreamSpec(
-                shape=(N_FINGERS, 2),
-                units="mm",
-                rate_hz=rate,
-                labels=tuple(f"{f} {a}" for f in FINGERS for a in "xy"),
-            ),
-        }
 
     def reset(self) -> None:
         c = self.config
