@@ -169,10 +169,8 @@ class Replay(ft.Source):
 
     # -- compile time ------------------------------------------------------------------------
     def specs(self, inputs: Any) -> dict[str, ft.StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
-        """The output spec, read from the file header."""
-        self.close()
-        self._src = self._inspect()
-        return {"y": self._src.spec}
+        """The output spec, read from the file (kept by nothing: ``open``/``reset`` read it for the run)."""
+        return {"y": (self._src if self._src is not None else self._inspect()).spec}
 
     def _where(self) -> str:
         return f"{self.node} ({self.name})"
@@ -379,8 +377,8 @@ class Replay(ft.Source):
 
     def ends_at(self, inputs: Any) -> float | None:  # noqa: ARG002 — a source: its end comes from its file
         """Graph time just past the last sample (one sample period after it; an event stream's
-        recorded end), or None when looping or empty. Known once ``specs`` has read the file."""
-        src = self._src
+        recorded end), or None when looping or empty; read from the file when not yet opened."""
+        src = self._src if self._src is not None else self._inspect()
         if self.config.loop or src is None:
             return None
         last, end = (

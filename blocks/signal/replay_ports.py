@@ -99,9 +99,13 @@ class ReplayPorts:
     # -- compile time ------------------------------------------------------------------------
     def specs(self, inputs: Any) -> dict[str, ft.StreamSpec]:  # noqa: ARG002 — a source
         """The spec of every port the file provides, checked against the replaced block's ports."""
-        self.close()
-        self._players = {}
-        out = {}
+        if self._players:  # opened for a run: each has read its file
+            return {port: player.specs({})["y"] for port, player in self._players.items()}
+        return {port: spec for port, (_, spec) in self._new_players().items()}
+
+    def _new_players(self) -> dict[str, tuple[Replay, ft.StreamSpec]]:
+        """A replay for every port the file provides, with its spec checked against the replaced block's."""
+        players = {}
         for port, source in self._sources().items():
             player = Replay(node=self.node, **self._player_params(port, source))
             try:
@@ -113,9 +117,8 @@ class ReplayPorts:
                     None, f"port '{port}': '{e.field}' {e.rule}" if e.field else str(e)
                 ) from None
             self._check(port, spec, source)
-            self._players[port] = player
-            out[port] = spec
-        return out
+            players[port] = (player, spec)
+        return players
 
     def _file(self) -> str:
         return display(self.config.path)
@@ -254,14 +257,15 @@ class ReplayPorts:
 
     def ends_at(self, inputs: Any) -> float | None:  # noqa: ARG002 — a source: its end comes from its file
         """The latest end of the played ports (None: nothing to play)."""
-        ends = [
-            e for p, r in self._players.items() if p in self.demanded and (e := r.ends_at({})) is not None
-        ]
+        players = self._players or {port: player for port, (player, _) in self._new_players().items()}
+        ends = [e for p, r in players.items() if p in self.demanded and (e := r.ends_at({})) is not None]
         return max(ends, default=None)
 
     # -- run time ----------------------------------------------------------------------------
     def reset(self) -> None:
         self._played: dict[str, list[float]] = {}  # port -> [count, first t, last t] (for summary)
+        if not self._players:
+            self._players = {port: player for port, (player, _) in self._new_players().items()}
         for port, player in self._players.items():
             if port in self.demanded:
                 player.bind({}, seed=self.seed)
