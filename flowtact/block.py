@@ -12,7 +12,7 @@ import functools
 import math
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
@@ -101,16 +101,19 @@ class Port:
             return f"expects units '{self.units}' but gets '{spec.units}'"
         return None
 
-    def derive(self, config: Config, inputs: Mapping[str, StreamSpec]) -> StreamSpec:
-        """This output's spec for a block with ``config`` fed ``inputs`` (the declaration resolved)."""
+    def derive(
+        self, config: Config, inputs: Mapping[str, StreamSpec], declared: Collection[str] = ()
+    ) -> StreamSpec:
+        """This output's spec for a block with ``config`` fed ``inputs`` (the declaration resolved);
+        ``declared`` names the block's input ports (a ``rate`` naming one left unconnected: no rate)."""
         first = next(iter(inputs.values()), StreamSpec())
         shape = None if self.shape is None else tuple(_value(config, s) for s in self.shape)
         if self.events:
             rate = None
         elif self.rate is None:
             rate = first.rate_hz
-        elif self.rate in inputs:
-            rate = inputs[self.rate].rate_hz
+        elif self.rate in inputs or self.rate in declared:
+            rate = inputs[self.rate].rate_hz if self.rate in inputs else None
         else:
             rate = getattr(config, self.rate)
         if self.labels is not None:
@@ -292,7 +295,7 @@ class Block:
         input). Override it only when the derivation is genuinely custom, and keep it pure: it is
         called at compile time, possibly more than once, and must not change the block.
         """
-        return {name: port.derive(self.config, inputs) for name, port in self.outputs.items()}
+        return {name: port.derive(self.config, inputs, self.inputs) for name, port in self.outputs.items()}
 
     def needs(self, connected: frozenset[str]) -> frozenset[str]:
         """The connected inputs this config actually uses (e.g. not those with zero weights)."""

@@ -574,12 +574,13 @@ class CnnForce(ft.Block):
         return shipped_checkpoint() if c is None else Path(c).expanduser()
 
     def _read_meta(self) -> dict[str, Any]:
-        if self._meta is None:
-            try:
-                self._meta = read_meta(self.checkpoint_path())
-            except (FileNotFoundError, ValueError, KeyError, TypeError, OSError) as e:
-                raise ft.SpecError(None, f"{self.node} ({self.name}): checkpoint: {shown(e)}") from None
-        return self._meta
+        """The checkpoint's metadata: as loaded by ``open``, else read now (and not kept: specs() is pure)."""
+        if self._meta is not None:
+            return self._meta
+        try:
+            return read_meta(self.checkpoint_path())
+        except (FileNotFoundError, ValueError, KeyError, TypeError, OSError) as e:
+            raise ft.SpecError(None, f"{self.node} ({self.name}): checkpoint: {shown(e)}") from None
 
     def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         x = inputs["x"]
