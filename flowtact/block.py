@@ -8,6 +8,7 @@ graph, or in a worker process, unchanged. The runtime owns the loop and the cloc
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import functools
 import math
 import os
@@ -115,7 +116,7 @@ class Port:
         elif self.rate in inputs or self.rate in declared:
             rate = inputs[self.rate].rate_hz if self.rate in inputs else None
         else:
-            rate = getattr(config, self.rate)
+            rate = _param(config, self.rate, "rate")
         if self.labels is not None:
             labels = _names(config, self.labels)
         else:
@@ -138,9 +139,19 @@ class Port:
         )
 
 
+def _param(config: Config, name: str, what: str) -> Any:
+    """The value of the parameter a port declaration names (a block author's typo: a clear error)."""
+    if name not in {f.name for f in dataclasses.fields(config)}:
+        raise TypeError(
+            f"a port's {what} names '{name}', which is no parameter of {type(config).__name__} "
+            "(nor, for a rate, an input)"
+        )
+    return getattr(config, name)
+
+
 def _value(config: Config, v: int | str) -> int:
     """A shape entry or unit count: a number, or the integer parameter it names."""
-    return int(getattr(config, v)) if isinstance(v, str) else v
+    return int(_param(config, v, "shape or n_units")) if isinstance(v, str) else v
 
 
 def _hz(rate: float | None) -> str:
@@ -149,7 +160,7 @@ def _hz(rate: float | None) -> str:
 
 def _names(config: Config, v: tuple[str, ...] | str) -> tuple[str, ...] | None:
     """Labels or categories: given, or read from the parameter named (``()``: none)."""
-    names = tuple(getattr(config, v)) if isinstance(v, str) else tuple(v)
+    names = tuple(_param(config, v, "labels or categories")) if isinstance(v, str) else tuple(v)
     return names or None
 
 

@@ -149,6 +149,17 @@ def test_outputs_derive_shape_rate_labels_and_categories_from_parameters_and_nam
     assert alone["wide"].rate_hz is None  # its rate follows 'b', left unconnected
 
 
+def test_a_port_naming_no_parameter_says_so():
+    class Typo(ft.Block):
+        config_cls = _ToyConfig
+        outputs = {"y": ft.Port(shape=("m",))}
+
+    with pytest.raises(
+        TypeError, match=r"a port's shape or n_units names 'm', which is no parameter of _ToyConfig"
+    ):
+        Typo().specs({})
+
+
 def test_same_rate_is_checked_when_binding():
     fsr = ft.StreamSpec(shape=(3,), units="N", rate_hz=100.0)
     phi = ft.StreamSpec(shape=(3, 3), units="rad", rate_hz=50.0)
