@@ -297,7 +297,7 @@ class SavGol(ft.Block):
             dtype="float64",
             ndim=(0, 1),
             require_rate=True,
-            doc="signal; channels are filtered independently along time",
+            doc="signal, shape () or (channels,)",
         )
     }
     outputs = {

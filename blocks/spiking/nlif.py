@@ -254,8 +254,8 @@ class Nlif(Block):
             units="1",
             ndim=(0, 1),
             require_rate=True,
-            doc="the stimulus I_stim (e.g. the Table I weighted sum of forces and derivatives), shape () "
-            "for the same drive to all neurons or (n,) per neuron",
+            doc="drive, shape () for all neurons or (n,) per neuron: the stimulus I_stim (e.g. the Table I "
+            "weighted sum of forces and derivatives)",
         )
     }
     outputs = {
