@@ -73,12 +73,16 @@ def _value(v: Any) -> str:
 
 
 def _names_text(what: str, v: Any) -> str:
+    """``, labels a, b, c`` (a long list shortened: its first and last names, and how many)."""
     if isinstance(v, str):
         return f", {what} from {v}"
-    return f", {what} " + ", ".join(v) if v else ""
+    if not v:
+        return ""
+    text = ", ".join(v) if len(v) <= 8 else f"{', '.join(v[:3])} … {v[-1]} ({len(v)})"
+    return f", {what} {text}"
 
 
-def _port_text(port: Any, output: bool, derived: bool) -> str:
+def _port_text(port: Any, output: bool, derived: bool, inputs: Any = ()) -> str:
     """One line from a port's declaration: what flows (dtype, shape, units), at what rate, named how."""
     shape = (
         "any shape"
@@ -94,8 +98,10 @@ def _port_text(port: Any, output: bool, derived: bool) -> str:
         parts[0] = f"events, {parts[0]}"
         if port.n_units is not None:
             parts.append(f"n_units {port.n_units}")
-    elif port.rate is not None:
+    elif port.rate in inputs:
         parts.append(f"at the rate of {port.rate}")
+    elif port.rate is not None:
+        parts.append(f"at {port.rate} (a parameter)")
     elif output and derived:
         parts.append("at its input's rate")
     elif port.require_rate:
@@ -126,7 +132,7 @@ def describe_block(cls: Any, width: int | None = None) -> str:
     for title, ports in (("Inputs", cls.inputs), ("Outputs", cls.outputs)):
         lines += ["", f"{title}:"]
         for name, port in ports.items():
-            lines.append(f"  {name:<12} {_port_text(port, title == 'Outputs', derived)}")
+            lines.append(f"  {name:<12} {_port_text(port, title == 'Outputs', derived, cls.inputs)}")
             lines += ["      " + s for s in _wrapped(port.doc, 6, width)]
         if not ports:
             lines.append("  (none: a source)" if title == "Inputs" else "  (none)")

@@ -56,6 +56,8 @@ def test_the_rendering_shows_what_the_declaration_derives():
     assert "v            float64 shape (n,), units 1" in nlif
     grasp = describe_block(load_block("grasp_sim"), width=100)
     assert "categories from object_names" in grasp
+    scan = describe_block(load_block("braille_scan"), width=100)
+    assert "at rate_hz (a parameter), labels r0c0, r0c1, r0c2 … r5c3 (24)" in scan  # long lists shortened
 
 
 def _state(block: ft.Block) -> dict[str, Any]:
