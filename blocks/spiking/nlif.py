@@ -187,6 +187,8 @@ NLIF_DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(NlifConfig) i
 class Nlif(Block):
     """A population of N noisy leaky integrate-and-fire neurons (Rager et al. eq. 5–6): drive → spikes.
 
+    The drive ``x`` is the stimulus I_stim, e.g. the Table I weighted sum of forces and derivatives.
+
     Config
     ------
     See the field docs (``flowtact blocks nlif``). ``tau_s``, ``v_leak``, ``gain`` and ``sigma``
@@ -254,8 +256,7 @@ class Nlif(Block):
             units="1",
             ndim=(0, 1),
             require_rate=True,
-            doc="drive, shape () for all neurons or (n,) per neuron: the stimulus I_stim (e.g. the Table I "
-            "weighted sum of forces and derivatives)",
+            doc="drive, shape () for all neurons or (n,) per neuron",
         )
     }
     outputs = {
