@@ -8,11 +8,12 @@ graph, or in a worker process, unchanged. The runtime owns the loop and the cloc
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import functools
 import math
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
@@ -47,20 +48,29 @@ BadDataPolicy = Literal["raise", "drop", "hold"]
 
 @dataclass(frozen=True)
 class Port:
-    """A declared input or output. ``None`` fields accept (inputs) or inherit (outputs) anything.
+    """A declared input or output: the one place a port is described (``flowtact blocks`` renders it).
 
-    ``events`` marks an event stream (spike times + unit index); ``optional`` an input that may be
-    left unconnected; ``delay`` an input that receives data one tick late, which is what lets a
-    feedback loop through it. On inputs, ``ndim`` lists the sample ranks accepted where ``shape``
-    is left open (``(0, 1)``: a value or a vector of channels) and ``require_rate`` asks for a
-    sample stream with a nominal rate. On outputs, ``categories`` declares a categorical stream
-    (value ``i`` means ``categories[i]``); a block whose names come from its config sets them in
-    ``specs`` instead (``StreamSpec.categories``). The framework checks inputs against these declarations on
-    every path (graph compile, in-process, worker, offline), so a block never re-checks them.
+    ``None`` fields accept (inputs) or inherit (outputs) anything. ``events`` marks an event stream
+    (spike times + unit index); ``optional`` an input that may be left unconnected; ``delay`` an
+    input that receives data one tick late, which is what lets a feedback loop through it. On
+    inputs, ``ndim`` lists the sample ranks accepted where ``shape`` is left open (``(0, 1)``: a
+    value or a vector of channels), ``require_rate`` asks for a sample stream with a nominal rate
+    and ``same_rate`` names another input whose rate this one must have (two streams read
+    together). The framework checks inputs against these declarations on every path (graph
+    compile, in-process, worker, offline), so a block never re-checks them.
+
+    On outputs the declaration also derives the stream's spec, so most blocks need no ``specs``:
+    a ``shape`` entry (outputs only) may name an integer parameter (``shape=("n",)``: ``config.n`` channels);
+    ``rate`` names the input whose rate the output has, or a parameter holding it in Hz (a
+    source's ``"rate_hz"``), default the first connected input's; ``labels`` (channel names) and
+    ``categories`` (a categorical stream: value ``i`` means ``categories[i]``) are given as names,
+    or as the name of a parameter holding them, ``()`` for none; ``n_units`` (an event stream's
+    unit count) is a number or a parameter's name. Left open, ``labels`` and ``n_units`` follow the
+    first connected input when the shape does.
     """
 
     dtype: str | None = "float64"
-    shape: tuple[int, ...] | None = None
+    shape: tuple[int | str, ...] | None = None
     units: str | None = None
     events: bool = False
     optional: bool = False
@@ -68,7 +78,11 @@ class Port:
     doc: str = ""
     ndim: tuple[int, ...] | None = None
     require_rate: bool = False
-    categories: tuple[str, ...] | None = None
+    categories: tuple[str, ...] | str | None = None
+    rate: str | None = None
+    labels: tuple[str, ...] | str | None = None
+    n_units: int | str | None = None
+    same_rate: str | None = None
 
     def mismatch(self, spec: StreamSpec) -> str | None:
         """Why a stream cannot feed this input port (``"expects …, gets …"``), or None."""
@@ -87,6 +101,67 @@ class Port:
         if self.units is not None and self.units != spec.units:
             return f"expects units '{self.units}' but gets '{spec.units}'"
         return None
+
+    def derive(
+        self, config: Config, inputs: Mapping[str, StreamSpec], declared: Collection[str] = ()
+    ) -> StreamSpec:
+        """This output's spec for a block with ``config`` fed ``inputs`` (the declaration resolved);
+        ``declared`` names the block's input ports (a ``rate`` naming one left unconnected: no rate)."""
+        first = next(iter(inputs.values()), StreamSpec())
+        shape = None if self.shape is None else tuple(_value(config, s) for s in self.shape)
+        if self.events:
+            rate = None
+        elif self.rate is None:
+            rate = first.rate_hz
+        elif self.rate in inputs or self.rate in declared:
+            rate = inputs[self.rate].rate_hz if self.rate in inputs else None
+        else:
+            rate = _param(config, self.rate, "rate")
+        if self.labels is not None:
+            labels = _names(config, self.labels)
+        else:
+            labels = first.labels if shape is None else None
+        if not self.events:
+            n_units = None
+        elif self.n_units is not None:
+            n_units = int(_value(config, self.n_units))
+        else:
+            n_units = first.n_units
+        return StreamSpec(
+            dtype=self.dtype or first.dtype,
+            shape=shape if shape is not None else first.shape,
+            units=self.units if self.units is not None else first.units,
+            rate_hz=rate,
+            events=self.events,
+            n_units=n_units,
+            labels=labels,
+            categories=None if self.categories is None else _names(config, self.categories),
+        )
+
+
+def _param(config: Config, name: str, what: str) -> Any:
+    """The value of the parameter a port declaration names (a block author's typo: a clear error)."""
+    if name not in {f.name for f in dataclasses.fields(config)}:
+        raise TypeError(
+            f"a port's {what} names '{name}', which is no parameter of {type(config).__name__} "
+            "(nor, for a rate, an input)"
+        )
+    return getattr(config, name)
+
+
+def _value(config: Config, v: int | str) -> int:
+    """A shape entry or unit count: a number, or the integer parameter it names."""
+    return int(_param(config, v, "shape or n_units")) if isinstance(v, str) else v
+
+
+def _hz(rate: float | None) -> str:
+    return "unrated" if rate is None else f"{rate:g} Hz"
+
+
+def _names(config: Config, v: tuple[str, ...] | str) -> tuple[str, ...] | None:
+    """Labels or categories: given, or read from the parameter named (``()``: none)."""
+    names = tuple(_param(config, v, "labels or categories")) if isinstance(v, str) else tuple(v)
+    return names or None
 
 
 class SpecError(FlowtactError, ValueError):
@@ -226,23 +301,12 @@ class Block:
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
         """Output specs for these connected inputs; raise :class:`SpecError` on a mismatch.
 
-        The default gives each output its declared dtype/shape/units, inheriting what the port
-        leaves open (and the rate) from the first connected input.
+        The default derives each output from its declaration (:meth:`Port.derive`: declared
+        dtype/shape/units/labels, parameters named there, the rest and the rate inherited from an
+        input). Override it only when the derivation is genuinely custom, and keep it pure: it is
+        called at compile time, possibly more than once, and must not change the block.
         """
-        first = next(iter(inputs.values()), StreamSpec())
-        out = {}
-        for name, port in self.outputs.items():
-            out[name] = StreamSpec(
-                dtype=port.dtype or first.dtype,
-                shape=port.shape if port.shape is not None else first.shape,
-                units=port.units if port.units is not None else first.units,
-                rate_hz=None if port.events else first.rate_hz,
-                events=port.events,
-                n_units=first.n_units if port.events else None,
-                labels=first.labels if port.shape is None else None,
-                categories=port.categories,
-            )
-        return out
+        return {name: port.derive(self.config, inputs, self.inputs) for name, port in self.outputs.items()}
 
     def needs(self, connected: frozenset[str]) -> frozenset[str]:
         """The connected inputs this config actually uses (e.g. not those with zero weights)."""
@@ -313,6 +377,19 @@ class Block:
         for name, port in self.inputs.items():
             if not port.optional and name not in inputs:
                 raise SpecError(name, f"input '{name}' must be connected ({port.doc or 'required'})")
+        self.check_rates(inputs)
+
+    def check_rates(self, inputs: Mapping[str, StreamSpec]) -> None:
+        """Raise :class:`SpecError` when an input declared ``same_rate`` as another has a different rate."""
+        for name, port in self.inputs.items():
+            other = port.same_rate
+            if other is None or name not in inputs or other not in inputs:
+                continue
+            mine, theirs = inputs[name].rate_hz, inputs[other].rate_hz
+            if not math.isclose(mine or 0.0, theirs or 0.0, rel_tol=1e-9):
+                raise SpecError(
+                    name, f"'{name}' is {_hz(mine)} but '{other}' is {_hz(theirs)} (read together)"
+                )
 
     def restart(self) -> None:
         """Rebuild state from scratch (same config, same seed): a fresh, deterministic start."""
@@ -395,10 +472,11 @@ class Source(Block):
             raise RuntimeError(f"{self.node}: bind() the source before ticking it")
         return self.step(now, **self._inputs(chunks))
 
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Mapping[str, StreamSpec]) -> float | None:  # noqa: ARG002 - sources use it
         """Graph time after which this source emits nothing more (a played-back file's end), or None
-        when it never ends. A run without a duration lasts until its sources' ends
-        (:mod:`flowtact.source_ends`); called after ``specs``."""
+        when it never ends. ``inputs`` are the specs of its connected inputs, as ``specs`` gets them
+        (a scan steered by a speed input ends later). A run without a duration lasts until its
+        sources' ends (:mod:`flowtact.source_ends`); called after ``specs``."""
         return None
 
     @staticmethod

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import zlib
 from collections import defaultdict
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -151,7 +151,8 @@ def compile_graph(graph: Graph, *, prune: bool = True) -> Plan:
     ends = {
         n: end
         for n in active
-        if isinstance(blocks[n], Source) and (end := blocks[n].ends_at()) is not None  # type: ignore[attr-defined]
+        if isinstance(blocks[n], Source)
+        and (end := blocks[n].ends_at(_fed(n, active_edges, specs))) is not None  # type: ignore[attr-defined]
     }
     missing = missing_extras(graph, active)  # before anything starts, naming the pip extra
     if missing:
@@ -195,6 +196,11 @@ class BlockSpecsFailed(FlowtactError, RuntimeError):
         super().__init__(f"{loc}: node '{node}' ({block}): specs() raised {type(cause).__name__}: {cause}")
 
 
+def _fed(node: str, edges: Sequence[Edge], specs: Mapping[Stream, StreamSpec]) -> dict[str, StreamSpec]:
+    """The specs of the streams feeding ``node`` along these edges (what it will be bound with)."""
+    return {e.dst_port: specs[(e.src, e.src_port)] for e in edges if e.dst == node}
+
+
 def _stream_specs(
     graph: Graph,
     order: list[str],
@@ -212,6 +218,7 @@ def _stream_specs(
         if n in broken:
             continue
         try:
+            blocks[n].check_rates(inputs)  # what the ports declare across inputs (same_rate)
             out = blocks[n].specs(inputs)
         except (SpecError, ConfigError) as err:  # a ConfigError here: a file the config names (a replay)
             loc = next(

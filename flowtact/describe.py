@@ -1,6 +1,7 @@
 """``flowtact blocks NAME``: a block's docs as readable terminal text, with the presets that apply to it.
 
-The docstring's reStructuredText is rendered by :mod:`flowtact.rst_text`; ports, parameters (type,
+The docstring's reStructuredText is rendered by :mod:`flowtact.rst_text`; ports (from their
+declarations: dtype, shape, units, rate, labels, doc — no docstring repeats them), parameters (type,
 default, rules, doc) and counters come from the class; every preset published for the block
 (``flowtact.presets`` entry points) is listed with each value and the units its field name carries.
 """
@@ -13,6 +14,7 @@ import shutil
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from flowtact.block import Block
 from flowtact.presets import presets_for
 from flowtact.rst_text import inline_text, rst_to_text
 
@@ -70,14 +72,50 @@ def _value(v: Any) -> str:
     return repr(v)
 
 
-def _port_text(port: Any) -> str:
+def _names_text(what: str, v: Any) -> str:
+    """``, labels a, b, c`` (a long list shortened: its first and last names, and how many)."""
+    if isinstance(v, str):
+        return f", {what} from {v}"
+    if not v:
+        return ""
+    text = ", ".join(v) if len(v) <= 8 else f"{', '.join(v[:3])} … {v[-1]} ({len(v)})"
+    return f", {what} {text}"
+
+
+def _port_text(port: Any, output: bool, derived: bool, inputs: Any = ()) -> str:
+    """One line from a port's declaration: what flows (dtype, shape, units), at what rate, named how."""
+    shape = (
+        "any shape"
+        if port.shape is None
+        else "shape (" + ", ".join(map(str, port.shape)) + ("," if len(port.shape) == 1 else "") + ")"
+    )
+    if port.shape is None and port.ndim is not None:
+        shape = "shape " + " or ".join({0: "()", 1: "(C,)"}.get(n, f"{n}-d") for n in port.ndim)
+    parts = [f"{port.dtype or 'any dtype'} {shape}"]
+    if port.units:
+        parts.append(f"units {port.units}")
     if port.events:
-        return "events"
-    shape = "any shape" if port.shape is None else f"shape {tuple(port.shape)}"
-    units = f", {port.units}" if port.units else ""
-    extra = ", optional" if port.optional else ""
-    extra += ", delayed" if port.delay else ""
-    return f"{port.dtype or 'any'} {shape}{units}{extra}"
+        parts[0] = f"events, {parts[0]}"
+        if port.n_units is not None:
+            parts.append(f"n_units {port.n_units}")
+    elif port.rate in inputs:
+        parts.append(f"at the rate of {port.rate}")
+    elif port.rate is not None:
+        parts.append(f"at {port.rate} (a parameter)")
+    elif output and derived:
+        parts.append("at its input's rate")
+    elif port.require_rate:
+        parts.append("with a nominal rate")
+    if port.same_rate:
+        parts.append(f"same rate as {port.same_rate}")
+    text = ", ".join(parts)
+    if port.labels is not None:
+        text += _names_text("labels", port.labels)
+    if port.categories is not None:
+        text += _names_text("categories", port.categories)
+    text += ", optional" if port.optional else ""
+    text += ", delayed" if port.delay else ""
+    return text
 
 
 def _wrapped(text: str, indent: int, width: int) -> list[str]:
@@ -90,10 +128,11 @@ def describe_block(cls: Any, width: int | None = None) -> str:
     width = width or min(shutil.get_terminal_size((100, 24)).columns, 100)
     lines = [f"{cls.name}  ({cls.__module__}.{cls.__name__})", ""]
     lines.append(rst_to_text(inspect.cleandoc(cls.__doc__ or ""), width))
+    derived = cls.specs is Block.specs or not cls.inputs  # the declarations alone give the outputs
     for title, ports in (("Inputs", cls.inputs), ("Outputs", cls.outputs)):
         lines += ["", f"{title}:"]
         for name, port in ports.items():
-            lines.append(f"  {name:<12} {_port_text(port)}")
+            lines.append(f"  {name:<12} {_port_text(port, title == 'Outputs', derived, cls.inputs)}")
             lines += ["      " + s for s in _wrapped(port.doc, 6, width)]
         if not ports:
             lines.append("  (none: a source)" if title == "Inputs" else "  (none)")

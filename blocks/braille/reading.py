@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+import flowtact.api as ft
+
 from .cells import CATEGORIES
 
 __all__ = ["GAPS", "LAYERS", "OPEN_GRAPH", "Reading", "char_windows", "prefix_windows", "read_line"]
@@ -124,7 +126,6 @@ def read_line(
     """Run ``graph`` in process, fast, and return what a decoder sees. An open-loop graph keeps
     nothing of its tick (its blocks are chunking-invariant), so a long ``tick_s`` only saves
     time; a closed loop must keep its own (pass ``tick_s=0`` to keep the graph's)."""
-    from flowtact.chunk import concat
     from flowtact.compile import compile_graph
     from flowtact.graph import load_graph
     from flowtact.runtime.inproc import InprocExecutor
@@ -142,7 +143,7 @@ def read_line(
     InprocExecutor(
         plan, fast=True, tick_s=tick_s or plan.graph.tick_s, recorder=memory, progress=progress
     ).run(duration)
-    got = {s: concat(memory.chunks.get(s, []), plan.specs[tuple(s.split("."))]) for s in streams}  # type: ignore[index]
+    got = {s: ft.concat(memory.chunks.get(s, []), plan.specs[tuple(s.split("."))]) for s in streams}  # type: ignore[index]
     char = got["scan.char"]
     windows, labels = char_windows(char.t, char.data)
     spikes = {

@@ -8,17 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from flowtact import (
-    BadDataConfig,
-    Chunk,
-    Example,
-    Port,
-    Source,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
+import flowtact.api as ft
 
 from .cells import CATEGORIES, LETTERS, Geometry, dot_positions, text_cells
 from .fingertip import COLS, ROWS, Fingertip
@@ -30,31 +20,31 @@ TAXEL_LABELS = tuple(f"r{r}c{c}" for r in range(ROWS) for c in range(COLS))
 
 
 @dataclass(frozen=True)
-class BrailleScanConfig(BadDataConfig):
+class BrailleScanConfig(ft.BadDataConfig):
     """Parameters of :class:`BrailleScan` (lengths in mm, speeds in mm/s)."""
 
-    text: str = param("", doc="the line to read: letters a-z and spaces ('' with random_letters > 0)")
-    random_letters: int = param(
+    text: str = ft.param("", doc="the line to read: letters a-z and spaces ('' with random_letters > 0)")
+    random_letters: int = ft.param(
         0, doc="if > 0, read this many random letters a-z drawn from the node's seed instead of text", ge=0
     )
-    rate_hz: float = param(250.0, doc="sampling rate of the taxels (Bologna et al.: 4 ms clock)", gt=0)
-    speed_mm_s: float = param(30.0, doc="scanning speed when the speed input is not connected", gt=0)
-    min_speed_mm_s: float = param(5.0, doc="slowest speed the finger is driven at (safe range)", gt=0)
-    max_speed_mm_s: float = param(100.0, doc="fastest speed the finger is driven at (safe range)", gt=0)
-    y_offset_mm: float = param(0.0, doc="lateral (±Y) error of the finger centre from the middle dot row")
-    max_lateral_mm: float = param(5.0, doc="lateral corrections are clamped to ±this", ge=0)
-    lead_mm: float = param(8.0, doc="blank paper before the first cell and after the last", ge=0)
-    noise: float = param(0.01, doc="sd of the white sensor noise on each reading (ΔC/C0)", ge=0)
-    scale: float = param(1.7, doc="scaling of the Braille dimensions (Bologna et al.: 1:1.7)", gt=0)
-    taxel_mm: float = param(1.6, doc="side of a square taxel electrode", gt=0)
-    pitch_mm: float = param(2.0, doc="taxel centre-to-centre distance, both directions", gt=0)
-    cover_mm: float = param(1.0, doc="thickness of the neoprene cover", gt=0)
-    spread: float = param(0.6, doc="sd of the cover's spatial spread per mm of cover thickness", gt=0)
-    press_mm: float = param(0.1, doc="uniform compression of the cover pressed on the paper", ge=0)
-    transmission: float = param(
+    rate_hz: float = ft.param(250.0, doc="sampling rate of the taxels (Bologna et al.: 4 ms clock)", gt=0)
+    speed_mm_s: float = ft.param(30.0, doc="scanning speed when the speed input is not connected", gt=0)
+    min_speed_mm_s: float = ft.param(5.0, doc="slowest speed the finger is driven at (safe range)", gt=0)
+    max_speed_mm_s: float = ft.param(100.0, doc="fastest speed the finger is driven at (safe range)", gt=0)
+    y_offset_mm: float = ft.param(0.0, doc="lateral (±Y) error of the finger centre from the middle dot row")
+    max_lateral_mm: float = ft.param(5.0, doc="lateral corrections are clamped to ±this", ge=0)
+    lead_mm: float = ft.param(8.0, doc="blank paper before the first cell and after the last", ge=0)
+    noise: float = ft.param(0.01, doc="sd of the white sensor noise on each reading (ΔC/C0)", ge=0)
+    scale: float = ft.param(1.7, doc="scaling of the Braille dimensions (Bologna et al.: 1:1.7)", gt=0)
+    taxel_mm: float = ft.param(1.6, doc="side of a square taxel electrode", gt=0)
+    pitch_mm: float = ft.param(2.0, doc="taxel centre-to-centre distance, both directions", gt=0)
+    cover_mm: float = ft.param(1.0, doc="thickness of the neoprene cover", gt=0)
+    spread: float = ft.param(0.6, doc="sd of the cover's spatial spread per mm of cover thickness", gt=0)
+    press_mm: float = ft.param(0.1, doc="uniform compression of the cover pressed on the paper", ge=0)
+    transmission: float = ft.param(
         0.3, doc="fraction of the cover compression closing the taxel gap", gt=0, le=1
     )
-    gap_mm: float = param(0.5, doc="dielectric gap of a taxel at rest", gt=0)
+    gap_mm: float = ft.param(0.5, doc="dielectric gap of a taxel at rest", gt=0)
 
     def check(self) -> None:
         if self.text and self.random_letters:
@@ -108,27 +98,8 @@ def _samples_at(x0: float, x_end: float, step: float) -> int:
     return n
 
 
-class BrailleScan(Source):
+class BrailleScan(ft.Source):
     """A fingertip of 24 capacitive taxels (6 × 4) under a neoprene cover scanning a line of Braille.
-
-    Ports
-    -----
-    speed : float64 (), "mm/s", optional, delayed (the closed loop feeds it one tick late)
-        Commanded scanning speed; clamped to [min_speed_mm_s, max_speed_mm_s]. Unconnected: the
-        constant ``speed_mm_s``.
-    lateral : float64 (), "mm", optional, delayed
-        Lateral correction added to ``y_offset_mm`` (clamped to ±max_lateral_mm); 0 before any.
-    taxels : float64 (24,), "1" (ΔC/C0), labels r{row}c{col}
-        Relative capacitance change of each taxel, ``j = row·4 + col``; row 0 is the top row
-        (+Y, dots 1 and 4), column 0 the trailing one (the finger moves towards +X).
-    char : float64 (), categorical: gap, a … z, space
-        The letter whose cell lies under the finger's centre (its two dot columns ± a dot
-        radius), else ``gap``. Ground truth for decoders: a run of equal values is one
-        character window.
-    position : float64 (), "mm"
-        The finger centre along the line; cell k spans [k, k + 1)·cell pitch (10.2 mm scaled).
-    y : float64 (), "mm"
-        The finger centre across the line (0 = on the middle dot row): offset + correction.
 
     Config
     ------
@@ -173,41 +144,69 @@ class BrailleScan(Source):
 
     config_cls = BrailleScanConfig
     inputs = {
-        "speed": Port(
-            dtype="float64", shape=(), units="mm/s", optional=True, delay=True, doc="commanded scanning speed"
+        "speed": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm/s",
+            optional=True,
+            delay=True,
+            doc="commanded scanning speed, clamped to [min_speed_mm_s, max_speed_mm_s]; unconnected: the "
+            "constant speed_mm_s",
         ),
-        "lateral": Port(
-            dtype="float64", shape=(), units="mm", optional=True, delay=True, doc="lateral (±Y) correction"
+        "lateral": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm",
+            optional=True,
+            delay=True,
+            doc="lateral (±Y) correction added to y_offset_mm (clamped to ±max_lateral_mm); 0 before any",
         ),
     }
     outputs = {
-        "taxels": Port(dtype="float64", shape=(ROWS * COLS,), units="1", doc="ΔC/C0 of the 24 taxels"),
-        "char": Port(
-            dtype="float64", shape=(), units="1", categories=CATEGORIES, doc="letter under the finger"
+        "taxels": ft.Port(
+            dtype="float64",
+            shape=(ROWS * COLS,),
+            units="1",
+            rate="rate_hz",
+            labels=TAXEL_LABELS,
+            doc="relative capacitance change ΔC/C0 of each taxel, ``j = row·4 + col``; row 0 is the top "
+            "row (+Y, dots 1 and 4), column 0 the trailing one (the finger moves towards +X)",
         ),
-        "position": Port(dtype="float64", shape=(), units="mm", doc="finger centre along the line"),
-        "y": Port(dtype="float64", shape=(), units="mm", doc="finger centre across the line"),
+        "char": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="1",
+            rate="rate_hz",
+            categories=CATEGORIES,
+            doc="the letter whose cell lies under the finger's centre (its two dot columns ± a dot "
+            "radius), else ``gap``. Ground truth for decoders: a run of equal values is one character "
+            "window",
+        ),
+        "position": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm",
+            rate="rate_hz",
+            doc="the finger centre along the line; cell k spans [k, k + 1)·cell pitch (10.2 mm scaled)",
+        ),
+        "y": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm",
+            rate="rate_hz",
+            doc="the finger centre across the line (0 = on the middle dot row): offset + correction",
+        ),
     }
     counter_docs = {
         "speed_clamped": "speed samples outside [min_speed_mm_s, max_speed_mm_s] (0, negative or too fast), "
         "clamped into it: the controller asked for more than the rig allows",
         "lateral_clamped": "lateral corrections beyond ±max_lateral_mm, clamped",
-        **nonfinite_counter_docs("speed or lateral samples"),
+        **ft.nonfinite_counter_docs("speed or lateral samples"),
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        self._steered = "speed" in inputs
-        rate = self.config.rate_hz
-        return {
-            "taxels": StreamSpec("float64", (ROWS * COLS,), "1", rate, labels=TAXEL_LABELS),
-            "char": StreamSpec("float64", (), "1", rate, categories=CATEGORIES),
-            "position": StreamSpec("float64", (), "mm", rate),
-            "y": StreamSpec("float64", (), "mm", rate),
-        }
-
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Mapping[str, ft.StreamSpec]) -> float | None:
         c = self.config
-        v = c.min_speed_mm_s if getattr(self, "_steered", False) else self._clamp_speed(c.speed_mm_s)
+        v = c.min_speed_mm_s if "speed" in inputs else self._clamp_speed(c.speed_mm_s)
         x0, x_end = c.track()
         return _samples_at(x0, x_end, v / c.rate_hz) / c.rate_hz
 
@@ -241,7 +240,7 @@ class BrailleScan(Source):
         }
 
     # -- inputs ----------------------------------------------------------------------------------
-    def _take(self, port: str, chunk: Chunk | None) -> None:
+    def _take(self, port: str, chunk: ft.Chunk | None) -> None:
         """Screen, clamp and queue the commands that arrived on ``port``.
 
         Non-finite samples: ``raise`` stops the run; ``drop`` removes them; ``hold`` repeats the
@@ -255,7 +254,7 @@ class BrailleScan(Source):
         bad = ~np.isfinite(v)
         if bad.any():
             if policy == "raise":
-                screen_nonfinite(self, chunk, policy, port, None)  # raises, naming node and port
+                ft.screen_nonfinite(self, chunk, policy, port, None)  # raises, naming node and port
             self.count("nonfinite_drop" if policy == "drop" else "nonfinite_hold", int(bad.sum()))
         lo, hi = self._range[port]
         clamped = int((~bad & ((v < lo) | (v > hi))).sum())
@@ -288,7 +287,9 @@ class BrailleScan(Source):
         return latest
 
     # -- step --------------------------------------------------------------------------------------
-    def step(self, now: float, speed: Chunk | None = None, lateral: Chunk | None = None) -> dict[str, Chunk]:
+    def step(
+        self, now: float, speed: ft.Chunk | None = None, lateral: ft.Chunk | None = None
+    ) -> dict[str, ft.Chunk]:
         self._take("speed", speed)
         self._take("lateral", lateral)
         n_due = max(self.due(now, self.config.rate_hz) - self._i, 0)
@@ -312,17 +313,17 @@ class BrailleScan(Source):
             self._x_last = xs[-1]
         t = (self._i - n + np.arange(n)) / self.config.rate_hz
         x, y = np.array(xs, np.float64), np.array(ys, np.float64)
-        out: dict[str, Chunk] = {}
+        out: dict[str, ft.Chunk] = {}
         want = self.demanded
         if "taxels" in want:
             noise = self._noise_rng.standard_normal((n, ROWS * COLS)) * self.config.noise
-            out["taxels"] = Chunk(t, self._tip.reading(self._tip.compression(x, y, self._dots)) + noise)
+            out["taxels"] = ft.Chunk(t, self._tip.reading(self._tip.compression(x, y, self._dots)) + noise)
         if "char" in want:
-            out["char"] = Chunk(t, self._char(x))
+            out["char"] = ft.Chunk(t, self._char(x))
         if "position" in want:
-            out["position"] = Chunk(t, x)
+            out["position"] = ft.Chunk(t, x)
         if "y" in want:
-            out["y"] = Chunk(t, y)
+            out["y"] = ft.Chunk(t, y)
         return out
 
     def _char(self, x: np.ndarray) -> np.ndarray:
@@ -350,12 +351,12 @@ class BrailleScan(Source):
         return f'scanned "{text}" ({letters} letters{part}) in {span:.2f} s, {dist / span:.0f} mm/s mean'
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         n = 250
         speed = 30.0 + 20.0 * np.sin(np.arange(n) / 40.0)
         speed[100] = 0.0  # clamped to the minimum
         lateral = 0.3 * np.sin(np.arange(n) / 60.0)
-        return Example(
+        return ft.Example(
             params={"text": "bat", "rate_hz": 250.0},
             inputs={"speed": speed, "lateral": lateral},
             units={"speed": "mm/s", "lateral": "mm"},

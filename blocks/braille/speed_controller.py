@@ -10,9 +10,7 @@ from typing import Literal
 
 import numpy as np
 
-from flowtact.block import Block, Example, Port, SpecError
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
+import flowtact.api as ft
 
 __all__ = ["SpeedController", "SpeedControllerConfig", "confidence"]
 
@@ -35,24 +33,30 @@ def confidence(p: np.ndarray, measure: str) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class SpeedControllerConfig(Config):
+class SpeedControllerConfig(ft.Config):
     """Parameters of :class:`SpeedController` (speeds in mm/s, accelerations in mm/s², offsets in mm)."""
 
-    min_speed_mm_s: float = param(10.0, doc="slowest commanded speed, mm/s (also the fail-safe speed)", gt=0)
-    max_speed_mm_s: float = param(80.0, doc="fastest commanded speed, mm/s", gt=0)
-    start_speed_mm_s: float | None = param(
+    min_speed_mm_s: float = ft.param(
+        10.0, doc="slowest commanded speed, mm/s (also the fail-safe speed)", gt=0
+    )
+    max_speed_mm_s: float = ft.param(80.0, doc="fastest commanded speed, mm/s", gt=0)
+    start_speed_mm_s: float | None = ft.param(
         None, doc="speed before the first posterior, mm/s (None: min)", gt=0
     )
-    measure: Literal["max", "entropy"] = param(
+    measure: Literal["max", "entropy"] = ft.param(
         "max", doc="confidence of a posterior: its largest probability, or 1 − normalised entropy"
     )
-    unsure: float = param(0.5, doc="confidence at or below which the speed target is the minimum", ge=0, lt=1)
-    sure: float = param(0.95, doc="confidence at or above which the speed target is the maximum", gt=0, le=1)
-    max_accel_mm_s2: float = param(2000.0, doc="rate limit: largest speed change per second, mm/s²", gt=0)
-    lateral_gain_hz: float = param(
+    unsure: float = ft.param(
+        0.5, doc="confidence at or below which the speed target is the minimum", ge=0, lt=1
+    )
+    sure: float = ft.param(
+        0.95, doc="confidence at or above which the speed target is the maximum", gt=0, le=1
+    )
+    max_accel_mm_s2: float = ft.param(2000.0, doc="rate limit: largest speed change per second, mm/s²", gt=0)
+    lateral_gain_hz: float = ft.param(
         5.0, doc="lateral corrector: integral gain, correction in mm per s per mm of error", ge=0
     )
-    max_lateral_mm: float = param(2.0, doc="lateral corrector: largest correction either way, mm", gt=0)
+    max_lateral_mm: float = ft.param(2.0, doc="lateral corrector: largest correction either way, mm", gt=0)
 
     def check(self) -> None:
         if self.max_speed_mm_s < self.min_speed_mm_s:
@@ -70,19 +74,8 @@ class SpeedControllerConfig(Config):
             )
 
 
-class SpeedController(Block):
+class SpeedController(ft.Block):
     """Scanning speed from the decoder's confidence (slow when unsure), bounded and rate-limited.
-
-    Ports
-    -----
-    posterior : float64 (n_classes,), with a rate
-        A posterior per sample, e.g. ``naive_bayes.running``.
-    lateral_error : float64 (), mm, with a rate (optional)
-        An estimate of the finger's lateral (±Y) offset from the line; connect it to get ``lateral``.
-    speed : float64 (), mm/s, one per posterior sample
-        The commanded scanning speed, always within [min_speed_mm_s, max_speed_mm_s].
-    lateral : float64 (), mm, one per lateral_error sample
-        The lateral correction, within ±max_lateral_mm.
 
     Config
     ------
@@ -113,19 +106,37 @@ class SpeedController(Block):
 
     config_cls = SpeedControllerConfig
     inputs = {
-        "posterior": Port(dtype="float64", ndim=(1,), require_rate=True, doc="posterior over the classes"),
-        "lateral_error": Port(
+        "posterior": ft.Port(
+            dtype="float64",
+            ndim=(1,),
+            require_rate=True,
+            doc="a posterior per sample, shape (n_classes,), e.g. naive_bayes.running",
+        ),
+        "lateral_error": ft.Port(
             dtype="float64",
             shape=(),
             units="mm",
             optional=True,
             require_rate=True,
-            doc="lateral offset estimate, mm",
+            doc="an estimate of the finger's lateral (±Y) offset from the line; connect it to get lateral",
         ),
     }
     outputs = {
-        "speed": Port(dtype="float64", shape=(), units="mm/s", doc="commanded scanning speed"),
-        "lateral": Port(dtype="float64", shape=(), units="mm", doc="lateral correction"),
+        "speed": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm/s",
+            doc=(
+                "the commanded scanning speed, always within [min_speed_mm_s, max_speed_mm_s], one per "
+                "posterior sample"
+            ),
+        ),
+        "lateral": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm",
+            doc="the lateral correction, within ±max_lateral_mm, one per lateral_error sample",
+        ),
     }
     counter_docs = {
         "clamped": "speed targets cut to the minimum or maximum (confidence below unsure or above sure): normal",
@@ -136,13 +147,13 @@ class SpeedController(Block):
         "lateral_fail_safe": "non-finite lateral errors: the correction was held; a fault upstream",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         p = inputs["posterior"]
         if p.shape[0] < 1:
-            raise SpecError("posterior", f"{self.node}: input 'posterior' needs at least one class")
-        out = {"speed": StreamSpec(dtype="float64", shape=(), units="mm/s", rate_hz=p.rate_hz)}
+            raise ft.SpecError("posterior", f"{self.node}: input 'posterior' needs at least one class")
+        out = {"speed": ft.StreamSpec(dtype="float64", shape=(), units="mm/s", rate_hz=p.rate_hz)}
         if "lateral_error" in inputs:
-            out["lateral"] = StreamSpec(
+            out["lateral"] = ft.StreamSpec(
                 dtype="float64", shape=(), units="mm", rate_hz=inputs["lateral_error"].rate_hz
             )
         return out
@@ -154,13 +165,13 @@ class SpeedController(Block):
         self._y = 0.0
         self._t_lat: float | None = None
 
-    def step(self, posterior: Chunk, lateral_error: Chunk | None = None) -> dict[str, Chunk]:
-        out = {"speed": Chunk(posterior.t, self._speeds(posterior), posterior.end)}
+    def step(self, posterior: ft.Chunk, lateral_error: ft.Chunk | None = None) -> dict[str, ft.Chunk]:
+        out = {"speed": ft.Chunk(posterior.t, self._speeds(posterior), posterior.end)}
         if lateral_error is not None:
-            out["lateral"] = Chunk(lateral_error.t, self._lateral(lateral_error), lateral_error.end)
+            out["lateral"] = ft.Chunk(lateral_error.t, self._lateral(lateral_error), lateral_error.end)
         return out
 
-    def _speeds(self, posterior: Chunk) -> np.ndarray:
+    def _speeds(self, posterior: ft.Chunk) -> np.ndarray:
         c = self.config
         conf = confidence(posterior.data, c.measure)
         frac = (conf - c.unsure) / (c.sure - c.unsure)
@@ -182,7 +193,7 @@ class SpeedController(Block):
             v[i] = self._v
         return v
 
-    def _lateral(self, err: Chunk) -> np.ndarray:
+    def _lateral(self, err: ft.Chunk) -> np.ndarray:
         c = self.config
         y = np.empty(len(err))
         for i, (t, e) in enumerate(zip(err.t.tolist(), np.asarray(err.data).tolist(), strict=True)):
@@ -199,14 +210,14 @@ class SpeedController(Block):
         return y
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(2)
         logits = rng.normal(0.0, 1.0, (500, 5)) * np.linspace(0.2, 4.0, 500)[:, None]
         p = np.exp(logits) / np.exp(logits).sum(axis=1, keepdims=True)
         p[100] = np.nan  # a broken posterior: the fail-safe
         lat = 1.5 * np.sin(np.linspace(0, 6, 500))
         lat[200] = np.inf
-        return Example(
+        return ft.Example(
             params={"max_accel_mm_s2": 500.0},
             inputs={"posterior": p, "lateral_error": lat},
             rate_hz=250.0,

@@ -11,7 +11,7 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError
+import flowtact.api as ft
 from flowtact.stress import Outcome, StressCase
 from flowtact.testing import run_source
 
@@ -66,7 +66,7 @@ def speed_nan_raises() -> Outcome:
     speed[50] = np.nan
     try:
         _scan(speed)
-    except BadDataError as e:
+    except ft.BadDataError as e:
         msg = str(e)
         ok = "'speed'" in msg and "\n" not in msg
         return Outcome("speed_nan_raise", "braille_scan", "one NaN speed, on_bad_data: raise",

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+import flowtact.api as ft
 from flowtact.blocks.spiking.nb_model import (
     ModelError,
     NaiveBayesModel,
@@ -36,7 +37,7 @@ from flowtact.blocks.spiking.window_features import window_features
 from flowtact.command import CommandParser, run_command
 from flowtact.commands import Command
 from flowtact.errors import UsageError
-from flowtact.limits import MAX_SEED, cli_float, cli_int, format_bytes
+from flowtact.limits import cli_float, cli_int
 from flowtact.terminal_bar import TerminalBar
 
 from .cells import LETTERS
@@ -221,8 +222,8 @@ def _check_size(
     need = windows * units * bins * 8
     if need > FEATURE_BUDGET_BYTES:
         raise ValueError(
-            f"{windows} windows × {units} units × --bins {bins} need {format_bytes(need)} of features; "
-            f"at most {format_bytes(FEATURE_BUDGET_BYTES)} (fewer --letters, --repeats or --bins)"
+            f"{windows} windows × {units} units × --bins {bins} need {ft.format_bytes(need)} of features; "
+            f"at most {ft.format_bytes(FEATURE_BUDGET_BYTES)} (fewer --letters, --repeats or --bins)"
         )
 
 
@@ -289,7 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--seed",
-        type=cli_int(0, MAX_SEED),
+        type=cli_int(0, ft.MAX_SEED),
         default=1,
         help=f"first graph seed (default 1; < {HELDOUT_SEED})",
     )

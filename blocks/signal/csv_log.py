@@ -25,10 +25,9 @@ from typing import BinaryIO
 
 import numpy as np
 
+import flowtact.api as ft
 from flowtact.blocks.signal.replay_limits import MAX_COLUMNS, MAX_LINE_BYTES, MAX_TEXT_BYTES, listing
 from flowtact.bounded_files import FileRefused, open_regular, refusal
-from flowtact.errors import FlowtactError
-from flowtact.limits import format_bytes
 
 __all__ = ["CsvError", "CsvLog", "read_csv_log", "row_place"]
 
@@ -39,7 +38,7 @@ TIME = "t"
 _TIME_LIKE = ("time", "time_s", "t_s", "timestamp", "times", "T", "Time", "TIME", "seconds", "sec")
 
 
-class CsvError(FlowtactError, ValueError):
+class CsvError(ft.FlowtactError, ValueError):
     """A CSV log that cannot be read: ``where`` is (display path, line, column), 1-based."""
 
     def __init__(self, path: str, line: int, col: int, message: str) -> None:
@@ -108,7 +107,7 @@ def _read(path: str, _mtime_ns: int, _size: int) -> CsvLog:
                 name,
                 1,
                 1,
-                f"{format_bytes(size)}: larger than the {format_bytes(MAX_TEXT_BYTES)} a .csv log may be "
+                f"{ft.format_bytes(size)}: larger than the {ft.format_bytes(MAX_TEXT_BYTES)} a .csv log may be "
                 "(its table is held in memory); split it, or record to .h5",
             )
         _scan(raw, name)
@@ -208,7 +207,7 @@ def _check_lines(block: bytes, run: int, lines_before: int, col_before: int, nam
             name,
             line,
             1,
-            f"a line longer than {format_bytes(MAX_LINE_BYTES)} (a .csv row is at most "
+            f"a line longer than {ft.format_bytes(MAX_LINE_BYTES)} (a .csv row is at most "
             f"{MAX_LINE_BYTES} bytes): not a sensor log",
         )
     return int(lengths[-1])

@@ -7,28 +7,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flowtact import (
-    Block,
-    Chunk,
-    Config,
-    Example,
-    Port,
-    StreamSpec,
-    param,
-)
-from flowtact.limits import MAX_TICK_S
+import flowtact.api as ft
 
 __all__ = ["Delay", "DelayConfig"]
 
 
 @dataclass(frozen=True)
-class DelayConfig(Config):
+class DelayConfig(ft.Config):
     """What the fed-back stream carries: in a loop the compiler needs it before the loop is resolved."""
 
-    dtype: str = param("float64", doc="dtype of the fed-back stream")
-    shape: tuple[int, ...] = param((), doc="sample shape of the fed-back stream", ge=1)
-    units: str = param("1", doc="units of the fed-back stream")
-    rate_hz: float | None = param(None, doc="rate of the fed-back stream (None: an event stream)", gt=0)
+    dtype: str = ft.param("float64", doc="dtype of the fed-back stream")
+    shape: tuple[int, ...] = ft.param((), doc="sample shape of the fed-back stream", ge=1)
+    units: str = ft.param("1", doc="units of the fed-back stream")
+    rate_hz: float | None = ft.param(None, doc="rate of the fed-back stream (None: an event stream)", gt=0)
 
     def state_bytes(self) -> dict[str, float]:
         """One tick of the fed-back stream: its sample size × the samples of a longest tick."""
@@ -36,17 +27,12 @@ class DelayConfig(Config):
             itemsize = np.dtype(self.dtype).itemsize
         except TypeError:
             itemsize = 8  # not a dtype: the block's own check says so
-        samples = (self.rate_hz or 1.0) * MAX_TICK_S
+        samples = (self.rate_hz or 1.0) * ft.MAX_TICK_S
         return {"shape": float(np.prod(self.shape, dtype=float)) * itemsize * samples}
 
 
-class Delay(Block):
+class Delay(ft.Block):
     """One-tick delay: passes its input through unchanged so a graph can close a feedback loop.
-
-    Ports
-    -----
-    x : any dtype and shape (declared ``delay=True``: it receives data one executor tick late)
-    y : the same samples with the same timestamps, dtype, shape, units and rate as ``x``
 
     Config
     ------
@@ -72,15 +58,23 @@ class Delay(Block):
     """
 
     config_cls = DelayConfig
-    inputs = {"x": Port(dtype=None, delay=True, doc="samples to pass on (one tick late)")}
-    outputs = {"y": Port(dtype=None, doc="the same samples, unchanged")}
+    inputs = {
+        "x": ft.Port(
+            dtype=None, delay=True, doc="any dtype and shape: it receives data one executor tick late"
+        )
+    }
+    outputs = {
+        "y": ft.Port(
+            dtype=None, doc="the same samples with the same timestamps, dtype, shape, units and rate as x"
+        )
+    }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         if "x" in inputs:
             return {"y": inputs["x"]}
         c = self.config  # inside a loop: the fed-back stream is not resolved yet
         return {
-            "y": StreamSpec(
+            "y": ft.StreamSpec(
                 dtype=c.dtype,
                 shape=tuple(c.shape),
                 units=c.units,
@@ -89,10 +83,10 @@ class Delay(Block):
             )
         }
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         return {"y": x}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(3)
-        return Example(inputs={"x": rng.normal(size=(200, 2))}, units={"x": "N"})
+        return ft.Example(inputs={"x": rng.normal(size=(200, 2))}, units={"x": "N"})

@@ -10,18 +10,7 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Example,
-    Port,
-    SpecError,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
+import flowtact.api as ft
 
 __all__ = ["Lowpass", "LowpassConfig", "lowpass_apply", "lowpass_apply_python"]
 
@@ -84,26 +73,21 @@ lowpass_apply_python = lowpass_apply.py_func
 
 
 @dataclass(frozen=True)
-class LowpassConfig(BadDataConfig):
+class LowpassConfig(ft.BadDataConfig):
     """Parameters of :class:`Lowpass`."""
 
-    cutoff_hz: float = param(10.0, doc="-3 dB cut-off frequency of the first-order low-pass, Hz", gt=0)
-    time_base: Literal["timestamps", "nominal"] = param(
+    cutoff_hz: float = ft.param(10.0, doc="-3 dB cut-off frequency of the first-order low-pass, Hz", gt=0)
+    time_base: Literal["timestamps", "nominal"] = ft.param(
         "timestamps",
         doc="timestamps: each step uses the time since the previous sample; nominal: a fixed 1/rate step",
     )
-    initial: Literal["first", "zero"] = param(
+    initial: Literal["first", "zero"] = ft.param(
         "first", doc="state before the stream: its first sample (no start transient) or zero"
     )
 
 
-class Lowpass(Block):
+class Lowpass(ft.Block):
     """First-order (one-pole) low-pass per channel, stepped on the samples' own timestamps.
-
-    Ports
-    -----
-    x : float64, any shape, any units, sampled — e.g. the three FSR forces in N
-    y : float64, same shape, units, rate and labels as ``x``
 
     Config
     ------
@@ -139,18 +123,26 @@ class Lowpass(Block):
     """
 
     config_cls = LowpassConfig
-    inputs = {"x": Port(dtype="float64", require_rate=True, doc="signal, any shape")}
-    outputs = {"y": Port(dtype="float64", doc="low-passed signal, same shape and units")}
+    inputs = {
+        "x": ft.Port(
+            dtype="float64",
+            require_rate=True,
+            doc="signal, any shape and units (e.g. the three FSR forces in N)",
+        )
+    }
+    outputs = {
+        "y": ft.Port(dtype="float64", doc="low-passed signal: the same shape, units, rate and labels as x")
+    }
     counter_docs = {
         "nonincreasing_t": "samples stamped at or before the previous one: they did not move the filter "
         "(the output repeats); timestamps went wrong upstream",
-        **nonfinite_counter_docs("samples on 'x'"),
+        **ft.nonfinite_counter_docs("samples on 'x'"),
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         x = inputs["x"]
         if self.config.cutoff_hz >= 0.5 * x.rate_hz:
-            raise SpecError(
+            raise ft.SpecError(
                 "x",
                 f"cutoff_hz {self.config.cutoff_hz:g} must be below half the stream's rate "
                 f"({x.rate_hz:g} Hz)",
@@ -169,12 +161,12 @@ class Lowpass(Block):
         self._started = False
         self._last: np.ndarray | None = None
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         cfg = self.config
-        x, self._last = screen_nonfinite(self, x, cfg.on_bad_data, "x", self._last)
+        x, self._last = ft.screen_nonfinite(self, x, cfg.on_bad_data, "x", self._last)
         n = len(x)
         if n == 0:
-            return {"y": Chunk.empty(shape=self._shape, end=x.end)}
+            return {"y": ft.Chunk.empty(shape=self._shape, end=x.end)}
         y, self._prev_t, self._started, bad = lowpass_apply(
             np.ascontiguousarray(x.t, np.float64),
             np.ascontiguousarray(x.data.reshape(n, self._nc), np.float64),
@@ -187,12 +179,12 @@ class Lowpass(Block):
             cfg.initial == "first",
         )
         self.count("nonincreasing_t", bad)
-        return {"y": Chunk(x.t, y.reshape(n, *self._shape), x.end)}
+        return {"y": ft.Chunk(x.t, y.reshape(n, *self._shape), x.end)}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(11)
         n = 200
         t = np.arange(n) / 100.0
         f = np.outer((t > 0.5) * 1.5, [1.0, 0.8, 1.2]) + rng.normal(0, 0.1, (n, 3))
-        return Example(params={"cutoff_hz": 5.0}, inputs={"x": f}, rate_hz=100.0, units={"x": "N"})
+        return ft.Example(params={"cutoff_hz": 5.0}, inputs={"x": f}, rate_hz=100.0, units={"x": "N"})

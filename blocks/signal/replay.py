@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source, SpecError, example_folder
+import flowtact.api as ft
 from flowtact.blocks.signal.csv_log import CsvError, CsvLog, display, read_csv_log, row_place
 from flowtact.blocks.signal.replay_limits import (
     MAX_CHUNK_BYTES,
@@ -28,9 +28,7 @@ from flowtact.blocks.signal.replay_limits import (
     time_problem,
 )
 from flowtact.bounded_files import FileRefused, NpyHeader, NpzArchive, check_hdf5_signature, open_npz, refusal
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.limits import MAX_TICK_S, format_bytes
-from flowtact.params import Config, did_you_mean, param
+from flowtact.params import did_you_mean
 from flowtact.safe_text import shown
 
 __all__ = ["Replay", "ReplayConfig"]
@@ -43,27 +41,29 @@ _DENSITY_BLOCK = 1 << 20  # time stamps searched at a time by Replay._check_dens
 
 
 @dataclass(frozen=True)
-class ReplayConfig(Config):
-    path: str = param(
+class ReplayConfig(ft.Config):
+    path: str = ft.param(
         doc="file to play back: a flowtact recording (.h5) or a .npz / .csv file (relative: to the graph file)",
         path=True,
     )
-    stream: str | tuple[str, ...] | None = param(
+    stream: str | tuple[str, ...] | None = ft.param(
         None,
         doc=".h5: '<node>.<port>' (optional if the file holds one stream); .npz: data array (default "
         "'data'); .csv: column name or list of columns (default all but 't')",
     )
-    units: str | None = param(
+    units: str | None = ft.param(
         None, doc="units of the data for .npz/.csv (default '1'); for .h5, if given, must match the recording"
     )
-    rate_hz: float | None = param(
+    rate_hz: float | None = ft.param(
         None,
         doc="nominal sample rate; default the recorded rate (.h5) or 1 / median step of t",
         gt=0,
         le=MAX_RATE_HZ,
     )
-    time_offset_s: float = param(0.0, doc="added to every time stamp; samples landing before 0 are skipped")
-    loop: bool = param(False, doc="start again after the end, times continuing (period = recorded length)")
+    time_offset_s: float = ft.param(
+        0.0, doc="added to every time stamp; samples landing before 0 are skipped"
+    )
+    loop: bool = ft.param(False, doc="start again after the end, times continuing (period = recorded length)")
 
     def check(self) -> None:
         suffix = Path(self.path).suffix.lower()
@@ -82,7 +82,7 @@ class ReplayConfig(Config):
 class _Source:
     """What the file holds, as far as playback needs: spec, times, data (or an HDF5 dataset)."""
 
-    spec: StreamSpec
+    spec: ft.StreamSpec
     t: np.ndarray | None = None  # file times, before the offset; None until loaded (h5)
     data: Any = None  # ndarray, or an h5py Dataset read slice by slice
     end_s: float | None = None  # events: the recorded end watermark
@@ -91,15 +91,8 @@ class _Source:
     csv: CsvLog | None = None  # a .csv's parsed log, to locate a bad time stamp at its line
 
 
-class Replay(Source):
+class Replay(ft.Source):
     """Play back a stream from a .h5 recording, a .npz or a .csv file, in graph time.
-
-    Ports
-    -----
-    y : the file's dtype and sample shape
-        The recorded stream with its recorded units, rate and channel labels (.h5), or the array /
-        columns of a .npz / .csv file. When the recorded stream is an event stream (spike times
-        + unit index) so is ``y``, and each chunk carries the watermark ``end = now``.
 
     Config
     ------
@@ -153,11 +146,16 @@ class Replay(Source):
 
     config_cls = ReplayConfig
     outputs = {
-        "y": Port(
+        "y": ft.Port(
             dtype=None,
             shape=None,
             units=None,
-            doc="the played-back stream: recorded dtype, shape, units, rate (events if recorded as events)",
+            doc=(
+                "the recorded stream with the file's dtype, sample shape, units, rate and channel labels "
+                "(.h5), or the array / columns of a .npz / .csv file. When the recorded stream is an "
+                "event stream (spike times + unit index) so is y, and each chunk carries the watermark "
+                "end = now"
+            ),
         )
     }
     counter_docs = {
@@ -170,11 +168,9 @@ class Replay(Source):
         self._src: _Source | None = None
 
     # -- compile time ------------------------------------------------------------------------
-    def specs(self, inputs: Any) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
-        """The output spec, read from the file header."""
-        self.close()
-        self._src = self._inspect()
-        return {"y": self._src.spec}
+    def specs(self, inputs: Any) -> dict[str, ft.StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
+        """The output spec, read from the file (kept by nothing: ``open``/``reset`` read it for the run)."""
+        return {"y": (self._src if self._src is not None else self._inspect()).spec}
 
     def _where(self) -> str:
         return f"{self.node} ({self.name})"
@@ -201,9 +197,9 @@ class Replay(Source):
             raise self._refused(path, refusal(path, e).reason) from None
         return src
 
-    def _refused(self, path: Path, reason: str) -> SpecError:
+    def _refused(self, path: Path, reason: str) -> ft.SpecError:
         """A file-level refusal, located at the file (so the reason does not name it)."""
-        return SpecError("y", f"{self._where()}: {reason}", where=(display(path), 1, 1))
+        return ft.SpecError("y", f"{self._where()}: {reason}", where=(display(path), 1, 1))
 
     def _inspect_h5(self, path: Path) -> _Source:
         c = self.config
@@ -221,16 +217,16 @@ class Replay(Source):
             raise FileRefused(path, f"stream {name} declares rate_hz {spec.rate_hz:g}; a rate {why}")
         _check_h5_stream(path, name, spec, self.config.time_offset_s)
         if c.units is not None and c.units != spec.units:
-            raise SpecError(
+            raise ft.SpecError(
                 "y", f"{self._where()}: units '{c.units}' given, but {name} in {path} is in '{spec.units}'"
             )
         if c.rate_hz is not None:
             if spec.events:
-                raise SpecError(
+                raise ft.SpecError(
                     "y", f"{self._where()}: rate_hz given, but {name} in {path} is an event stream"
                 )
             if not math.isclose(c.rate_hz, spec.rate_hz or math.nan, rel_tol=1e-9):
-                raise SpecError(
+                raise ft.SpecError(
                     "y",
                     f"{self._where()}: rate_hz {c.rate_hz:g} given, but {name} in {path} was recorded at "
                     f"{spec.rate_hz:g} Hz",
@@ -249,12 +245,12 @@ class Replay(Source):
             has_t = "t" in z.names and key != "t"
             t_head = _npy_header(z, "t") if has_t else None
             if len(head.shape) == 0:
-                raise SpecError(
+                raise ft.SpecError(
                     "y", f"{self._where()}: array '{key}' in {path} is a scalar; need (n, ...) samples"
                 )
             n = head.shape[0]
             if t_head is not None and t_head.shape != (n,):
-                raise SpecError(
+                raise ft.SpecError(
                     "y", f"{self._where()}: 't' in {path} has shape {t_head.shape}; '{key}' has {n} samples"
                 )
             need = head.nbytes + 8 * n + (t_head.nbytes if t_head is not None else 0)
@@ -271,7 +267,7 @@ class Replay(Source):
                     "rate_hz", f"is required: {path} has no 't' array (samples are stamped i / rate_hz)"
                 )
             t = np.arange(n) / c.rate_hz
-        spec = StreamSpec(dtype=head.dtype.name, shape=tuple(head.shape[1:]), units=c.units or "1")
+        spec = ft.StreamSpec(dtype=head.dtype.name, shape=tuple(head.shape[1:]), units=c.units or "1")
         return _Source(spec=spec, t=t, data=(path, key))
 
     def _inspect_csv(self, path: Path) -> _Source:
@@ -279,7 +275,7 @@ class Replay(Source):
         try:
             log = read_csv_log(path)
         except CsvError as e:
-            raise SpecError("y", e.message, where=e.where) from None
+            raise ft.SpecError("y", e.message, where=e.where) from None
         names = log.names
         index = {n: i for i, n in enumerate(names)}
         if c.stream is None:
@@ -296,7 +292,7 @@ class Replay(Source):
         idx = [index[col] for col in columns]
         single = isinstance(c.stream, str)
         data = np.ascontiguousarray(log.table[:, idx[0]] if single else log.table[:, idx])
-        spec = StreamSpec(
+        spec = ft.StreamSpec(
             dtype="float64",
             shape=() if single else (len(columns),),
             units=c.units or "1",
@@ -310,11 +306,11 @@ class Replay(Source):
         bad = ~np.isfinite(t)
         if bad.any():
             i = int(np.argmax(bad))
-            raise SpecError("y", f"{self._where()}: t[{i}] = {t[i]} in {path} is not a finite time")
+            raise ft.SpecError("y", f"{self._where()}: t[{i}] = {t[i]} in {path} is not a finite time")
         step = np.diff(t)
         if (step < 0).any():
             i = int(np.argmax(step < 0)) + 1
-            raise SpecError(
+            raise ft.SpecError(
                 "y",
                 f"{self._where()}: t decreases at sample {i} in {path} ({t[i]:.9g} s after {t[i - 1]:.9g} s); "
                 "time stamps must be non-decreasing",
@@ -325,13 +321,13 @@ class Replay(Source):
                 shifted = f" (+ time_offset_s {offset:g})" if offset else ""
                 if log is not None:
                     line, col, text = row_place(log, i)
-                    raise SpecError(
+                    raise ft.SpecError(
                         "y", f"{self._where()}: time {text}{shifted} {why}", where=(display(path), line, col)
                     )
                 raise self._refused(path, f"t[{i}] = {t[i]:.9g} s{shifted} {why}")
 
     def _check_density(self, src: _Source, t: np.ndarray, path: Path) -> None:
-        """Bound what one tick may emit: the samples in the densest ``MAX_TICK_S`` of the file
+        """Bound what one tick may emit: the samples in the densest ``ft.MAX_TICK_S`` of the file
         (times the repeats a loop fits in a tick) must fit the budget, or a file of equal time
         stamps, or a short loop, would have one tick read everything at once (or for ever)."""
         n = len(t)
@@ -340,17 +336,17 @@ class Replay(Source):
         most = 0
         for lo in range(0, n, _DENSITY_BLOCK):  # a block at a time: no n-sized temporaries
             hi = min(n, lo + _DENSITY_BLOCK)
-            ends = np.searchsorted(t, t[lo:hi] + MAX_TICK_S, side="left")
+            ends = np.searchsorted(t, t[lo:hi] + ft.MAX_TICK_S, side="left")
             most = max(most, int(np.max(ends - np.arange(lo, hi))))
         if self.config.loop and (period := _period(src, t)) > 0:
-            most = max(most, n * (math.ceil(MAX_TICK_S / period) + 1))
+            most = max(most, n * (math.ceil(ft.MAX_TICK_S / period) + 1))
         row = math.prod(src.spec.shape) * np.dtype(src.spec.dtype).itemsize + 8  # and its time
         if most * row > REPLAY_BUDGET_BYTES:
             looped = " (looped)" if self.config.loop else ""
             raise self._refused(
                 path,
-                f"up to {most} samples ({format_bytes(most * row)}) fall within {MAX_TICK_S:g} s{looped}, "
-                f"the longest tick; a replay may emit at most {format_bytes(REPLAY_BUDGET_BYTES)} in one tick",
+                f"up to {most} samples ({ft.format_bytes(most * row)}) fall within {ft.MAX_TICK_S:g} s{looped}, "
+                f"the longest tick; a replay may emit at most {ft.format_bytes(REPLAY_BUDGET_BYTES)} in one tick",
             )
 
     def _rate(self, t: np.ndarray, path: Path) -> float:
@@ -372,17 +368,17 @@ class Replay(Source):
                 )
             return inferred
         if inferred is not None and abs(inferred - c.rate_hz) > RATE_TOLERANCE * c.rate_hz:
-            raise SpecError(
+            raise ft.SpecError(
                 "y",
                 f"{self._where()}: rate_hz {c.rate_hz:g} given, but the time stamps of {path} step at "
                 f"{inferred:g} Hz (median)",
             )
         return float(c.rate_hz)
 
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Any) -> float | None:  # noqa: ARG002 — a source: its end comes from its file
         """Graph time just past the last sample (one sample period after it; an event stream's
-        recorded end), or None when looping or empty. Known once ``specs`` has read the file."""
-        src = self._src
+        recorded end), or None when looping or empty; read from the file when not yet opened."""
+        src = self._src if self._src is not None else self._inspect()
         if self.config.loop or src is None:
             return None
         last, end = (
@@ -469,7 +465,7 @@ class Replay(Source):
         assert src.t is not None
         period = _period(src, src.t)
         if not period > 0:
-            raise SpecError(
+            raise ft.SpecError(
                 "y", f"{self._where()}: cannot loop {self.config.path}: its length is {period:g} s"
             )
         return period
@@ -485,7 +481,7 @@ class Replay(Source):
             j += 1
         return j
 
-    def step(self, now: float) -> dict[str, Chunk]:
+    def step(self, now: float) -> dict[str, ft.Chunk]:
         src = self._src
         assert src is not None
         ts: list[np.ndarray] = []
@@ -506,15 +502,15 @@ class Replay(Source):
                 break
         spec = src.spec
         if not ts:
-            empty = Chunk.empty(spec)
-            return {"y": Chunk(empty.t, empty.data, now if spec.events else None)}
+            empty = ft.Chunk.empty(spec)
+            return {"y": ft.Chunk(empty.t, empty.data, now if spec.events else None)}
         t = ts[0] if len(ts) == 1 else np.concatenate(ts)
         d = ds[0] if len(ds) == 1 else np.concatenate(ds)
-        return {"y": Chunk(t, d, now if spec.events else None)}
+        return {"y": ft.Chunk(t, d, now if spec.events else None)}
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(
+    def example(cls) -> ft.Example:
+        return ft.Example(
             params={"path": str(_example_file()), "units": "N", "loop": True, "time_offset_s": -0.1},
             rate_hz=1000.0,
             duration_s=1.0,
@@ -573,7 +569,7 @@ def check_h5_file(path: Path) -> None:
         raise FileRefused(path, f"{count} streams; a replayed recording may hold at most {MAX_STREAMS}")
 
 
-def h5_streams(path: Path) -> dict[str, tuple[StreamSpec, int]]:
+def h5_streams(path: Path) -> dict[str, tuple[ft.StreamSpec, int]]:
     """The streams of a recording to replay, from its header (:func:`check_h5_file`, then
     :func:`flowtact.record.stream_specs`); any refusal a :class:`FileRefused` naming the file once."""
     from flowtact.record import stream_specs
@@ -585,7 +581,7 @@ def h5_streams(path: Path) -> dict[str, tuple[StreamSpec, int]]:
         raise FileRefused(path, str(e).removeprefix(f"{shown(path)}: ")) from None
 
 
-def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> None:
+def _check_h5_stream(path: Path, name: str, spec: ft.StreamSpec, offset: float) -> None:
     """The played stream's datasets: sizes within the budget and the file (every declared sample
     stored), its sample shape as its spec says, its first and last time stamps playable."""
     from flowtact.record import open_recording, stream_header
@@ -632,7 +628,7 @@ def _unstored(ds: Any) -> str | None:
         return None if stored >= need or ds.compression else f"stores only {stored} of its {need} bytes"
     chunk = math.prod(ds.chunks) * ds.dtype.itemsize
     if chunk > MAX_CHUNK_BYTES and ds.chunks[0] > 1:  # HDF5 inflates a whole chunk to read a value
-        return f"is stored in chunks of {format_bytes(chunk)}; a replay reads chunks of at most {format_bytes(MAX_CHUNK_BYTES)}"
+        return f"is stored in chunks of {ft.format_bytes(chunk)}; a replay reads chunks of at most {ft.format_bytes(MAX_CHUNK_BYTES)}"
     need = math.prod(-(-n // c) for n, c in zip(shape, ds.chunks, strict=True))
     stored = ds.id.get_num_chunks()
     return None if stored >= need else f"stores only {stored} of its {need} chunks (not written, or cut)"
@@ -641,7 +637,7 @@ def _unstored(ds: Any) -> str | None:
 def _example_file() -> Path:
     """A small .npz (0.4 s of three force channels at 1 kHz) in this process's private example
     folder (:func:`flowtact.block.example_folder`), written once."""
-    path = example_folder() / "replay-example.npz"
+    path = ft.example_folder() / "replay-example.npz"
     if not path.exists():
         i = np.arange(400)
         t = i / 1000.0

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from flowtact.limits import STATE_BUDGET_BYTES, format_bytes
+import flowtact.api as ft
 
 __all__ = [
     "MAX_CHUNK_BYTES",
@@ -31,7 +31,7 @@ __all__ = [
     "time_problem",
 ]
 
-REPLAY_BUDGET_BYTES = STATE_BUDGET_BYTES
+REPLAY_BUDGET_BYTES = ft.STATE_BUDGET_BYTES
 """Most memory (1 GiB) the arrays one player reads whole may take: a .npz's data and ``t`` arrays
 (as their headers declare them), a .csv's float64 table, a .h5 stream's time stamps. A replay's
 data is its state, so it gets a block's state budget; a larger recording plays from .h5, whose
@@ -69,7 +69,7 @@ buffers by their input's rate."""
 
 def budget_text(nbytes: int) -> str:
     """``2.0 GiB, over the 1.0 GiB a replay may read``: for refusals."""
-    return f"{format_bytes(nbytes)}, over the {format_bytes(REPLAY_BUDGET_BYTES)} a replay may hold in memory"
+    return f"{ft.format_bytes(nbytes)}, over the {ft.format_bytes(REPLAY_BUDGET_BYTES)} a replay may hold in memory"
 
 
 def time_problem(t: float) -> str | None:

@@ -16,13 +16,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from flowtact.block import Block, Example, Source, SpecError, example_folder
+import flowtact.api as ft
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
 from flowtact.blocks.signal.replay import SUFFIXES, Replay, h5_streams
 from flowtact.blocks.signal.replay_limits import MAX_STREAMS, listing
 from flowtact.bounded_files import FileRefused, open_npz, refusal
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, ConfigError, did_you_mean, param
+from flowtact.params import did_you_mean
 from flowtact.registry import UnknownBlockError, load_block
 from flowtact.replay_spec import parse_port_map
 
@@ -33,17 +32,17 @@ INDEXED = ("{port}[{i}]", "{port}.{i}", "{port}_{i}")
 
 
 @dataclass(frozen=True)
-class ReplayPortsConfig(Config):
-    path: str = param(
+class ReplayPortsConfig(ft.Config):
+    path: str = ft.param(
         doc="file to play back: a flowtact recording (.h5), a .npz or a .csv log (relative: to the graph file)",
         path=True,
     )
-    ports: str = param(
+    ports: str = ft.param(
         "",
         doc="PORT=COLUMN[,COLUMN...];... : which columns (.csv), array (.npz) or stream (.h5) feed which "
         "port; ports left out are found by name",
     )
-    need: tuple[str, ...] = param((), doc="ports the file must provide (the graph consumes them)")
+    need: tuple[str, ...] = ft.param((), doc="ports the file must provide (the graph consumes them)")
 
     def check(self) -> None:
         suffix = Path(self.path).suffix.lower()
@@ -58,14 +57,13 @@ class ReplayPortsConfig(Config):
 class ReplayPorts:
     """Play a file back in place of a node of another block, on that block's output ports.
 
-    Ports
-    -----
-    The replaced block's output ports, with their declared dtype, shape and units; the rate comes
-    from the file's time stamps (or the recording). A port the file does not provide emits nothing
-    and has no stream (recording it is skipped, with a note); one listed in ``need`` must be there.
-
     Notes
     -----
+    It has the replaced block's output ports, with their declared dtype, shape and units; the rate
+    comes from the file's time stamps (or the recording). A port the file does not provide emits
+    nothing and has no stream (recording it is skipped, with a note); one listed in ``need`` must be
+    there.
+
     Finding a port's data, unless ``ports`` maps it: in a ``.h5`` recording the stream
     ``<node>.<port>`` (the node's own recorded output); in a ``.npz`` the array named like the port;
     in a ``.csv`` the column named like the port (one value per sample) or the columns ``port[0]``,
@@ -84,7 +82,7 @@ class ReplayPorts:
     """
 
     config_cls = ReplayPortsConfig
-    replaces: ClassVar[type[Block]]
+    replaces: ClassVar[type[ft.Block]]
     counter_docs: ClassVar[dict[str, str]] = {
         "skipped_before_zero": "samples of the file whose time fell before graph time 0: not played",
     }
@@ -99,23 +97,28 @@ class ReplayPorts:
         self._players: dict[str, Replay] = {}
 
     # -- compile time ------------------------------------------------------------------------
-    def specs(self, inputs: Any) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source
+    def specs(self, inputs: Any) -> dict[str, ft.StreamSpec]:  # noqa: ARG002 — a source
         """The spec of every port the file provides, checked against the replaced block's ports."""
-        self.close()
-        self._players = {}
-        out = {}
+        if self._players:  # opened for a run: each has read its file
+            return {port: player.specs({})["y"] for port, player in self._players.items()}
+        return {port: spec for port, (_, spec) in self._new_players().items()}
+
+    def _new_players(self) -> dict[str, tuple[Replay, ft.StreamSpec]]:
+        """A replay for every port the file provides, with its spec checked against the replaced block's."""
+        players = {}
         for port, source in self._sources().items():
             player = Replay(node=self.node, **self._player_params(port, source))
             try:
                 spec = player.specs({})["y"]
-            except SpecError as e:
-                raise SpecError(None, f"port '{port}': {e}", where=e.where) from None
-            except ConfigError as e:
-                raise SpecError(None, f"port '{port}': '{e.field}' {e.rule}" if e.field else str(e)) from None
+            except ft.SpecError as e:
+                raise ft.SpecError(None, f"port '{port}': {e}", where=e.where) from None
+            except ft.ConfigError as e:
+                raise ft.SpecError(
+                    None, f"port '{port}': '{e.field}' {e.rule}" if e.field else str(e)
+                ) from None
             self._check(port, spec, source)
-            self._players[port] = player
-            out[port] = spec
-        return out
+            players[port] = (player, spec)
+        return players
 
     def _file(self) -> str:
         return display(self.config.path)
@@ -126,33 +129,33 @@ class ReplayPorts:
         path = Path(c.path)
         if not path.exists() and not path.is_symlink():
             where = "" if path.parent.is_dir() else " (no such folder)"
-            raise SpecError(None, f"no such file: {self._file()}{where}")
+            raise ft.SpecError(None, f"no such file: {self._file()}{where}")
         suffix = path.suffix.lower()
         try:
             names = self._names(path, suffix)
         except FileRefused as e:
-            raise SpecError(None, e.reason, where=(self._file(), 1, 1)) from None
+            raise ft.SpecError(None, e.reason, where=(self._file(), 1, 1)) from None
         except OSError as e:  # a dangling link, a file that cannot be read
-            raise SpecError(None, refusal(path, e).reason, where=(self._file(), 1, 1)) from None
+            raise ft.SpecError(None, refusal(path, e).reason, where=(self._file(), 1, 1)) from None
         known = set(names)
         what = {".csv": "column", ".npz": "array"}.get(suffix, "stream")
         explicit = parse_port_map(c.ports)
         sources: dict[str, str | tuple[str, ...]] = {}
         for port, cols in explicit.items():
             if port not in self.outputs:
-                raise SpecError(
+                raise ft.SpecError(
                     None,
                     f"'{port}' is not an output of {self.replaces.name}{did_you_mean(port, self.outputs)}",
                 )
             if suffix != ".csv" and len(cols) != 1:
-                raise SpecError(
+                raise ft.SpecError(
                     None, f"port '{port}': a {suffix} file feeds a port from one {what}; got {cols}"
                 )
             for col in cols:
                 if col not in known:
                     close = did_you_mean(col, names) if names else ""
                     close = close if close.startswith(" (did") else ""
-                    raise SpecError(
+                    raise ft.SpecError(
                         None,
                         f"port '{port}': no {what} '{col}' in {self._file()}{close}"
                         f" ({what}s: {listing(names)})",
@@ -164,7 +167,7 @@ class ReplayPorts:
         missing = [p for p in c.need if p not in sources]
         if missing:
             example = ";".join(f"{p}={self._placeholder(p, what)}" for p in missing)
-            raise SpecError(
+            raise ft.SpecError(
                 None,
                 f"{self._file()} has no {what} for port{'s' if len(missing) > 1 else ''} "
                 f"{', '.join(repr(p) for p in missing)} of {self.replaces.name} ({what}s: "
@@ -186,7 +189,7 @@ class ReplayPorts:
             try:
                 return list(read_csv_log(path).data_columns)
             except CsvError as e:
-                raise SpecError(None, e.message, where=e.where) from None
+                raise ft.SpecError(None, e.message, where=e.where) from None
         if suffix == ".npz":
             with open_npz(path, MAX_STREAMS) as z:
                 return [n for n in z.names if n != "t"]
@@ -221,7 +224,7 @@ class ReplayPorts:
             params["units"] = declared.units or "1"
         return params
 
-    def _check(self, port: str, spec: StreamSpec, source: str | tuple[str, ...]) -> None:
+    def _check(self, port: str, spec: ft.StreamSpec, source: str | tuple[str, ...]) -> None:
         """The played stream must be what the replaced block's port declares (rate aside)."""
         declared = self.outputs[port]
         block = self.replaces.name
@@ -230,7 +233,7 @@ class ReplayPorts:
         if declared.events != spec.events:
             kind = "an event stream" if declared.events else "a sample stream"
             hint = "; replay it from a .h5 recording" if declared.events else ""
-            raise SpecError(None, f"port '{port}' of {block} is {kind}, {given} is not{hint}")
+            raise ft.SpecError(None, f"port '{port}' of {block} is {kind}, {given} is not{hint}")
         if declared.shape is not None and tuple(declared.shape) != tuple(spec.shape):
             n = int(np.prod(declared.shape)) if declared.shape else 1
             cols = (
@@ -238,28 +241,31 @@ class ReplayPorts:
                 if isinstance(source, tuple) and len(declared.shape) < 2
                 else ""
             )
-            raise SpecError(
+            raise ft.SpecError(
                 None,
                 f"port '{port}' of {block} takes samples of shape {tuple(declared.shape)}{cols}; "
                 f"{given} gives {tuple(spec.shape)}",
             )
         if declared.dtype is not None and declared.dtype != spec.dtype:
-            raise SpecError(
+            raise ft.SpecError(
                 None, f"port '{port}' of {block} carries {declared.dtype}; {given} is {spec.dtype}"
             )
         if declared.units is not None and declared.units != spec.units:
-            raise SpecError(
+            raise ft.SpecError(
                 None, f"port '{port}' of {block} is in '{declared.units}'; {given} is in '{spec.units}'"
             )
 
-    def ends_at(self) -> float | None:
+    def ends_at(self, inputs: Any) -> float | None:  # noqa: ARG002 — a source: its end comes from its file
         """The latest end of the played ports (None: nothing to play)."""
-        ends = [e for p, r in self._players.items() if p in self.demanded and (e := r.ends_at()) is not None]
+        players = self._players or {port: player for port, (player, _) in self._new_players().items()}
+        ends = [e for p, r in players.items() if p in self.demanded and (e := r.ends_at({})) is not None]
         return max(ends, default=None)
 
     # -- run time ----------------------------------------------------------------------------
     def reset(self) -> None:
         self._played: dict[str, list[float]] = {}  # port -> [count, first t, last t] (for summary)
+        if not self._players:
+            self._players = {port: player for port, (player, _) in self._new_players().items()}
         for port, player in self._players.items():
             if port in self.demanded:
                 player.bind({}, seed=self.seed)
@@ -276,7 +282,7 @@ class ReplayPorts:
         for player in getattr(self, "_players", {}).values():
             player.close()
 
-    def step(self, now: float) -> dict[str, Chunk]:
+    def step(self, now: float) -> dict[str, ft.Chunk]:
         out = {p: r(now)["y"] for p, r in self._players.items() if p in self.demanded}
         for p, chunk in out.items():
             if len(chunk.t):
@@ -295,12 +301,12 @@ class ReplayPorts:
         return f"replayed {self._file()} ({'; '.join(parts) or 'nothing: no sample fell in the run'})"
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(params={"path": str(_example_csv(cls.replaces))}, rate_hz=1000.0, duration_s=0.4)
+    def example(cls) -> ft.Example:
+        return ft.Example(params={"path": str(_example_csv(cls.replaces))}, rate_hz=1000.0, duration_s=0.4)
 
 
 @functools.cache
-def stand_in_class(block: str) -> type[Source]:
+def stand_in_class(block: str) -> type[ft.Source]:
     """The replay class standing in for nodes of ``block`` (a registered name or ``module:Class``)."""
     replaced = load_block(block)
     if issubclass(replaced, ReplayPorts):  # replaying a replay: the same ports, the same class
@@ -308,7 +314,7 @@ def stand_in_class(block: str) -> type[Source]:
     ports = ", ".join(replaced.outputs) or "none"
     return type(
         f"ReplayAs{replaced.__name__}",
-        (ReplayPorts, Source),
+        (ReplayPorts, ft.Source),
         {
             "__module__": __name__,
             "__doc__": f"Play a file back in place of a node of {replaced.name}, on its ports ({ports}).\n"
@@ -320,7 +326,7 @@ def stand_in_class(block: str) -> type[Source]:
     )
 
 
-def __getattr__(name: str) -> type[Source]:
+def __getattr__(name: str) -> type[ft.Source]:
     """``replay_ports:aunp_sensor`` (as the graph names the stand-in) -> its class."""
     if name.startswith("__"):
         raise AttributeError(name)
@@ -330,10 +336,10 @@ def __getattr__(name: str) -> type[Source]:
         raise AttributeError(f"no stand-in replay for block '{name}': {e}") from None
 
 
-def _example_csv(block: type[Block]) -> Path:
+def _example_csv(block: type[ft.Block]) -> Path:
     """0.4 s at 1 kHz of every fixed-shape sample port of ``block``, columns named as found by
     default, in this process's private example folder (:func:`flowtact.block.example_folder`)."""
-    path = example_folder() / f"replay-ports-{block.name}.csv"
+    path = ft.example_folder() / f"replay-ports-{block.name}.csv"
     if not path.exists():
         t = np.arange(400) / 1000.0
         cols: dict[str, np.ndarray] = {"t": t}

@@ -17,18 +17,7 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Example,
-    Port,
-    SpecError,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
+import flowtact.api as ft
 from flowtact.finite import all_finite_kernel
 
 __all__ = [
@@ -214,26 +203,26 @@ def savgol_apply_numpy(coef: np.ndarray, tail: np.ndarray, x: np.ndarray) -> np.
 
 
 @dataclass(frozen=True)
-class SavGolConfig(BadDataConfig):
+class SavGolConfig(ft.BadDataConfig):
     """Parameters of :class:`SavGol`."""
 
-    window: int = param(
+    window: int = ft.param(
         DEFAULT_WINDOW,
         doc=f"frame length in samples (odd, > order; at most {MAX_WINDOW}: the exact fit takes ~1 s there)",
         ge=3,
         le=MAX_WINDOW,
         odd=True,
     )
-    order: int = param(DEFAULT_ORDER, doc="degree of the fitted polynomial", ge=0, le=10)
-    deriv: int = param(1, doc="derivative to estimate: 0 smooths, 1 = d/dt (units/s), 2 = d²/dt²", ge=0)
-    mode: Literal["causal", "centred"] = param(
+    order: int = ft.param(DEFAULT_ORDER, doc="degree of the fitted polynomial", ge=0, le=10)
+    deriv: int = ft.param(1, doc="derivative to estimate: 0 smooths, 1 = d/dt (units/s), 2 = d²/dt²", ge=0)
+    mode: Literal["causal", "centred"] = ft.param(
         "centred",
         doc="centred: estimate at the window centre, stamped (window-1)/2 samples late; causal: at the newest sample",
     )
-    rate_hz: float | None = param(
+    rate_hz: float | None = ft.param(
         None, doc="sample rate the filter is designed for (null: the stream's rate)", gt=0
     )
-    padding: Literal["zeros", "hold"] = param(
+    padding: Literal["zeros", "hold"] = ft.param(
         "zeros",
         doc="signal assumed outside the stream: zeros (the paper's zero padding) or hold (its first/last sample: no edge transients)",
     )
@@ -245,15 +234,8 @@ class SavGolConfig(BadDataConfig):
             raise self.error("deriv", f"must be <= order ({self.order}); got {self.deriv}")
 
 
-class SavGol(Block):
+class SavGol(ft.Block):
     """Streaming Savitzky–Golay smoother/differentiator, per channel, in physical units per second.
-
-    Ports
-    -----
-    x : float64, shape () or (C,), any units, sampled
-        Signal; channels are filtered independently along time.
-    y : float64, same shape as ``x``; units ``u`` (deriv 0), ``u/s`` (1), ``u/s^2`` (2) ...
-        The estimate of the ``deriv``-th derivative. Same rate and labels as ``x``.
 
     Config
     ------
@@ -311,22 +293,35 @@ class SavGol(Block):
     name = "savgol"
     config_cls = SavGolConfig
     inputs = {
-        "x": Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="signal, shape () or (channels,)")
+        "x": ft.Port(
+            dtype="float64",
+            ndim=(0, 1),
+            require_rate=True,
+            doc="signal, shape () or (channels,)",
+        )
     }
-    outputs = {"y": Port(dtype="float64", doc="smoothed signal or its derivative, per second")}
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            doc=(
+                "the estimate of the deriv-th derivative: the shape, rate and labels of x; units u (deriv"
+                " 0), u/s (1), u/s^2 (2) ... for x in u"
+            ),
+        )
+    }
     counter_docs = {
-        **nonfinite_counter_docs("samples on 'x'"),
+        **ft.nonfinite_counter_docs("samples on 'x'"),
         "sample_gaps": "intervals between samples longer than 1.5 periods (missing or dropped samples): the "
         "estimates whose window spans one are wrong (the filter assumes uniform sampling)",
         "irregular_dt": "intervals off the nominal period by more than 1 % (timestamp jitter): the "
         "estimates whose window spans one are inexact (the filter assumes uniform sampling)",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         x = inputs["x"]
         want = self.config.rate_hz
         if want is not None and not math.isclose(want, x.rate_hz, rel_tol=1e-9):
-            raise SpecError("x", f"expects {want:g} Hz (rate_hz) but the input stream is {x.rate_hz:g} Hz")
+            raise ft.SpecError("x", f"expects {want:g} Hz (rate_hz) but the input stream is {x.rate_hz:g} Hz")
         return {"y": x.with_(units=deriv_units(x.units, self.config.deriv))}
 
     @property
@@ -351,14 +346,14 @@ class SavGol(Block):
         self._t_prev = math.nan  # time of the last sample filtered (timing checks; NaN: none yet)
         self._hold = cfg.on_bad_data == "hold"  # keep the last good sample to repeat
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         if not len(x.t):
-            return {"y": Chunk.empty(shape=self._shape)}
+            return {"y": ft.Chunk.empty(shape=self._shape)}
         ok, y, gaps, irregular = self._filter(x)  # the common case, finite samples: one compiled call
         if not ok:  # non-finite samples: the bad-data policy first, then the same call on what is left
-            x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
+            x, self._last = ft.screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
             if not len(x.t):
-                return {"y": Chunk.empty(shape=self._shape)}
+                return {"y": ft.Chunk.empty(shape=self._shape)}
             _, y, gaps, irregular = self._filter(x)
         elif self._hold:
             self._last = x.data[-1].copy()
@@ -368,21 +363,21 @@ class SavGol(Block):
         self.count("irregular_dt", irregular)
         n = len(x.t)
         if self._h == 0:
-            return {"y": Chunk(x.t, y.reshape(n, *self._shape))}
+            return {"y": ft.Chunk(x.t, y.reshape(n, *self._shape))}
         t_all = np.concatenate([self._t_hist, x.t])
         emit = len(t_all) - self._h
         self._t_hist = t_all[max(emit, 0) :].copy()
         if emit <= 0:
-            return {"y": Chunk.empty(shape=self._shape)}
-        return {"y": Chunk(t_all[:emit], y[n - emit :].reshape(emit, *self._shape))}
+            return {"y": ft.Chunk.empty(shape=self._shape)}
+        return {"y": ft.Chunk(t_all[:emit], y[n - emit :].reshape(emit, *self._shape))}
 
-    def _filter(self, x: Chunk) -> tuple[bool, np.ndarray, int, int]:
+    def _filter(self, x: ft.Chunk) -> tuple[bool, np.ndarray, int, int]:
         """:func:`_finite_step` on ``x``: (all finite, estimates, gaps, irregular intervals)."""
         prime = not self._started and self.config.padding == "hold"
         d = x.data.reshape(len(x.t), self._nc)
         return _finite_step(self._coef, self._tail, d, x.t, self._t_prev, self._period, prime)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         k = len(self._t_hist) if self._h else 0
         if k == 0:
             return {}
@@ -392,14 +387,14 @@ class SavGol(Block):
         y = savgol_apply(self._coef, self._tail, pad)
         t = self._t_hist
         self._t_hist = np.empty(0)
-        return {"y": Chunk(t, y[self._h - k :].reshape(k, *self._shape))}
+        return {"y": ft.Chunk(t, y[self._h - k :].reshape(k, *self._shape))}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(1)
         n = 600
         force = np.cumsum(rng.normal(0.0, 0.01, (n, 3)), axis=0) + rng.normal(0.0, 0.002, (n, 3))
-        return Example(
+        return ft.Example(
             params={"window": 5, "order": 4, "deriv": 1, "mode": "centred"},
             inputs={"x": force},
             units={"x": "N"},

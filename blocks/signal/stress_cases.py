@@ -13,7 +13,7 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError
+import flowtact.api as ft
 from flowtact.stress import EPS, Outcome, StressCase
 from flowtact.testing import run_offline
 
@@ -73,7 +73,7 @@ def savgol_bad(policy: str) -> Outcome:
     blk = SavGol(on_bad_data=policy)
     try:
         y = run_offline(blk, x=x, chunk=7)["y"]
-    except BadDataError as e:
+    except ft.BadDataError as e:
         ok = policy == "raise" and "non-finite" in str(e) and "\n" not in str(e)
         return Outcome(
             f"nonfinite_{policy}", "savgol", "NaN, +inf, −inf samples", f"stops: “{e}”",
@@ -175,7 +175,7 @@ def wsum_bad(policy: str) -> Outcome:
     blk = WeightedSum(w1=list(_W1), w2=list(_W2), on_bad_data=policy)
     try:
         y = run_offline(blk, x1=x1, x2=x2, units={"x1": "N", "x2": "N/s"}, chunk=9)["y"]
-    except BadDataError as e:
+    except ft.BadDataError as e:
         return Outcome(
             f"nonfinite_{policy}", "weighted_sum", "NaN on x1, +inf on x2", f"stops: “{e}”",
             "raise: clean one-line error", policy == "raise" and "\n" not in str(e),

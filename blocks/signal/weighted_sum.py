@@ -9,17 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Example,
-    Port,
-    SpecError,
-    StreamSpec,
-    param,
-)
-from flowtact.align import Aligner, screen_aligned
+import flowtact.api as ft
 
 __all__ = ["WeightedSum", "WeightedSumConfig"]
 
@@ -55,16 +45,16 @@ def _add_weighted(y: np.ndarray, x: np.ndarray, w: np.ndarray) -> int:
 
 
 @dataclass(frozen=True)
-class WeightedSumConfig(BadDataConfig):
+class WeightedSumConfig(ft.BadDataConfig):
     """Parameters of :class:`WeightedSum`."""
 
-    w1: tuple[float, ...] | None = param(None, doc="weights on x1, one per channel", min_len=1)
-    w2: tuple[float, ...] | None = param(None, doc="weights on x2, one per channel", min_len=1)
-    w3: tuple[float, ...] | None = param(None, doc="weights on x3, one per channel", min_len=1)
-    w4: tuple[float, ...] | None = param(None, doc="weights on x4, one per channel", min_len=1)
-    bias: float = param(0.0, doc="constant added to every output sample")
-    units: str = param("1", doc="units of the output")
-    expect_units: tuple[str, ...] = param(
+    w1: tuple[float, ...] | None = ft.param(None, doc="weights on x1, one per channel", min_len=1)
+    w2: tuple[float, ...] | None = ft.param(None, doc="weights on x2, one per channel", min_len=1)
+    w3: tuple[float, ...] | None = ft.param(None, doc="weights on x3, one per channel", min_len=1)
+    w4: tuple[float, ...] | None = ft.param(None, doc="weights on x4, one per channel", min_len=1)
+    bias: float = ft.param(0.0, doc="constant added to every output sample")
+    units: str = ft.param("1", doc="units of the output")
+    expect_units: tuple[str, ...] = ft.param(
         (),
         doc="units the inputs must have, x1 first (weights are per unit: N and mN differ 1000x); empty: any",
     )
@@ -80,14 +70,8 @@ class WeightedSumConfig(BadDataConfig):
         return {f"x{i}": getattr(self, f"w{i}") for i in range(1, 5)}
 
 
-class WeightedSum(Block):
+class WeightedSum(ft.Block):
     """Weighted sum of up to four sampled inputs: the drive of an afferent population.
-
-    Ports
-    -----
-    x1 : float64, shape () or (C1,), sampled — required
-    x2, x3, x4 : float64, shape () or (Ck,), optional
-    y : float64, shape (), units ``units`` — ``bias + Σ_k w_k · x_k`` per sample, stamped like x1
 
     Config
     ------
@@ -128,12 +112,25 @@ class WeightedSum(Block):
 
     config_cls = WeightedSumConfig
     inputs = {
-        "x1": Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="first input (the output's clock)"),
-        "x2": Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="second input"),
-        "x3": Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="third input"),
-        "x4": Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="fourth input"),
+        "x1": ft.Port(
+            dtype="float64",
+            ndim=(0, 1),
+            require_rate=True,
+            doc="first input, required: the output is stamped like it (its clock)",
+        ),
+        "x2": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="second input"),
+        "x3": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="third input"),
+        "x4": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, optional=True, doc="fourth input"),
     }
-    outputs = {"y": Port(dtype="float64", shape=(), doc="weighted sum, one value per sample")}
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            shape=(),
+            doc=(
+                "bias + Σ_k w_k · x_k per sample, stamped like x1, in the units given by the units parameter"
+            ),
+        )
+    }
     counter_docs = {
         "nonfinite_drop": "instants where an input had NaN/inf, removed from every input (on_bad_data: "
         "drop): upstream sent bad data",
@@ -151,36 +148,38 @@ class WeightedSum(Block):
             p for p in connected if p == "x1" or (w[p] is not None and any(v != 0 for v in w[p]))
         )
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         cfg, w = self.config, self.config.weights()
         for p in _INPUTS:
             wp = w[p]
             if p not in inputs:
                 if wp is not None and any(v != 0 for v in wp):
-                    raise SpecError(p, f"w{p[1]} gives non-zero weights to '{p}' but '{p}' is not connected")
+                    raise ft.SpecError(
+                        p, f"w{p[1]} gives non-zero weights to '{p}' but '{p}' is not connected"
+                    )
                 continue
             spec = inputs[p]
             if wp is None:
-                raise SpecError(
+                raise ft.SpecError(
                     p, f"input '{p}' is connected but has no weights (set w{p[1]}, or disconnect it)"
                 )
             if len(wp) != spec.size:
-                raise SpecError(
+                raise ft.SpecError(
                     p,
                     f"w{p[1]} has {len(wp)} weights but input '{p}' has {spec.size} channel(s)",
                 )
             i = int(p[1]) - 1
             if i < len(cfg.expect_units) and spec.units != cfg.expect_units[i]:
-                raise SpecError(
+                raise ft.SpecError(
                     p,
                     f"input '{p}' must be in '{cfg.expect_units[i]}' (expect_units: the weights are per "
                     f"{cfg.expect_units[i]}) but gets '{spec.units}'",
                 )
             if not math.isclose(spec.rate_hz or 0.0, inputs["x1"].rate_hz or 0.0, rel_tol=1e-9):
-                raise SpecError(
+                raise ft.SpecError(
                     p, f"input '{p}' is {spec.rate_hz:g} Hz but x1 is {inputs['x1'].rate_hz:g} Hz"
                 )
-        return {"y": StreamSpec(dtype="float64", shape=(), units=cfg.units, rate_hz=inputs["x1"].rate_hz)}
+        return {"y": ft.StreamSpec(dtype="float64", shape=(), units=cfg.units, rate_hz=inputs["x1"].rate_hz)}
 
     def reset(self) -> None:
         w = self.config.weights()
@@ -189,34 +188,34 @@ class WeightedSum(Block):
         self._w = {p: np.asarray(w[p], np.float64) for p in self._ports}
         self._nc = {p: self.input_specs[p].size for p in self._ports}
         rate = self.input_specs["x1"].rate_hz or 1.0
-        self._align = Aligner(self.node, self.input_specs, self._ports, tol_s=1e-6 / rate)
+        self._align = ft.Aligner(self.node, self.input_specs, self._ports, tol_s=1e-6 / rate)
         self._last: dict[str, np.ndarray | None] = {p: None for p in self._ports}
 
-    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
+    def step(self, **inputs: ft.Chunk) -> dict[str, ft.Chunk]:
         t, data = self._align.push(inputs)
         n = len(t)
         if n:
-            t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
+            t, data = ft.screen_aligned(self, self.config.on_bad_data, t, data, self._last)
             n = len(t)
         first, *rest = self._ports
         y, bad = _weighted(data[first].reshape(n, self._nc[first]), self._w[first], self.config.bias)
         for p in rest:
             bad = _add_weighted(y, data[p].reshape(n, self._nc[p]), self._w[p])
         self.count("overflow", bad)
-        return {"y": Chunk(t, y)}
+        return {"y": ft.Chunk(t, y)}
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         left = sum(self._align.pending().values())
         self.count("unpaired_at_end", left)
         return {}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(2)
         n = 500
         f = np.abs(np.cumsum(rng.normal(0.0, 0.01, (n, 3)), axis=0))
         df = np.gradient(f, 1e-3, axis=0)
-        return Example(
+        return ft.Example(
             params={"w1": [1.417, 2.359, 0.452], "w2": [-0.012, -9.912e-4, 0.024], "w3": [0.0, 0.0, 0.0]},
             inputs={"x1": f, "x2": df, "x3": np.gradient(df, 1e-3, axis=0)},
             units={"x1": "N", "x2": "N/s", "x3": "N/s^2"},

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from flowtact.chunk import Chunk
+import flowtact.api as ft
 
 __all__ = ["EventBins"]
 
@@ -31,7 +31,7 @@ class EventBins:
     def bin_of(self, t: np.ndarray | list[float]) -> np.ndarray:
         return np.floor(np.asarray(t, np.float64) / self.width + 1e-9).astype(np.int64)
 
-    def add(self, spikes: Chunk) -> int:
+    def add(self, spikes: ft.Chunk) -> int:
         """Count a chunk of events and move the watermark; returns how many events fell in bins
         already taken (they are ignored: the producer broke its watermark)."""
         late_n = 0

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flowtact.block import Block, Example, Port, SpecError
+import flowtact.api as ft
 from flowtact.blocks.spiking.nb_model import (
     ModelError,
     NaiveBayesModel,
@@ -20,8 +20,6 @@ from flowtact.blocks.spiking.nb_model import (
     tempered_log_posterior,
 )
 from flowtact.blocks.spiking.window_features import window_features
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
 
 __all__ = ["EXAMPLE_MODEL", "NaiveBayes", "NaiveBayesConfig", "example_model_path"]
 
@@ -35,38 +33,20 @@ def example_model_path() -> Path:
 
 
 @dataclass(frozen=True)
-class NaiveBayesConfig(Config):
+class NaiveBayesConfig(ft.Config):
     """Parameters of :class:`NaiveBayes`."""
 
-    model: str = param(doc="model file (.npz) written by a trainer, e.g. flowtact train-braille", path=True)
-    gap: tuple[str, ...] = param(
+    model: str = ft.param(
+        doc="model file (.npz) written by a trainer, e.g. flowtact train-braille", path=True
+    )
+    gap: tuple[str, ...] = ft.param(
         ("gap",),
         doc="window categories that are not windows (between characters); ignored without categories",
     )
 
 
-class NaiveBayes(Block):
+class NaiveBayes(ft.Block):
     """Naive Bayes decoding of spike windows: a posterior over the classes and a decision per window.
-
-    Ports
-    -----
-    spikes : events, int64 unit index, n_units = the model's
-        The population's spikes (e.g. ``nlif.spikes``), watermarked (``Chunk.end``).
-    window : int or float sample stream, shape (), with a rate
-        What is under the sensor: a categorical stream (e.g. the character); a window is a maximal
-        run of one value that is not named in ``gap``. Without categories, values < 0 are gaps;
-        float values that are no whole number (NaN) are gaps too (``unknown_window_values``).
-    posterior : float64 (n_classes,), one sample per finished window, stamped at its end, no rate
-        p(class | features of the window); the channels are named after the classes.
-    decision : int64 categorical (the classes), one sample per finished window, stamped at its end
-        The most probable class (the first of equals).
-    running : float64 (n_classes,), at the window stream's rate
-        At each window sample t: the posterior from the spikes since the window began up to
-        t + 1/rate, scored with the unit-marginal model (the per-unit counts over all sub-bins,
-        since where the window ends is not known yet) with its evidence scaled by the model's
-        ``running_temperature`` (a calibration: see ``nb_model``); in a gap, the last window's posterior
-        (the prior before the first). What a speed controller reads; a latency model refuses to
-        run when this output is consumed (a latency needs the window's end).
 
     Config
     ------
@@ -93,13 +73,58 @@ class NaiveBayes(Block):
 
     config_cls = NaiveBayesConfig
     inputs = {
-        "spikes": Port(dtype="int64", shape=(), events=True, doc="spike times and unit indices"),
-        "window": Port(dtype=None, shape=(), require_rate=True, doc="categorical: what is under the sensor"),
+        "spikes": ft.Port(
+            dtype="int64",
+            shape=(),
+            events=True,
+            doc=(
+                "the population's spikes (e.g. nlif.spikes), watermarked (Chunk.end); n_units must be the"
+                " model's"
+            ),
+        ),
+        "window": ft.Port(
+            dtype=None,
+            shape=(),
+            require_rate=True,
+            doc=(
+                "what is under the sensor: a categorical stream (e.g. the character), int or float, with "
+                "a rate; a window is a maximal run of one value that is not named in gap. Without "
+                "categories, values < 0 are gaps; float values that are no whole number (NaN) are gaps "
+                "too (unknown_window_values)"
+            ),
+        ),
     }
     outputs = {
-        "posterior": Port(dtype="float64", units="1", doc="posterior per finished window, at its end"),
-        "decision": Port(dtype="int64", shape=(), units="1", doc="most probable class per finished window"),
-        "running": Port(dtype="float64", units="1", doc="posterior of the window so far, per window sample"),
+        "posterior": ft.Port(
+            dtype="float64",
+            units="1",
+            doc=(
+                "p(class | features of the window), shape (n_classes,), one sample per finished window, "
+                "stamped at its end, no rate; the channels are named after the classes"
+            ),
+        ),
+        "decision": ft.Port(
+            dtype="int64",
+            shape=(),
+            units="1",
+            doc=(
+                "the most probable class (the first of equals), categorical (the classes), one sample per"
+                " finished window, stamped at its end"
+            ),
+        ),
+        "running": ft.Port(
+            dtype="float64",
+            units="1",
+            doc=(
+                "at each window sample t (at the window stream's rate): the posterior from the spikes "
+                "since the window began up to t + 1/rate, scored with the unit-marginal model (the "
+                "per-unit counts over all sub-bins, since where the window ends is not known yet) with "
+                "its evidence scaled by the model's running_temperature (a calibration: see nb_model); in"
+                " a gap, the last window's posterior (the prior before the first). What a speed "
+                "controller reads; a latency model refuses to run when this output is consumed (a latency"
+                " needs the window's end)"
+            ),
+        ),
     }
     counter_docs = {
         "windows": "windows decoded (posterior and decision emitted): the normal work",
@@ -115,34 +140,34 @@ class NaiveBayes(Block):
         try:
             return load_model(self.config.model)
         except ModelError as e:
-            raise SpecError(None, f"{self.node} ({self.name}): model: {e}") from None
+            raise ft.SpecError(None, f"{self.node} ({self.name}): model: {e}") from None
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         m = self._model()
         s, w = inputs["spikes"], inputs["window"]
         if s.n_units != m.n_units:
-            raise SpecError(
+            raise ft.SpecError(
                 "spikes",
                 f"{self.node}: the model {self.config.model} was trained on {m.n_units} units; input "
                 f"'spikes' has {s.n_units}",
             )
         if np.dtype(w.dtype).kind not in "iuf":
-            raise SpecError(
+            raise ft.SpecError(
                 "window", f"{self.node}: input 'window' must be categorical numbers; got {w.dtype}"
             )
         if w.categories is not None:
             missing = [c for c in m.classes if c not in w.categories]
             if missing:
-                raise SpecError(
+                raise ft.SpecError(
                     "window",
                     f"{self.node}: model classes {missing} are not among the window categories "
                     f"{list(w.categories)}: the model was trained on another alphabet",
                 )
         c = len(m.classes)
-        post = StreamSpec(dtype="float64", shape=(c,), units="1", labels=m.classes)
+        post = ft.StreamSpec(dtype="float64", shape=(c,), units="1", labels=m.classes)
         return {
             "posterior": post,
-            "decision": StreamSpec(dtype="int64", shape=(), units="1", categories=m.classes),
+            "decision": ft.StreamSpec(dtype="int64", shape=(), units="1", categories=m.classes),
             "running": post.with_(rate_hz=w.rate_hz),
         }
 
@@ -150,7 +175,7 @@ class NaiveBayes(Block):
     def reset(self) -> None:
         self._m = self._model()
         if self._m.features != "counts" and "running" in self.demanded:
-            raise SpecError(
+            raise ft.SpecError(
                 None,
                 f"{self.node} ({self.name}): output 'running' needs a counts model; {self.config.model} "
                 "has latency features",
@@ -195,13 +220,13 @@ class NaiveBayes(Block):
         return v in self._gaps
 
     # -- step --------------------------------------------------------------------------------
-    def step(self, spikes: Chunk, window: Chunk) -> dict[str, Chunk]:
+    def step(self, spikes: ft.Chunk, window: ft.Chunk) -> dict[str, ft.Chunk]:
         self._take_spikes(spikes)
         for t, v in zip(window.t.tolist(), self._values(window.data).tolist(), strict=True):
             self._take_window_sample(float(t), v)
         return self._drain(final=False)
 
-    def _take_spikes(self, spikes: Chunk) -> None:
+    def _take_spikes(self, spikes: ft.Chunk) -> None:
         if len(spikes):
             idx = np.asarray(spikes.data, np.int64)
             if idx.min() < 0 or idx.max() >= self._n_units:
@@ -236,7 +261,7 @@ class NaiveBayes(Block):
         start = self._cur[1] if self._cur is not None else math.nan
         self._queue.append(("run", start, t + self._dt, v))
 
-    def _drain(self, final: bool) -> dict[str, Chunk]:
+    def _drain(self, final: bool) -> dict[str, ft.Chunk]:
         c = len(self._m.classes)
         post_t, post, dec, run_t, run = [], [], [], [], []
         while self._queue and (final or self._queue[0][2] <= self._wm):
@@ -255,9 +280,9 @@ class NaiveBayes(Block):
         self._prune()
         end = self._wm if math.isfinite(self._wm) else None
         return {
-            "posterior": Chunk(np.array(post_t), np.array(post).reshape(-1, c), end),
-            "decision": Chunk(np.array(post_t), np.array(dec, np.int64), end),
-            "running": Chunk(np.array(run_t), np.array(run).reshape(-1, c), end),
+            "posterior": ft.Chunk(np.array(post_t), np.array(post).reshape(-1, c), end),
+            "decision": ft.Chunk(np.array(post_t), np.array(dec, np.int64), end),
+            "running": ft.Chunk(np.array(run_t), np.array(run).reshape(-1, c), end),
         }
 
     def _tell(self, decided: int, value: int) -> None:
@@ -317,16 +342,16 @@ class NaiveBayes(Block):
             if cut:
                 self._spk_t, self._spk_i = self._spk_t[cut:], self._spk_i[cut:]
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         if self._cur is not None:
             self.count("unfinished_windows")
             self._cur = None
         return self._drain(final=True)
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         spikes, window = example_data()
-        return Example(
+        return ft.Example(
             params={"model": str(example_model_path())},
             inputs={"spikes": spikes, "window": window},
             rate_hz=EXAMPLE_RATE_HZ,

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flowtact.chunk import StreamSpec
+import flowtact.api as ft
 from flowtact.stress import Outcome, StressCase
 from flowtact.testing import run_offline
 
@@ -16,8 +16,8 @@ from .naive_bayes import NaiveBayes, example_model_path
 __all__ = ["CASES"]
 
 SPECS = {
-    "spikes": StreamSpec(dtype="int64", events=True, n_units=4),
-    "window": StreamSpec(dtype="float64", rate_hz=250.0),
+    "spikes": ft.StreamSpec(dtype="int64", events=True, n_units=4),
+    "window": ft.StreamSpec(dtype="float64", rate_hz=250.0),
 }
 
 

@@ -32,8 +32,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+import flowtact.api as ft
 from flowtact.bounded_files import FileRefused, read_npz_bounded
-from flowtact.errors import FlowtactError
 from flowtact.safe_text import shown
 
 __all__ = [
@@ -68,7 +68,7 @@ _ARRAYS = {
 }
 
 
-class ModelError(FlowtactError, ValueError):
+class ModelError(ft.FlowtactError, ValueError):
     """A naive Bayes model file that cannot be used: unreadable, damaged, or not what was expected."""
 
 

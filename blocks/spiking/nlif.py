@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Literal
 
 import numpy as np
@@ -38,18 +38,17 @@ from flowtact.params import param
 
 __all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig"]
 
-#: Values used for the parameters a config leaves at None.
-NLIF_DEFAULTS: dict[str, Any] = {
-    "tau_s": 0.01,
-    "v_leak": 0.0,
-    "gain": 1.0,
-    "sigma": 0.0,
-    "refractory_s": 0.0,
-    "integrator": "exp",
-    "h_weights": (),
-    "h_peaks_s": (0.002, 0.05),
-    "h_offset_s": 0.005,
-}
+_MODEL = (
+    "tau_s",
+    "v_leak",
+    "gain",
+    "sigma",
+    "refractory_s",
+    "integrator",
+    "h_weights",
+    "h_peaks_s",
+    "h_offset_s",
+)
 _PER_NEURON = ("tau_s", "v_leak", "gain", "sigma")
 _F64 = np.dtype(np.float64)
 #: Neurons per cache tile in the kernels (noise-free runs; see lif_kernels).
@@ -67,62 +66,58 @@ SPIKE_BUFFER_MIN = 4096
 
 @dataclass(frozen=True)
 class NlifConfig(BadDataConfig):
-    """Parameters of :class:`Nlif`; ``None`` means the value in :data:`NLIF_DEFAULTS`."""
+    """Parameters of :class:`Nlif`; each default is the field's own (:data:`NLIF_DEFAULTS` reads them)."""
 
     n: int = param(1, doc="number of neurons in the population", ge=1)
-    tau_s: float | tuple[float, ...] | None = param(
-        None, doc="membrane time constant in s, one value or one per neuron (default 0.01)", gt=0
+    tau_s: float | tuple[float, ...] = param(
+        0.01, doc="membrane time constant in s, one value or one per neuron", gt=0
     )
-    v_leak: float | tuple[float, ...] | None = param(
-        None, doc="leak (resting) potential, threshold = 1, reset = 0; one value or n (default 0)"
+    v_leak: float | tuple[float, ...] = param(
+        0.0, doc="leak (resting) potential, threshold = 1, reset = 0; one value or n"
     )
-    gain: float | tuple[float, ...] | None = param(
-        None, doc="drive gain g: the input adds g·x to the membrane target; one value or n (default 1)"
+    gain: float | tuple[float, ...] = param(
+        1.0, doc="drive gain g: the input adds g·x to the membrane target; one value or n"
     )
-    sigma: float | tuple[float, ...] | None = param(
-        None,
-        doc="noise intensity σ of σ·dW in 1/sqrt(s): stationary sd σ·sqrt(τ/2); one value or n (default 0)",
+    sigma: float | tuple[float, ...] = param(
+        0.0,
+        doc="noise intensity σ of σ·dW in 1/sqrt(s): stationary sd σ·sqrt(τ/2); one value or n",
         ge=0,
     )
-    refractory_s: float | None = param(
-        None,
-        doc="absolute refractory period in s: held at reset, at most 1/refractory_s spikes/s (default 0)",
+    refractory_s: float = param(
+        0.0,
+        doc="absolute refractory period in s: held at reset, at most 1/refractory_s spikes/s",
         ge=0,
     )
-    integrator: Literal["exp", "euler", "exp_interp"] | None = param(
-        None,
+    integrator: Literal["exp", "euler", "exp_interp"] = param(
+        "exp",
         doc="exp: exact for held input; euler: Euler-Maruyama; exp_interp: linear input, "
-        "interpolated spike times, one sample of latency (default exp)",
+        "interpolated spike times, one sample of latency",
     )
-    h_weights: tuple[float, ...] | None = param(
-        None, doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none)"
+    h_weights: tuple[float, ...] = param(
+        (), doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none)"
     )
-    h_peaks_s: tuple[float, ...] | None = param(
-        None,
-        doc="post-spike basis: first and last peak times in s (default [0.002, 0.05])",
+    h_peaks_s: tuple[float, ...] = param(
+        (0.002, 0.05),
+        doc="post-spike basis: first and last peak times in s",
         ge=0,
         le=10,
         min_len=2,
         max_len=2,
     )
-    h_offset_s: float | None = param(
-        None, doc="post-spike basis: log-time offset b in s (small = finer early lags; default 0.005)", gt=0
+    h_offset_s: float = param(
+        0.005, doc="post-spike basis: log-time offset b in s (small = finer early lags)", gt=0
     )
 
     def state_bytes(self) -> dict[str, float]:
         """Per neuron: a dozen rows of coefficients and state, a chunk of ``v`` and the post-spike
         history ring (about 2 × the last basis peak at :data:`NOMINAL_RATE_HZ`)."""
-        weights = NLIF_DEFAULTS["h_weights"] if self.h_weights is None else self.h_weights
-        peaks = NLIF_DEFAULTS["h_peaks_s"] if self.h_peaks_s is None else self.h_peaks_s
+        weights, peaks = self.h_weights, self.h_peaks_s
         ring = 2.0 * max(peaks) * NOMINAL_RATE_HZ if any(w != 0 for w in weights) else 0.0
         return {"n": self.n * 8.0 * (80 + ring)}
 
     def resolved(self) -> dict[str, Any]:
-        """Every model parameter, defaults filled in (per-neuron values as arrays)."""
-        out: dict[str, Any] = {}
-        for key, default in NLIF_DEFAULTS.items():
-            value = getattr(self, key)
-            out[key] = default if value is None else value
+        """Every model parameter, typed for the kernels (per-neuron values as arrays)."""
+        out: dict[str, Any] = {key: getattr(self, key) for key in _MODEL}
         for key in _PER_NEURON:
             arr = np.atleast_1d(np.asarray(out[key], dtype=np.float64))
             out[key] = np.broadcast_to(arr, (self.n,)).copy() if arr.shape[0] == 1 else arr
@@ -185,20 +180,14 @@ def _spike_buffers(cap: int, offsets: bool) -> tuple[np.ndarray, ...]:
     return np.empty(cap, np.int64), np.empty(cap, np.int64)
 
 
+#: The model parameters' defaults, read from :class:`NlifConfig` (their one source).
+NLIF_DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(NlifConfig) if f.name in _MODEL}
+
+
 class Nlif(Block):
     """A population of N noisy leaky integrate-and-fire neurons (Rager et al. eq. 5–6): drive → spikes.
 
-    Ports
-    -----
-    x : float64, shape () (the same drive for all neurons) or (n,), units "1", sampled at rate_hz
-        The stimulus I_stim, e.g. the Table I weighted sum of forces and derivatives.
-    spikes : events, int64 neuron index, n_units = n
-        Spike times (s), sorted by time then index. ``Chunk.end`` is the watermark: time of the
-        last processed sample + dt (nothing more will come before it).
-    v : float64, shape (n,), units "1" (threshold 1), at the input rate
-        The membrane at each input sample's time ``t_i`` (before that sample acts; after the
-        reset of the previous step), as Brian2's StateMonitor records it. Computed only when
-        ``v`` is demanded.
+    The drive ``x`` is the stimulus I_stim, e.g. the Table I weighted sum of forces and derivatives.
 
     Config
     ------
@@ -271,8 +260,23 @@ class Nlif(Block):
         )
     }
     outputs = {
-        "spikes": Port(dtype="int64", shape=(), units="1", events=True, doc="spike times and neuron indices"),
-        "v": Port(dtype="float64", units="1", doc="membrane at each input sample time, shape (n,)"),
+        "spikes": Port(
+            dtype="int64",
+            shape=(),
+            units="1",
+            events=True,
+            n_units="n",
+            doc="spike times (s) and neuron indices, sorted by time then index. Chunk.end is the "
+            "watermark: time of the last processed sample + dt (nothing more will come before it)",
+        ),
+        "v": Port(
+            dtype="float64",
+            shape=("n",),
+            units="1",
+            doc="the membrane (threshold 1) at each input sample's time t_i (before that sample acts; "
+            "after the reset of the previous step), as Brian2's StateMonitor records it. Computed only "
+            "when v is demanded",
+        ),
     }
     counter_docs = nonfinite_counter_docs("drive samples on 'x'")
 
@@ -292,10 +296,7 @@ class Nlif(Block):
                 f"{self.node}: euler is unstable for dt >= 2·tau (dt = {dt:g} s, min tau = "
                 f"{p['tau_s'].min():g} s); use integrator: exp",
             )
-        return {
-            "spikes": StreamSpec(dtype="int64", shape=(), units="1", events=True, n_units=n),
-            "v": StreamSpec(dtype="float64", shape=(n,), units="1", rate_hz=x.rate_hz),
-        }
+        return super().specs(inputs)  # the declared ports: n_units and shape from n, x's rate
 
     # -- state -------------------------------------------------------------------------------
     def reset(self) -> None:

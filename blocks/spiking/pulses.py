@@ -13,17 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from flowtact.block import (
-    BadDataConfig,
-    Block,
-    Example,
-    Port,
-    SpecError,
-    nonfinite_counter_docs,
-    screen_nonfinite,
-)
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import param
+import flowtact.api as ft
 
 __all__ = ["FLAGS", "Pulses", "PulsesConfig", "pulse_kernel", "pulse_kernel_py"]
 
@@ -115,29 +105,31 @@ pulse_kernel.__doc__ = "numba version of :func:`pulse_kernel_py` (the per-event 
 
 
 @dataclass(frozen=True)
-class PulsesConfig(BadDataConfig):
-    amplitude_ua: float = param(
+class PulsesConfig(ft.BadDataConfig):
+    amplitude_ua: float = ft.param(
         60.0, doc="pulse amplitude per spike (also held before the first amplitude sample)", gt=0
     )
-    width_us: float = param(200.0, doc="pulse width (per phase)", gt=0)
-    max_rate_hz: float = param(
+    width_us: float = ft.param(200.0, doc="pulse width (per phase)", gt=0)
+    max_rate_hz: float = ft.param(
         300.0,
         doc="per unit: a pulse closer than 1/max_rate_hz to the previous delivered one is dropped",
         gt=0,
     )
-    min_amplitude_ua: float = param(
+    min_amplitude_ua: float = ft.param(
         5.0, doc="smallest pulse delivered; requests below it (zero, negative) give no pulse", gt=0
     )
-    max_amplitude_ua: float = param(250.0, doc="largest pulse amplitude; larger requests are clipped", gt=0)
-    max_charge_nc: float = param(
+    max_amplitude_ua: float = ft.param(
+        250.0, doc="largest pulse amplitude; larger requests are clipped", gt=0
+    )
+    max_charge_nc: float = ft.param(
         30.0, doc="charge per phase limit (amplitude × width); the amplitude is clipped to respect it", gt=0
     )
-    max_ramp_ua_per_s: float = param(
+    max_ramp_ua_per_s: float = ft.param(
         5000.0,
         doc="largest amplitude change between consecutive pulses of a unit, per second between them",
         gt=0,
     )
-    max_units: int = param(64, doc="most stimulation channels (units) the stream may index", ge=1)
+    max_units: int = ft.param(64, doc="most stimulation channels (units) the stream may index", ge=1)
 
     def charge_ceiling_ua(self) -> float:
         """Largest amplitude allowed by the charge limit at this width: 1000·max_charge_nc / width_us."""
@@ -168,19 +160,8 @@ class PulsesConfig(BadDataConfig):
             )
 
 
-class Pulses(Block):
+class Pulses(ft.Block):
     """Spikes → stimulation pulses, one per spike, always inside a safety envelope.
-
-    Ports
-    -----
-    spikes : events, int (unit index), n_units ≤ max_units
-        The spike trains to deliver (e.g. an ``nlif`` population's ``spikes``).
-    amplitude : float64 () or (n_units,), units "uA", optional
-        Requested amplitude, sample-and-hold: a spike at time t uses the latest sample at or
-        before t (``amplitude_ua`` before the first sample). Unconnected: ``amplitude_ua``.
-    y : events, float64 (3,), labels (unit, amplitude_ua, width_us)
-        One row per delivered pulse, stamped with the spike time (pulse onset). ``Chunk.end`` is
-        the watermark: no pulse before it will follow.
 
     Config
     ------
@@ -234,14 +215,35 @@ class Pulses(Block):
 
     config_cls = PulsesConfig
     inputs = {
-        "spikes": Port(dtype=None, shape=(), events=True, doc="spike events (t = time, data = unit index)"),
-        "amplitude": Port(
-            dtype="float64", units="uA", optional=True, doc="requested amplitude per unit or for all (µA)"
+        "spikes": ft.Port(
+            dtype=None,
+            shape=(),
+            events=True,
+            doc=(
+                "the spike trains to deliver (e.g. an nlif population's spikes): t = time, data = unit "
+                "index, n_units ≤ max_units"
+            ),
+        ),
+        "amplitude": ft.Port(
+            dtype="float64",
+            units="uA",
+            optional=True,
+            doc=(
+                "requested amplitude, shape () or (n_units,), sample-and-hold: a spike at time t uses the"
+                " latest sample at or before t (amplitude_ua before the first sample). Unconnected: "
+                "amplitude_ua"
+            ),
         ),
     }
     outputs = {
-        "y": Port(
-            dtype="float64", shape=(3,), events=True, doc="delivered pulses: [unit, amplitude_ua, width_us]"
+        "y": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            events=True,
+            doc=(
+                "one row [unit, amplitude_ua, width_us] per delivered pulse, stamped with the spike time "
+                "(pulse onset). Chunk.end is the watermark: no pulse before it will follow"
+            ),
         ),
     }
     counter_docs = {
@@ -258,19 +260,19 @@ class Pulses(Block):
         "charge ceiling",
         "ramp_limited": "pulses whose amplitude changed faster than max_ramp_ua_per_s since the unit's "
         "previous pulse: delivered at the ramp-limited amplitude",
-        **nonfinite_counter_docs("amplitude samples"),
+        **ft.nonfinite_counter_docs("amplitude samples"),
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         c = self.config
         sp = inputs["spikes"]
         if np.dtype(sp.dtype).kind not in "iu":
-            raise SpecError("spikes", f"expects integer unit indices; got dtype {sp.dtype}")
+            raise ft.SpecError("spikes", f"expects integer unit indices; got dtype {sp.dtype}")
         if sp.shape != ():
-            raise SpecError("spikes", f"expects one unit index per event (shape ()); got shape {sp.shape}")
+            raise ft.SpecError("spikes", f"expects one unit index per event (shape ()); got shape {sp.shape}")
         n_units = sp.n_units if sp.n_units is not None else c.max_units
         if n_units > c.max_units:
-            raise SpecError(
+            raise ft.SpecError(
                 "spikes",
                 f"indexes {n_units} units but max_units is {c.max_units}: one stimulation channel per unit; "
                 f"set max_units: {n_units} if the stimulator has that many channels",
@@ -278,17 +280,17 @@ class Pulses(Block):
         amp = inputs.get("amplitude")
         if amp is not None:
             if amp.events:
-                raise SpecError("amplitude", "expects a sampled stream, not events")
+                raise ft.SpecError("amplitude", "expects a sampled stream, not events")
             if amp.units != "uA":
-                raise SpecError("amplitude", f"expects units 'uA'; got '{amp.units}'")
+                raise ft.SpecError("amplitude", f"expects units 'uA'; got '{amp.units}'")
             if np.dtype(amp.dtype).kind != "f":
-                raise SpecError("amplitude", f"expects a float stream; got dtype {amp.dtype}")
+                raise ft.SpecError("amplitude", f"expects a float stream; got dtype {amp.dtype}")
             if amp.shape not in ((), (n_units,)):
-                raise SpecError(
+                raise ft.SpecError(
                     "amplitude", f"expects shape () or ({n_units},) (one per unit); got shape {amp.shape}"
                 )
         return {
-            "y": StreamSpec(
+            "y": ft.StreamSpec(
                 dtype="float64",
                 shape=(3,),
                 units="1",
@@ -313,7 +315,7 @@ class Pulses(Block):
         self.pend_t = np.empty(0)
         self.pend_u = np.empty(0, np.int64)
 
-    def step(self, spikes: Chunk, amplitude: Chunk | None = None) -> dict[str, Chunk]:
+    def step(self, spikes: ft.Chunk, amplitude: ft.Chunk | None = None) -> dict[str, ft.Chunk]:
         c = self.config
         new_t = np.asarray(spikes.t, np.float64)
         new_u = np.asarray(spikes.data).astype(np.int64)
@@ -328,7 +330,7 @@ class Pulses(Block):
         # Sample-and-hold lookup over [last held sample] + this chunk's (screened) samples.
         a_t, a_v = np.array([self.amp_t]), self.amp_last[None, :]
         if amplitude is not None and len(amplitude):
-            amplitude, self.screen_last = screen_nonfinite(
+            amplitude, self.screen_last = ft.screen_nonfinite(
                 self, amplitude, c.on_bad_data, "amplitude", self.screen_last
             )
             if len(amplitude):
@@ -350,7 +352,7 @@ class Pulses(Block):
         end = horizon if spikes.end is None else min(horizon, spikes.end)
         return {"y": self._deliver(ev_t, ev_u, req, end)}
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         if not len(self.pend_t):
             return {}
         ev_t, ev_u = self.pend_t, self.pend_u
@@ -358,7 +360,7 @@ class Pulses(Block):
         req = self.amp_last[np.clip(ev_u, 0, self.n_units - 1)]
         return {"y": self._deliver(ev_t, ev_u, req, float(ev_t[-1]))}
 
-    def _deliver(self, t: np.ndarray, u: np.ndarray, req: np.ndarray, end: float | None) -> Chunk:
+    def _deliver(self, t: np.ndarray, u: np.ndarray, req: np.ndarray, end: float | None) -> ft.Chunk:
         c = self.config
         n = len(t)
         out_a = np.empty(n)
@@ -386,10 +388,10 @@ class Pulses(Block):
         data[:, 0] = u[keep]
         data[:, 1] = out_a[keep]
         data[:, 2] = c.width_us
-        return Chunk(t[keep].copy(), data, end)
+        return ft.Chunk(t[keep].copy(), data, end)
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(11)
         n = 1000
         parts_t, parts_u = [], []
@@ -409,7 +411,7 @@ class Pulses(Block):
         )
         amp[300, 1] = np.nan
         amp[600, 2] = np.inf
-        return Example(
+        return ft.Example(
             params={"on_bad_data": "hold", "max_ramp_ua_per_s": 3000.0},
             inputs={"spikes": (t[order], u[order].astype(np.int64)), "amplitude": amp},
             units={"amplitude": "uA"},

@@ -8,33 +8,24 @@ from typing import Literal
 
 import numpy as np
 
-from flowtact.block import Block, Example, Port, SpecError
+import flowtact.api as ft
 from flowtact.blocks.spiking.event_bins import EventBins
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
 
 __all__ = ["Rate", "RateConfig"]
 
 
 @dataclass(frozen=True)
-class RateConfig(Config):
+class RateConfig(ft.Config):
     """Parameters of :class:`Rate`."""
 
-    bin_s: float = param(0.02, doc="bin width in s (output rate 1/bin_s Hz)", gt=0)
-    mode: Literal["unit", "population"] = param(
+    bin_s: float = ft.param(0.02, doc="bin width in s (output rate 1/bin_s Hz)", gt=0)
+    mode: Literal["unit", "population"] = ft.param(
         "unit", doc="unit: one rate per unit, shape (n_units,); population: mean rate per unit, shape ()"
     )
 
 
-class Rate(Block):
+class Rate(ft.Block):
     """Firing rate of a spike stream in fixed time bins (spikes/s).
-
-    Ports
-    -----
-    spikes : events, int64 unit index (needs the stream's n_units)
-        The spike stream, e.g. ``nlif.spikes``.
-    y : float64, shape (n_units,) (mode unit) or () (mode population), spikes/s, at 1/bin_s Hz
-        Bin ``k`` covers ``[k·bin_s, (k+1)·bin_s)`` and is stamped at its start ``k·bin_s``.
 
     Config
     ------
@@ -62,35 +53,53 @@ class Rate(Block):
     """
 
     config_cls = RateConfig
-    inputs = {"spikes": Port(dtype="int64", shape=(), events=True, doc="spike times and unit indices")}
-    outputs = {"y": Port(dtype="float64", units="spikes/s", doc="rate per bin, stamped at the bin start")}
+    inputs = {
+        "spikes": ft.Port(
+            dtype="int64",
+            shape=(),
+            events=True,
+            doc="the spike stream (e.g. nlif.spikes); needs the stream's n_units",
+        )
+    }
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            units="spikes/s",
+            doc=(
+                "rate per bin, shape (n_units,) (mode unit) or () (mode population), at 1/bin_s Hz: bin k"
+                " covers [k·bin_s, (k+1)·bin_s) and is stamped at its start k·bin_s"
+            ),
+        )
+    }
     counter_docs = {
         "late_events": "spikes older than a bin already emitted (the producer broke its watermark): "
         "ignored, so those rates are too low; a fault upstream",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         s = inputs["spikes"]
         if not s.n_units or s.n_units < 1:
-            raise SpecError(
+            raise ft.SpecError(
                 "spikes", f"{self.node}: input 'spikes' must declare its number of units (n_units)"
             )
         shape = (s.n_units,) if self.config.mode == "unit" else ()
         return {
-            "y": StreamSpec(dtype="float64", shape=shape, units="spikes/s", rate_hz=1.0 / self.config.bin_s)
+            "y": ft.StreamSpec(
+                dtype="float64", shape=shape, units="spikes/s", rate_hz=1.0 / self.config.bin_s
+            )
         }
 
     def reset(self) -> None:
         units = int(self.input_specs["spikes"].n_units)  # type: ignore[arg-type]
         self._bins = EventBins(units, self.config.bin_s, f"{self.node} ({self.name})")
 
-    def step(self, spikes: Chunk) -> dict[str, Chunk]:
+    def step(self, spikes: ft.Chunk) -> dict[str, ft.Chunk]:
         late = self._bins.add(spikes)
         if late:
             self.count("late_events", late)
         return {"y": self._emit(self._bins.complete(), partial=False)}
 
-    def _emit(self, n_bins: int, partial: bool) -> Chunk:
+    def _emit(self, n_bins: int, partial: bool) -> ft.Chunk:
         w = self.config.bin_s
         k, counts = self._bins.take(n_bins)
         widths = np.full(len(k), w)
@@ -101,14 +110,14 @@ class Rate(Block):
         rates = counts / widths[:, None]
         if self.config.mode == "population":
             rates = rates.mean(axis=1)
-        return Chunk(k * w, rates, k[-1] * w + w if len(k) else None)
+        return ft.Chunk(k * w, rates, k[-1] * w + w if len(k) else None)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         return {"y": self._emit(self._bins.pending(), partial=True)}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(5)
         t = np.sort(rng.uniform(0.0, 1.0, 300))
         idx = rng.integers(0, 4, 300)
-        return Example(params={"bin_s": 0.02}, inputs={"spikes": (t, idx)}, rate_hz=1000.0)
+        return ft.Example(params={"bin_s": 0.02}, inputs={"spikes": (t, idx)}, rate_hz=1000.0)

@@ -12,8 +12,7 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError, SpecError
-from flowtact.chunk import Chunk, StreamSpec
+import flowtact.api as ft
 from flowtact.stress import EPS, Outcome, StressCase
 from flowtact.testing import run_offline
 
@@ -32,7 +31,7 @@ def _closed_form(u: float, tau: float, t: np.ndarray) -> np.ndarray:
     return -u * np.expm1(-t / tau)
 
 
-def _run(integrator: str, tau: float, u: float, n_steps: int = 1000, **kw: object) -> dict[str, Chunk]:
+def _run(integrator: str, tau: float, u: float, n_steps: int = 1000, **kw: object) -> dict[str, ft.Chunk]:
     return run_offline(Nlif(n=2, tau_s=tau, integrator=integrator, **kw), x=np.full(n_steps, u), chunk=333)
 
 
@@ -45,7 +44,7 @@ def tau_tiny(integrator: str) -> Outcome:
     if integrator == "euler":
         try:
             _run(integrator, 1e-6, 0.5)
-        except SpecError as e:
+        except ft.SpecError as e:
             msg = str(e)
             clean = "euler is unstable" in msg and "\n" not in msg
             return Outcome(
@@ -149,7 +148,7 @@ def bad_samples(policy: str) -> Outcome:
             blk = Nlif(n=2, integrator=integ, on_bad_data=policy)
             try:
                 out = run_offline(blk, x=x, chunk=7)
-            except BadDataError as e:
+            except ft.BadDataError as e:
                 ok &= policy == "raise" and "non-finite" in str(e) and "\n" not in str(e)
                 continue
             v, spk = out["v"], out["spikes"]
@@ -176,7 +175,7 @@ def float32_input() -> Outcome:
     """A float32 drive: the block's port is float64 (state is float64): refused at bind, or not."""
     try:
         run_offline(Nlif(n=2), x=np.full(10, 0.5, np.float32))
-    except SpecError as e:
+    except ft.SpecError as e:
         return Outcome(
             "float32", "nlif", "float32 drive", f"not supported (state and ports are float64): refused at "
             f"bind: “{e}”", "clean refusal", "\n" not in str(e),
@@ -196,14 +195,14 @@ def long_run(integrator: str, n_steps: int, u: float, n: int = 4, chunk: int = 1
     grid methods) and ``t_ulp`` (one ulp of the last time).
     """
     blk = Nlif(n=n, tau_s=0.01, integrator=integrator)
-    blk.bind({"x": StreamSpec(dtype="float64", shape=(), units="1", rate_hz=RATE)})
+    blk.bind({"x": ft.StreamSpec(dtype="float64", shape=(), units="1", rate_hz=RATE)})
     x = np.full(chunk, u)
     times: list[np.ndarray] = []
     v_first = v_last = math.nan
     for i0 in range(0, n_steps, chunk):
         m = min(chunk, n_steps - i0)
         t = (i0 + np.arange(m)) / RATE
-        out = blk(x=Chunk(t, x[:m]))
+        out = blk(x=ft.Chunk(t, x[:m]))
         v_last = float(out["v"].data[-1, 0])
         if i0 == 0:
             v_first = v_last

@@ -10,9 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from flowtact import Block, Chunk, Example, Port, SpecError, StreamSpec, param
+import flowtact.api as ft
 from flowtact.blocks.spiking.event_bins import EventBins
-from flowtact.params import Config
 
 __all__ = ["Synapse", "SynapseConfig", "grid_connectivity"]
 
@@ -54,27 +53,27 @@ def grid_connectivity(
 
 
 @dataclass(frozen=True)
-class SynapseConfig(Config):
+class SynapseConfig(ft.Config):
     """Parameters of :class:`Synapse`: the weights (dense, or a grid connectivity) and the decay."""
 
-    rate_hz: float = param(1000.0, doc="rate of the output currents (its bins: 1/rate_hz s)", gt=0)
-    tau_s: float = param(0.005, doc="decay time constant of the synaptic current, s", gt=0)
-    weights: tuple[tuple[float, ...], ...] | None = param(
+    rate_hz: float = ft.param(1000.0, doc="rate of the output currents (its bins: 1/rate_hz s)", gt=0)
+    tau_s: float = ft.param(0.005, doc="decay time constant of the synaptic current, s", gt=0)
+    weights: tuple[tuple[float, ...], ...] | None = ft.param(
         None, doc="dense weights, one row per target, one column per source (or use grid)"
     )
-    grid: tuple[int, ...] | None = param(
+    grid: tuple[int, ...] | None = ft.param(
         None, doc="random connectivity: sources on a row-major grid [rows, cols]", ge=1, min_len=2, max_len=2
     )
-    n_targets: int = param(1, doc="random connectivity: number of targets", ge=1)
-    fan_in: tuple[int, ...] = param(
+    n_targets: int = ft.param(1, doc="random connectivity: number of targets", ge=1)
+    fan_in: tuple[int, ...] = ft.param(
         (1, 3),
         doc="random connectivity: [least, most] adjacent sources per target",
         ge=1,
         min_len=2,
         max_len=2,
     )
-    weight: float = param(1.0, doc="random connectivity: the weight of every connection")
-    connect_seed: int = param(
+    weight: float = ft.param(1.0, doc="random connectivity: the weight of every connection")
+    connect_seed: int = ft.param(
         0, doc="random connectivity: seed of the draw (fixed: not the graph's seed)", ge=0
     )
 
@@ -121,16 +120,8 @@ def _integrate(
     return out
 
 
-class Synapse(Block):
+class Synapse(ft.Block):
     """Synaptic currents of a target population from a source population's spikes (sparse weights, exponential decay).
-
-    Ports
-    -----
-    spikes : events, int64 source index (needs the stream's n_units = number of sources)
-    y : float64, shape (n_targets,), units "1", at rate_hz
-        Sample ``k`` (stamped ``k/rate_hz``) is the current after bin ``k`` = [k, k + 1)/rate_hz:
-        ``y[k] = e^(−dt/τ)·y[k−1] + W·c[k]`` with ``c[k]`` the spike counts of each source in that
-        bin: a spike adds its weight at once, then decays with ``tau_s``.
 
     Config
     ------
@@ -161,27 +152,45 @@ class Synapse(Block):
     """
 
     config_cls = SynapseConfig
-    inputs = {"spikes": Port(dtype="int64", shape=(), events=True, doc="spike times and source indices")}
-    outputs = {"y": Port(dtype="float64", units="1", doc="current of each target, per bin")}
+    inputs = {
+        "spikes": ft.Port(
+            dtype="int64",
+            shape=(),
+            events=True,
+            doc="spike times and source indices (needs the stream's n_units = number of sources)",
+        )
+    }
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            units="1",
+            doc=(
+                "current of each target, shape (n_targets,), at rate_hz: sample k (stamped k/rate_hz) is "
+                "the current after bin k = [k, k + 1)/rate_hz: y[k] = e^(−dt/τ)·y[k−1] + W·c[k] with c[k]"
+                " the spike counts of each source in that bin: a spike adds its weight at once, then "
+                "decays with tau_s"
+            ),
+        )
+    }
     counter_docs = {
         "late_events": "spikes older than a bin already emitted (the producer broke its watermark): "
         "ignored, so those currents are too low; a fault upstream",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         s = inputs["spikes"]
         w = self.config.matrix()
         if not s.n_units:
-            raise SpecError(
+            raise ft.SpecError(
                 "spikes", f"{self.node}: input 'spikes' must declare its number of units (n_units)"
             )
         if s.n_units != w.shape[1]:
-            raise SpecError(
+            raise ft.SpecError(
                 "spikes",
                 f"{self.node}: the weights have {w.shape[1]} source columns but 'spikes' has "
                 f"{s.n_units} units",
             )
-        return {"y": StreamSpec("float64", (w.shape[0],), "1", self.config.rate_hz)}
+        return {"y": ft.StreamSpec("float64", (w.shape[0],), "1", self.config.rate_hz)}
 
     def reset(self) -> None:
         w = self.config.matrix()
@@ -195,22 +204,22 @@ class Synapse(Block):
         self._y = np.zeros(self._n_tgt)
         self._bins = EventBins(self._n_src, self._dt, f"{self.node} ({self.name})", what="source")
 
-    def step(self, spikes: Chunk) -> dict[str, Chunk]:
+    def step(self, spikes: ft.Chunk) -> dict[str, ft.Chunk]:
         late = self._bins.add(spikes)
         if late:
             self.count("late_events", late)
         return {"y": self._emit(self._bins.complete())}
 
-    def _emit(self, n_bins: int) -> Chunk:
+    def _emit(self, n_bins: int) -> ft.Chunk:
         k, counts = self._bins.take(n_bins)
         y = _integrate(np.ascontiguousarray(counts), self._ptr, self._tgt, self._val, self._decay, self._y)
-        return Chunk(k * self._dt, y, (k[-1] + 1) * self._dt if len(k) else None)
+        return ft.Chunk(k * self._dt, y, (k[-1] + 1) * self._dt if len(k) else None)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         return {"y": self._emit(self._bins.pending())}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(9)
         t = np.sort(rng.uniform(0.0, 1.0, 400))
         idx = rng.integers(0, 24, 400)
@@ -222,4 +231,4 @@ class Synapse(Block):
             "tau_s": 0.01,
             "rate_hz": 250.0,
         }
-        return Example(params=params, inputs={"spikes": (t, idx)}, rate_hz=1000.0)
+        return ft.Example(params=params, inputs={"spikes": (t, idx)}, rate_hz=1000.0)

@@ -17,11 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source, example_folder
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.errors import FlowtactError
-from flowtact.limits import MAX_TICK_S
-from flowtact.params import Config, param
+import flowtact.api as ft
 
 from .hand import FINGERS
 
@@ -41,13 +37,13 @@ _BACKENDS = {
 }
 
 
-class CameraError(FlowtactError, RuntimeError):
+class CameraError(ft.FlowtactError, RuntimeError):
     """A device could not be opened, or stopped delivering frames."""
 
 
 @dataclass(frozen=True)
-class CameraConfig(Config):
-    devices: tuple[int | str, ...] = param(
+class CameraConfig(ft.Config):
+    devices: tuple[int | str, ...] = ft.param(
         (0, 1, 2),
         doc="one entry per sensor (thumb, index, middle): a device index, a video file, or an image folder "
         "(relative: to the graph file)",
@@ -56,27 +52,27 @@ class CameraConfig(Config):
         max_len=3,
         path=True,
     )
-    fps: float = param(
+    fps: float = ft.param(
         40.0, doc="frame rate of the output (graph time); each due frame reads every device", gt=0, le=1000
     )
-    size: tuple[int, ...] = param(
+    size: tuple[int, ...] = ft.param(
         (320, 240),
         doc="output frame width, height in px (frames of another size are resized)",
         gt=0,
         min_len=2,
         max_len=2,
     )
-    loop: bool = param(
+    loop: bool = ft.param(
         False, doc="video files and image folders start again at their end (else: stop emitting)"
     )
-    backend: Literal["any", "v4l2", "dshow", "msmf", "avfoundation", "gstreamer", "ffmpeg"] = param(
+    backend: Literal["any", "v4l2", "dshow", "msmf", "avfoundation", "gstreamer", "ffmpeg"] = ft.param(
         "any", doc="OpenCV capture backend for device indices and video files"
     )
 
     def state_bytes(self) -> dict[str, float]:
         """A frame per device and its resize buffers, and a longest tick of frames."""
         frame = float(self.size[0]) * self.size[1] * len(self.devices)
-        return {"size": frame * (16 + self.fps * MAX_TICK_S)}
+        return {"size": frame * (16 + self.fps * ft.MAX_TICK_S)}
 
 
 class _Folder:
@@ -145,18 +141,8 @@ class _Capture:
         self.cap.release()
 
 
-class Camera(Source):
+class Camera(ft.Source):
     """Gray frames from 1–3 cameras, video files or image folders (the TacTips' cameras), at a set FPS.
-
-    Ports
-    -----
-    frames : uint8 (n, H, W), units "DN"
-        One gray frame per device (axis 0 in ``devices`` order: thumb, index, middle for three),
-        ``(H, W) = (size[1], size[0])``, default (240, 320): the ``tactip_sim`` stream.
-    device_t : float64 (n,), units "s"
-        Each frame's own time stamp: a video's position (``CAP_PROP_POS_MSEC``), an image
-        folder's frame index / ``fps``, a live camera's driver time stamp (or ``time.monotonic()``
-        at the read when the driver gives none).
 
     Config
     ------
@@ -197,25 +183,39 @@ class Camera(Source):
     config_cls = CameraConfig
     requires = {"cv2": "vision"}
     outputs = {
-        "frames": Port(dtype="uint8", units="DN", doc="gray frames, one per device, (n, H, W)"),
-        "device_t": Port(units="s", doc="each frame's own time stamp (video position, driver stamp)"),
+        "frames": ft.Port(
+            dtype="uint8",
+            units="DN",
+            doc=(
+                "one gray frame per device (axis 0 in devices order: thumb, index, middle for three), (H,"
+                " W) = (size[1], size[0]), default (240, 320): the tactip_sim stream"
+            ),
+        ),
+        "device_t": ft.Port(
+            units="s",
+            doc=(
+                "each frame's own time stamp: a video's position (CAP_PROP_POS_MSEC), an image folder's "
+                "frame index / fps, a live camera's driver time stamp (or time.monotonic() at the read "
+                "when the driver gives none)"
+            ),
+        ),
     }
     counter_docs = {
         "ended": "a video file or image folder ran out of frames (loop: false): no frames after that; "
         "expected when playing a finite recording",
     }
 
-    def __init__(self, config: Config | None = None, /, **kw: Any) -> None:
+    def __init__(self, config: ft.Config | None = None, /, **kw: Any) -> None:
         super().__init__(config, **kw)
         self.sources: list[_Folder | _Capture] = []
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
         c = self.config
         n = len(c.devices)
         w, h = c.size
         return {
-            "frames": StreamSpec(dtype="uint8", shape=(n, h, w), units="DN", rate_hz=c.fps),
-            "device_t": StreamSpec(
+            "frames": ft.StreamSpec(dtype="uint8", shape=(n, h, w), units="DN", rate_hz=c.fps),
+            "device_t": ft.StreamSpec(
                 shape=(n,), units="s", rate_hz=c.fps, labels=FINGERS if n == len(FINGERS) else None
             ),
         }
@@ -301,7 +301,7 @@ class Camera(Source):
             img = cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
         return img
 
-    def step(self, now: float) -> dict[str, Chunk]:
+    def step(self, now: float) -> dict[str, ft.Chunk]:
         c = self.config
         if not self.sources:
             self.open()  # driven offline (run_source) without the runtime's open()
@@ -331,16 +331,16 @@ class Camera(Source):
         n = len(frames)
         t = (start + np.arange(n)) / c.fps
         data = np.stack(frames) if n else np.empty((0, n_dev, h, w), np.uint8)
-        out: dict[str, Chunk] = {}
+        out: dict[str, ft.Chunk] = {}
         if "frames" in self.demanded:
-            out["frames"] = Chunk(t, data, now)
+            out["frames"] = ft.Chunk(t, data, now)
         if "device_t" in self.demanded:
-            out["device_t"] = Chunk(t, np.stack(stamps) if n else np.empty((0, n_dev)), now)
+            out["device_t"] = ft.Chunk(t, np.stack(stamps) if n else np.empty((0, n_dev)), now)
         return out
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(params={"devices": _example_folders(), "loop": True}, rate_hz=40.0, duration_s=0.5)
+    def example(cls) -> ft.Example:
+        return ft.Example(params={"devices": _example_folders(), "loop": True}, rate_hz=40.0, duration_s=0.5)
 
 
 def _example_folders() -> list[str]:
@@ -353,7 +353,7 @@ def _example_folders() -> list[str]:
     """
     from .tactip_sim import render, scenario_contacts
 
-    root = example_folder() / "camera"
+    root = ft.example_folder() / "camera"
     names = [str(root / f) for f in FINGERS]
     if all((Path(d) / "frame_007.pgm").is_file() for d in names):
         return names

@@ -29,9 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
+import flowtact.api as ft
 from flowtact.bounded_files import open_regular, regular_file
-from flowtact.limits import STATE_BUDGET_BYTES, format_bytes
 from flowtact.safe_text import shown
 
 from .hand import FINGERS
@@ -77,7 +76,7 @@ MAX_INPUT_SIDE = 4096
 """Largest frame side (pixels) a checkpoint may declare."""
 MAX_DOWNSAMPLE = 64
 """Largest average-pooling factor."""
-MAX_CNN_BYTES = STATE_BUDGET_BYTES
+MAX_CNN_BYTES = ft.STATE_BUDGET_BYTES
 """Most memory a network may need (float32 parameters twice, as built and as loaded, plus two
 activations of one 3-image call): a block's state budget (1 GiB), checked from the metadata
 before the network is built."""
@@ -371,8 +370,8 @@ def _check_shape(meta: Mapping[str, Any], path: Path) -> None:
     need = 4 * (2 * params + acts)
     if need > MAX_CNN_BYTES:
         raise ValueError(
-            f"{shown(path)}: the network it describes would need about {format_bytes(need)} "
-            f"(at most {format_bytes(MAX_CNN_BYTES)}): width {width}, {n_conv} stages, fc {fc}"
+            f"{shown(path)}: the network it describes would need about {ft.format_bytes(need)} "
+            f"(at most {ft.format_bytes(MAX_CNN_BYTES)}): width {width}, {n_conv} stages, fc {fc}"
         )
 
 
@@ -381,7 +380,7 @@ def _read_json(path: Path) -> Any:
     with open_regular(path) as fh:
         raw = fh.read(MAX_META_BYTES + 1)
     if len(raw) > MAX_META_BYTES:
-        raise ValueError(f"{shown(path)}: metadata larger than {format_bytes(MAX_META_BYTES)}")
+        raise ValueError(f"{shown(path)}: metadata larger than {ft.format_bytes(MAX_META_BYTES)}")
     return _loads(raw, path)
 
 
@@ -400,7 +399,7 @@ def _checkpoint_file(path: Path) -> None:
         raise FileNotFoundError(f"checkpoint not found: {shown(path)}") from None
     if size > MAX_CHECKPOINT_BYTES:
         raise ValueError(
-            f"{shown(path)}: checkpoint of {format_bytes(size)} (at most {format_bytes(MAX_CHECKPOINT_BYTES)})"
+            f"{shown(path)}: checkpoint of {ft.format_bytes(size)} (at most {ft.format_bytes(MAX_CHECKPOINT_BYTES)})"
         )
 
 
@@ -478,32 +477,22 @@ def load_checkpoint(path: str | Path) -> tuple[Any, dict[str, Any]]:
 
 
 @dataclass(frozen=True)
-class CnnForceConfig(Config):
+class CnnForceConfig(ft.Config):
     """Parameters of :class:`CnnForce`."""
 
-    checkpoint: str | None = param(
+    checkpoint: str | None = ft.param(
         None,
         doc="checkpoint (.pt) written by 'flowtact train-force' (relative: to the graph file); null: the "
         "small model shipped with flowtact",
         path=True,
     )
-    clip_negative: bool = param(
+    clip_negative: bool = ft.param(
         True, doc="clip estimates below 0 N to 0 (a pressed fingertip pushes, never pulls)"
     )
 
 
-class CnnForce(Block):
+class CnnForce(ft.Block):
     """Contact force per TacTip from its camera frame with a trained CNN (one batched call per frame).
-
-    Ports
-    -----
-    x : uint8, shape (S, H, W), units "DN", sampled
-        One gray frame per sensor (S = 3: thumb, index, middle). Either whole frames of the size the
-        checkpoint was trained on (its ``preprocess.input_hw``; the block applies the checkpoint's
-        crop) or frames already cropped to the checkpoint's crop size (e.g. from a ``crop`` node with
-        the same window: the block then trusts that the window is the same).
-    y : float64, shape (S,), units "N", same rate; labels (thumb, index, middle) when S = 3
-        Estimated contact force per sensor, stamped like the frame; ``end`` follows ``x``'s watermark.
 
     Config
     ------
@@ -549,16 +538,29 @@ class CnnForce(Block):
     config_cls = CnnForceConfig
     requires = {"torch": "cnn"}
     inputs = {
-        "x": Port(
+        "x": ft.Port(
             dtype="uint8",
             units="DN",
             ndim=(3,),
             require_rate=True,
-            doc="gray frames, one per sensor: (S, H, W) uint8",
+            doc=(
+                "one gray frame per sensor (S = 3: thumb, index, middle). Either whole frames of the size"
+                " the checkpoint was trained on (its preprocess.input_hw; the block applies the "
+                "checkpoint's crop) or frames already cropped to the checkpoint's crop size (e.g. from a "
+                "crop node with the same window: the block then trusts that the window is the same)"
+            ),
         )
     }
     outputs = {
-        "y": Port(dtype="float64", shape=None, units="N", doc="estimated contact force per sensor (S,)")
+        "y": ft.Port(
+            dtype="float64",
+            shape=None,
+            units="N",
+            doc=(
+                "estimated contact force per sensor, shape (S,), at x's rate, stamped like the frame; "
+                "labels thumb, index, middle when S = 3; end follows x's watermark"
+            ),
+        )
     }
 
     def __init__(self, *args: Any, **kw: Any) -> None:
@@ -572,19 +574,20 @@ class CnnForce(Block):
         return shipped_checkpoint() if c is None else Path(c).expanduser()
 
     def _read_meta(self) -> dict[str, Any]:
-        if self._meta is None:
-            try:
-                self._meta = read_meta(self.checkpoint_path())
-            except (FileNotFoundError, ValueError, KeyError, TypeError, OSError) as e:
-                raise SpecError(None, f"{self.node} ({self.name}): checkpoint: {shown(e)}") from None
-        return self._meta
+        """The checkpoint's metadata: as loaded by ``open``, else read now (and not kept: specs() is pure)."""
+        if self._meta is not None:
+            return self._meta
+        try:
+            return read_meta(self.checkpoint_path())
+        except (FileNotFoundError, ValueError, KeyError, TypeError, OSError) as e:
+            raise ft.SpecError(None, f"{self.node} ({self.name}): checkpoint: {shown(e)}") from None
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         x = inputs["x"]
         self._check_size(self._read_meta(), tuple(x.shape[1:]))
         s = x.shape[0]
         labels = FINGERS if s == len(FINGERS) else None
-        return {"y": StreamSpec(dtype="float64", shape=(s,), units="N", rate_hz=x.rate_hz, labels=labels)}
+        return {"y": ft.StreamSpec(dtype="float64", shape=(s,), units="N", rate_hz=x.rate_hz, labels=labels)}
 
     def _check_size(self, meta: Mapping[str, Any], hw: tuple[int, ...]) -> bool:
         """Whether frames of size ``hw`` come cropped already; SpecError if the checkpoint cannot take them."""
@@ -596,7 +599,7 @@ class CnnForce(Block):
             sizes = f"{full[0]}×{full[1]}" + (
                 "" if cropped == full else f" (or {cropped[0]}×{cropped[1]} crops)"
             )
-            raise SpecError(
+            raise ft.SpecError(
                 "x",
                 f"{self.node} ({self.name}): frames are {hw[0]}×{hw[1]} but checkpoint "
                 f"{self.checkpoint_path().name} was trained on {sizes} frames; feed frames of that size "
@@ -616,7 +619,7 @@ class CnnForce(Block):
         try:
             self._model, meta = load_checkpoint(path)
         except (FileNotFoundError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
-            raise SpecError(
+            raise ft.SpecError(
                 None,
                 f"{self.node} ({self.name}): cannot load checkpoint {shown(path)}: {shown(e, limit=500)}",
             ) from None
@@ -638,7 +641,7 @@ class CnnForce(Block):
     def close(self) -> None:
         self._model = None
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         n = len(x)
         z = np.empty((n, self._n), np.float32)
         torch, model = self._torch, self._model
@@ -649,11 +652,11 @@ class CnnForce(Block):
         y = z.astype(np.float64) * self._std + self._mean
         if self.config.clip_negative:
             np.maximum(y, 0.0, out=y)
-        return {"y": Chunk(x.t, y, x.end)}
+        return {"y": ft.Chunk(x.t, y, x.end)}
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(
+    def example(cls) -> ft.Example:
+        return ft.Example(
             params={}, inputs={"x": _example_frames()}, rate_hz=40.0, units={"x": "DN"}, duration_s=1.0
         )
 

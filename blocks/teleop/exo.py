@@ -35,27 +35,13 @@ finger pose: :func:`exo_forward` (eq. 3.3), :func:`finger_inverse` (eqs. 3.4–3
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Config,
-    Example,
-    Port,
-    SpecError,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
-from flowtact.align import Aligner, screen_aligned
+import flowtact.api as ft
 
 from .hand import FINGERS, N_FINGERS
 
@@ -288,7 +274,7 @@ def fingertip_gain(
 # -- shared config pieces -------------------------------------------------------------------------------
 
 
-def _rows_error(cfg: Config, name: str, width: int) -> None:
+def _rows_error(cfg: ft.Config, name: str, width: int) -> None:
     rows = getattr(cfg, name)
     for i, row in enumerate(rows):
         if len(row) != width:
@@ -301,30 +287,26 @@ def _rows_error(cfg: Config, name: str, width: int) -> None:
 
 
 @dataclass(frozen=True)
-class FsrForceConfig(BadDataConfig):
+class FsrForceConfig(ft.BadDataConfig):
     """Parameters of :class:`FsrForce`."""
 
-    scale_n: float = param(FSR_SCALE_N, doc="eq. 3.10 prefactor: |F| = scale_n·exp(exponent_per_adc·R)", gt=0)
-    exponent_per_adc: float = param(FSR_EXP_PER_ADC, doc="eq. 3.10 exponent per ADC count", gt=0)
-    rest_readings: int = param(
+    scale_n: float = ft.param(
+        FSR_SCALE_N, doc="eq. 3.10 prefactor: |F| = scale_n·exp(exponent_per_adc·R)", gt=0
+    )
+    exponent_per_adc: float = ft.param(FSR_EXP_PER_ADC, doc="eq. 3.10 exponent per ADC count", gt=0)
+    rest_readings: int = ft.param(
         REST_READINGS, doc="readings at rest averaged into the offset (0: no offset, absolute |F|)", ge=0
     )
-    adc_max: float = param(
+    adc_max: float = ft.param(
         1023.0, doc="largest valid ADC reading; readings outside [0, adc_max] are bad data", gt=0
     )
-    invert: bool = param(
+    invert: bool = ft.param(
         False, doc="true if pushing the finger closed LOWERS the reading (FSR mounted the other way)"
     )
 
 
-class FsrForce(Block):
+class FsrForce(ft.Block):
     """FSR reading → signed force: eq. 3.10, minus the rest offset of the first 20 readings (§3.2.3).
-
-    Ports
-    -----
-    x : float64, shape (3,), units "ADC" — raw FSR readings 0..1023 (thumb, index, middle)
-    y : float64, shape (3,), units "N", labels FINGERS — F = ±(0.6867·e^(0.0023·R) − offset);
-        positive when the finger pushes towards closing against the servo
 
     Config
     ------
@@ -358,11 +340,24 @@ class FsrForce(Block):
 
     config_cls = FsrForceConfig
     inputs = {
-        "x": Port(
-            dtype="float64", shape=(3,), units="ADC", require_rate=True, doc="raw FSR readings (ADC counts)"
+        "x": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            units="ADC",
+            require_rate=True,
+            doc="raw FSR readings 0..1023 (thumb, index, middle)",
         )
     }
-    outputs = {"y": Port(dtype="float64", shape=(3,), units="N", doc="signed FSR force per finger")}
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            labels=FINGERS,
+            doc="signed force F = ±(0.6867·e^(0.0023·R) − offset) per finger; positive when the finger "
+            "pushes towards closing against the servo",
+        )
+    }
     counter_docs = {
         "out_of_range": "samples with a reading outside [0, adc_max] (a garbled serial line): treated as "
         "NaN, so on_bad_data applies (and counts them too)",
@@ -373,9 +368,6 @@ class FsrForce(Block):
         "nonfinite_hold": "samples with a NaN/inf or out-of-range reading, held at the last good reading "
         "(0 before any; on_bad_data: hold): bad data came from the device",
     }
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        return {"y": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=inputs["x"].rate_hz, labels=FINGERS)}
 
     def reset(self) -> None:
         cfg = self.config
@@ -389,18 +381,18 @@ class FsrForce(Block):
     def _force(self, r: np.ndarray) -> np.ndarray:
         return self.config.scale_n * np.exp(self.config.exponent_per_adc * r)
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         end = x.end
         if len(x):
             d = x.data
             out = (d < 0.0) | (d > self.config.adc_max)
             if out.any():
                 self.count("out_of_range", int(out.reshape(len(x), -1).any(axis=1).sum()))
-                x = Chunk(x.t, np.where(out, np.nan, d), x.end)
-            x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
+                x = ft.Chunk(x.t, np.where(out, np.nan, d), x.end)
+            x, self._last = ft.screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
         f = self._force(x.data)
         if self._offset is not None:
-            return {"y": Chunk(x.t, self._sign * (f - self._offset), end)}
+            return {"y": ft.Chunk(x.t, self._sign * (f - self._offset), end)}
         k = self.config.rest_readings
         take = min(k - self._seen, len(x))
         for i in range(take):  # sequential sum: the same additions whatever the chunking
@@ -411,57 +403,57 @@ class FsrForce(Block):
         if self._seen < k:
             first = self._held[0][0][0] if self._held else end
             wm = None if end is None else (min(end, first) if first is not None else end)
-            return {"y": Chunk.empty(shape=(N_FINGERS,), end=wm)}
+            return {"y": ft.Chunk.empty(shape=(N_FINGERS,), end=wm)}
         return {"y": self._release(end)}
 
-    def _release(self, end: float | None) -> Chunk:
+    def _release(self, end: float | None) -> ft.Chunk:
         self._offset = self._acc / self._seen
         t = np.concatenate([h[0] for h in self._held])
         f = np.concatenate([h[1] for h in self._held])
         self._held = []
-        return Chunk(t, self._sign * (f - self._offset), end)
+        return ft.Chunk(t, self._sign * (f - self._offset), end)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         if self._offset is None and self._seen:
             self.count("rest_short", 1)
             return {"y": self._release(None)}
         return {}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(7)
         n = 150
         t = np.arange(n) / 100.0
         push = np.clip(np.sin(2 * np.pi * 0.8 * (t - 0.3)), -0.4, 1.0) * (t > 0.3)
         r = 300.0 + np.outer(push, [250.0, 300.0, 200.0]) + rng.normal(0, 3.0, (n, N_FINGERS))
-        return Example(inputs={"x": np.round(r)}, rate_hz=100.0, units={"x": "ADC"})
+        return ft.Example(inputs={"x": np.round(r)}, rate_hz=100.0, units={"x": "ADC"})
 
 
 # -- exo_kinematics -----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class ExoKinematicsConfig(BadDataConfig):
+class ExoKinematicsConfig(ft.BadDataConfig):
     """Parameters of :class:`ExoKinematics` (geometry rows: thumb, index, middle)."""
 
-    finger_mm: tuple[tuple[float, ...], ...] = param(
+    finger_mm: tuple[tuple[float, ...], ...] = ft.param(
         FINGER_MM,
         doc="finger segment lengths l1, l2, l3 in mm per finger (thumb: proximal, distal, unused)",
         min_len=3,
         max_len=3,
         ge=0,
     )
-    exo_a_mm: tuple[tuple[float, ...], ...] = param(
+    exo_a_mm: tuple[tuple[float, ...], ...] = ft.param(
         EXO_A_MM,
         doc="exoskeleton link lengths a1, a2, a3 in mm per finger (thumb's a3 unused)",
         min_len=3,
         max_len=3,
         ge=0,
     )
-    exo_zeta_rad: tuple[tuple[float, ...], ...] = param(
+    exo_zeta_rad: tuple[tuple[float, ...], ...] = ft.param(
         EXO_ZETA_RAD, doc="fixed exoskeleton angles ζ1, ζ2, ζ3 in rad per finger", min_len=3, max_len=3
     )
-    exo_s_a_mm: tuple[tuple[float, ...], ...] = param(
+    exo_s_a_mm: tuple[tuple[float, ...], ...] = ft.param(
         EXO_S_A_MM,
         doc="servo pivot O relative to the MCP joint (x, y) in mm per finger",
         min_len=3,
@@ -482,14 +474,8 @@ class ExoKinematicsConfig(BadDataConfig):
                 raise self.error("exo_a_mm", f"{FINGERS[i]}: a1 and a2 must be > 0; got {list(row)}")
 
 
-class ExoKinematics(Block):
+class ExoKinematics(ft.Block):
     """Exoskeleton angles φ → fingertip position s_Q (FK, eq. 3.3) and finger joint angles θ (IK, eqs. 3.4–3.8).
-
-    Ports
-    -----
-    phi : float64, shape (3, 3), units "rad" — [φ1 (servo), φ2, φ3] per finger (thumb's φ3 unused)
-    s_q : float64, shape (3, 2), units "mm" — attachment point on the distal phalanx, MCP at the origin
-    theta : float64, shape (3, 3), units "rad" — [MCP, PIP, DIP] per finger; thumb [MCP, IP, 0]
 
     Config
     ------
@@ -522,51 +508,52 @@ class ExoKinematics(Block):
 
     config_cls = ExoKinematicsConfig
     inputs = {
-        "phi": Port(
+        "phi": ft.Port(
             dtype="float64",
             shape=(3, 3),
             units="rad",
             require_rate=True,
-            doc="exoskeleton joint angles φ1..φ3",
+            doc="[φ1 (servo), φ2, φ3] per finger (the thumb's φ3 unused)",
         )
     }
     outputs = {
-        "s_q": Port(dtype="float64", shape=(3, 2), units="mm", doc="attachment point s_Q per finger (FK)"),
-        "theta": Port(
-            dtype="float64", shape=(3, 3), units="rad", doc="finger joint angles θ per finger (IK)"
+        "s_q": ft.Port(
+            dtype="float64",
+            shape=(3, 2),
+            units="mm",
+            doc="attachment point s_Q on the distal phalanx per finger, MCP at the origin (FK)",
+        ),
+        "theta": ft.Port(
+            dtype="float64",
+            shape=(3, 3),
+            units="rad",
+            doc="[MCP, PIP, DIP] per finger; the thumb [MCP, IP, 0] (IK)",
         ),
     }
     counter_docs = {
         "ik_out_of_reach": "samples with a finger pose the finger model cannot reach, clipped to the "
         "nearest reachable one (θ approximate): noise, or a wrong geometry if frequent",
-        **nonfinite_counter_docs("angle samples on 'phi'"),
+        **ft.nonfinite_counter_docs("angle samples on 'phi'"),
     }
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        rate = inputs["phi"].rate_hz
-        return {
-            "s_q": StreamSpec(shape=(N_FINGERS, 2), units="mm", rate_hz=rate),
-            "theta": StreamSpec(shape=(N_FINGERS, 3), units="rad", rate_hz=rate),
-        }
 
     def reset(self) -> None:
         self._last: np.ndarray | None = None
 
-    def step(self, phi: Chunk) -> dict[str, Chunk]:
+    def step(self, phi: ft.Chunk) -> dict[str, ft.Chunk]:
         cfg = self.config
-        phi, self._last = screen_nonfinite(self, phi, cfg.on_bad_data, "phi", self._last)
+        phi, self._last = ft.screen_nonfinite(self, phi, cfg.on_bad_data, "phi", self._last)
         s_q, psi_sum = exo_forward(phi.data, cfg.exo_a_mm, cfg.exo_zeta_rad, cfg.exo_s_a_mm)
         out = {}
         if "s_q" in self.demanded:
-            out["s_q"] = Chunk(phi.t, s_q, phi.end)
+            out["s_q"] = ft.Chunk(phi.t, s_q, phi.end)
         if "theta" in self.demanded:
             theta, clipped = finger_inverse(s_q, psi_sum - 0.5 * np.pi, cfg.finger_mm)
             self.count("ik_out_of_reach", int(clipped.any(axis=-1).sum()))
-            out["theta"] = Chunk(phi.t, theta, phi.end)
+            out["theta"] = ft.Chunk(phi.t, theta, phi.end)
         return out
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         n = 120
         t = np.arange(n) / 100.0
         grasp = 0.5 - 0.5 * np.cos(2 * np.pi * 0.8 * t)  # open → closed → open
@@ -574,30 +561,32 @@ class ExoKinematics(Block):
         theta[:, 0] = np.outer(grasp, [0.8, 1.0, 0.0])
         theta[:, 1] = np.outer(grasp, [1.0, 1.3, 0.87]) - [0.1, 0.0, 0.0]
         theta[:, 2] = np.outer(grasp, [1.0, 1.3, 0.87])
-        return Example(inputs={"phi": phi_from_theta(theta)}, rate_hz=100.0, units={"phi": "rad"})
+        return ft.Example(inputs={"phi": phi_from_theta(theta)}, rate_hz=100.0, units={"phi": "rad"})
 
 
 # -- fingertip_force -----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class FingertipForceConfig(BadDataConfig):
+class FingertipForceConfig(ft.BadDataConfig):
     """Parameters of :class:`FingertipForce`."""
 
-    exo_a_mm: tuple[tuple[float, ...], ...] = param(
+    exo_a_mm: tuple[tuple[float, ...], ...] = ft.param(
         EXO_A_MM, doc="exoskeleton link lengths a1, a2, a3 in mm per finger", min_len=3, max_len=3, ge=0
     )
-    exo_zeta_rad: tuple[tuple[float, ...], ...] = param(
+    exo_zeta_rad: tuple[tuple[float, ...], ...] = ft.param(
         EXO_ZETA_RAD, doc="fixed exoskeleton angles ζ1, ζ2, ζ3 in rad per finger", min_len=3, max_len=3
     )
-    lever_m: float = param(
+    lever_m: float = ft.param(
         FSR_LEVER_M, doc="τ1 = lever_m·|F_FSR|: the link from O to the ψ1 joint, in m", gt=0
     )
-    form: Literal["equation", "text"] = param(
+    form: Literal["equation", "text"] = ft.param(
         "equation",
         doc="equation: eq. 3.9 as printed (a1, [cos α, sin α]); text: as the prose derives it (a3, [−sin α, −cos α])",
     )
-    tol_s: float = param(1e-6, doc="largest timestamp difference between paired fsr and phi samples, s", gt=0)
+    tol_s: float = ft.param(
+        1e-6, doc="largest timestamp difference between paired fsr and phi samples, s", gt=0
+    )
 
     def check(self) -> None:
         _rows_error(self, "exo_a_mm", 3)
@@ -607,15 +596,8 @@ class FingertipForceConfig(BadDataConfig):
                 raise self.error("exo_a_mm", f"{FINGERS[i]}: the torque arm must be > 0; got {list(row)}")
 
 
-class FingertipForce(Block):
+class FingertipForce(ft.Block):
     """Fingertip force F_f from the FSR force and the exoskeleton pose: eq. 3.9, signed like the FSR force.
-
-    Ports
-    -----
-    fsr : float64, shape (3,), units "N" — signed FSR force (fsr_force, low-passed)
-    phi : float64, shape (3, 3), units "rad" — exoskeleton angles of the same device packets
-    f : float64, shape (3,), units "N", labels FINGERS — signed fingertip force: F·|w(α)|
-    f_vec : float64, shape (3, 2), units "N" — the vector F·w(α) (eq. 3.9 exactly when F ≥ 0)
 
     Config
     ------
@@ -648,20 +630,38 @@ class FingertipForce(Block):
 
     config_cls = FingertipForceConfig
     inputs = {
-        "fsr": Port(
-            dtype="float64", shape=(3,), units="N", require_rate=True, doc="signed FSR force per finger"
+        "fsr": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            require_rate=True,
+            doc="signed FSR force per finger (fsr_force, low-passed)",
         ),
-        "phi": Port(
+        "phi": ft.Port(
             dtype="float64",
             shape=(3, 3),
             units="rad",
             require_rate=True,
-            doc="exoskeleton joint angles φ1..φ3",
+            same_rate="fsr",
+            doc="exoskeleton angles φ1..φ3 of the same device packets",
         ),
     }
     outputs = {
-        "f": Port(dtype="float64", shape=(3,), units="N", doc="signed fingertip force per finger"),
-        "f_vec": Port(dtype="float64", shape=(3, 2), units="N", doc="fingertip force vector per finger"),
+        "f": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            units="N",
+            rate="fsr",
+            labels=FINGERS,
+            doc="signed fingertip force per finger: F·|w(α)|",
+        ),
+        "f_vec": ft.Port(
+            dtype="float64",
+            shape=(3, 2),
+            units="N",
+            rate="fsr",
+            doc="the fingertip force vector F·w(α) per finger (eq. 3.9 exactly when F ≥ 0)",
+        ),
     }
     counter_docs = {
         "nonfinite_drop": "instants where 'fsr' or 'phi' had NaN/inf, removed from both (on_bad_data: "
@@ -672,23 +672,12 @@ class FingertipForce(Block):
         "ended: not used (the inputs delivered different numbers of samples)",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        rate = inputs["fsr"].rate_hz
-        if not math.isclose(inputs["phi"].rate_hz or 0.0, rate or 0.0, rel_tol=1e-9):
-            raise SpecError(
-                "phi", f"'phi' is {inputs['phi'].rate_hz:g} Hz but 'fsr' is {rate:g} Hz (one packet)"
-            )
-        return {
-            "f": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=rate, labels=FINGERS),
-            "f_vec": StreamSpec(shape=(N_FINGERS, 2), units="N", rate_hz=rate),
-        }
-
     def reset(self) -> None:
-        self._align = Aligner(self.node, self.input_specs, ["fsr", "phi"], tol_s=self.config.tol_s)
+        self._align = ft.Aligner(self.node, self.input_specs, ["fsr", "phi"], tol_s=self.config.tol_s)
         self._last: dict[str, np.ndarray | None] = {"fsr": None, "phi": None}
         self._wm: dict[str, float | None] = {"fsr": None, "phi": None}
 
-    def _watermark(self, chunks: Mapping[str, Chunk]) -> float | None:
+    def _watermark(self, chunks: Mapping[str, ft.Chunk]) -> float | None:
         for p in self._wm:
             c = chunks.get(p)
             if c is None:
@@ -699,36 +688,36 @@ class FingertipForce(Block):
             return None
         return min(v for v in self._wm.values() if v is not None)
 
-    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
+    def step(self, **inputs: ft.Chunk) -> dict[str, ft.Chunk]:
         cfg = self.config
         end = self._watermark(inputs)
         t, data = self._align.push(inputs)
         if len(t):
-            t, data = screen_aligned(self, cfg.on_bad_data, t, data, self._last)
+            t, data = ft.screen_aligned(self, cfg.on_bad_data, t, data, self._last)
         phi = data["phi"] if len(t) else np.empty((0, N_FINGERS, 3))
         fsr = data["fsr"] if len(t) else np.empty((0, N_FINGERS))
         _, psi_sum = exo_forward(phi, cfg.exo_a_mm, cfg.exo_zeta_rad, np.zeros((N_FINGERS, 2)))
         gain, w = fingertip_gain(psi_sum, cfg.exo_a_mm, cfg.lever_m, cfg.form)
         out = {}
         if "f" in self.demanded:
-            out["f"] = Chunk(t, fsr * gain, end)
+            out["f"] = ft.Chunk(t, fsr * gain, end)
         if "f_vec" in self.demanded:
-            out["f_vec"] = Chunk(t, fsr[..., None] * w, end)
+            out["f_vec"] = ft.Chunk(t, fsr[..., None] * w, end)
         return out
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         self.count("unpaired_at_end", sum(self._align.pending().values()))
         return {}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(8)
         n = 120
         t = np.arange(n) / 100.0
         grasp = 0.5 - 0.5 * np.cos(2 * np.pi * 0.8 * t)
         theta = np.stack([np.outer(grasp, [0.8, 1.0, 0.0])] + [np.outer(grasp, [1.0, 1.3, 0.87])] * 2, axis=1)
         fsr = np.outer(np.sin(2 * np.pi * 0.8 * t), [1.0, 1.5, 1.2]) + rng.normal(0, 0.05, (n, N_FINGERS))
-        return Example(
+        return ft.Example(
             inputs={"fsr": fsr, "phi": phi_from_theta(theta)}, rate_hz=100.0, units={"fsr": "N", "phi": "rad"}
         )
 
@@ -737,16 +726,16 @@ class FingertipForce(Block):
 
 
 @dataclass(frozen=True)
-class GripperCommandConfig(BadDataConfig):
+class GripperCommandConfig(ft.BadDataConfig):
     """Parameters of :class:`GripperCommand` (one value per finger: thumb, index, middle)."""
 
-    open_rad: tuple[float, ...] = param(
+    open_rad: tuple[float, ...] = ft.param(
         (0.4, 0.7, 0.7),
         doc="sum of finger angles θ1+θ2+θ3 with the hand open (relaxed), rad",
         min_len=3,
         max_len=3,
     )
-    closed_rad: tuple[float, ...] = param(
+    closed_rad: tuple[float, ...] = ft.param(
         (1.8, 3.2, 3.2), doc="sum of finger angles with the hand fully closed, rad", min_len=3, max_len=3
     )
 
@@ -756,13 +745,8 @@ class GripperCommandConfig(BadDataConfig):
                 raise self.error("closed_rad", f"{FINGERS[i]}: must differ from open_rad ({a:g}); got {b:g}")
 
 
-class GripperCommand(Block):
+class GripperCommand(ft.Block):
     """Finger pose → gripper command in [0, 1] per finger: the sum of finger angles scaled between open and closed.
-
-    Ports
-    -----
-    x : float64, shape (3, 3), units "rad" — finger joint angles θ (exo_kinematics.theta)
-    y : float64, shape (3,), units "1", labels FINGERS — 0 fully open … 1 fully closed
 
     Config
     ------
@@ -789,37 +773,40 @@ class GripperCommand(Block):
 
     config_cls = GripperCommandConfig
     inputs = {
-        "x": Port(
+        "x": ft.Port(
             dtype="float64",
             shape=(3, 3),
             units="rad",
             require_rate=True,
-            doc="finger joint angles θ per finger",
+            doc="finger joint angles θ per finger (exo_kinematics.theta)",
         )
     }
     outputs = {
-        "y": Port(dtype="float64", shape=(3,), units="1", doc="gripper command per finger, 0 open, 1 closed")
+        "y": ft.Port(
+            dtype="float64",
+            shape=(3,),
+            units="1",
+            labels=FINGERS,
+            doc="gripper command per finger, 0 fully open … 1 fully closed",
+        )
     }
-    counter_docs = nonfinite_counter_docs("pose samples on 'x'")
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        return {"y": StreamSpec(shape=(N_FINGERS,), units="1", rate_hz=inputs["x"].rate_hz, labels=FINGERS)}
+    counter_docs = ft.nonfinite_counter_docs("pose samples on 'x'")
 
     def reset(self) -> None:
         self._open = np.asarray(self.config.open_rad, np.float64)
         self._span = np.asarray(self.config.closed_rad, np.float64) - self._open
         self._last: np.ndarray | None = None
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
-        x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
+        x, self._last = ft.screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
         d = x.data
         total = d[..., 0] + d[..., 1] + d[..., 2]
-        return {"y": Chunk(x.t, np.clip((total - self._open) / self._span, 0.0, 1.0), x.end)}
+        return {"y": ft.Chunk(x.t, np.clip((total - self._open) / self._span, 0.0, 1.0), x.end)}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         n = 120
         t = np.arange(n) / 100.0
         grasp = 0.6 - 0.7 * np.cos(2 * np.pi * 0.8 * t)  # overshoots both calibration poses
         theta = np.stack([np.outer(grasp, [0.8, 1.0, 0.0])] + [np.outer(grasp, [1.0, 1.3, 0.87])] * 2, axis=1)
-        return Example(inputs={"x": theta}, rate_hz=100.0, units={"x": "rad"})
+        return ft.Example(inputs={"x": theta}, rate_hz=100.0, units={"x": "rad"})

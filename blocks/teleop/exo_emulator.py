@@ -10,13 +10,14 @@ import time
 from collections.abc import Sequence
 from typing import Any, TextIO
 
+import flowtact.api as ft
 from flowtact.blocks.teleop.exo_device import ExoDevice, ExoParams
 from flowtact.blocks.teleop.exo_protocol import (
     N_FINGERS,
 )
 from flowtact.command import CommandParser, run_command
 from flowtact.errors import UsageError
-from flowtact.limits import MAX_SEED, cli_float, cli_int
+from flowtact.limits import cli_float, cli_int
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 # -- the emulator process -----------------------------------------------------------------------
@@ -157,7 +158,7 @@ def _parser() -> _Parser:
     )
     ap.add_argument(
         "--seed",
-        type=cli_int(0, MAX_SEED),
+        type=cli_int(0, ft.MAX_SEED),
         default=0,
         help="random seed (noise, preload, clock start)",
     )

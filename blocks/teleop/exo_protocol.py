@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from flowtact.errors import FlowtactError
+import flowtact.api as ft
 
 __all__ = [
     "ADC_MAX",
@@ -40,7 +40,7 @@ SEQ_WRAP = 1 << 16
 # -- line protocol ------------------------------------------------------------------------------
 
 
-class ProtocolError(FlowtactError, ValueError):
+class ProtocolError(ft.FlowtactError, ValueError):
     """A line that is not a valid protocol message (bad framing, checksum, field count or range)."""
 
 

@@ -8,13 +8,12 @@ column 0 engage (0.0 / 1.0), column 1 the deviation from the contact position in
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from flowtact import Block, Chunk, Config, Example, Port, StreamSpec, param
+import flowtact.api as ft
 from flowtact.merge import LatestMerger
 
 from .hand import FINGERS, N_FINGERS
@@ -62,37 +61,39 @@ def _fill(
 
 
 @dataclass(frozen=True)
-class ForceFeedbackConfig(Config):
+class ForceFeedbackConfig(ft.Config):
     """Parameters of :class:`ForceFeedback` (per-finger tuples: thumb, index, middle)."""
 
-    mode: Literal["blocking", "variable"] = param(
+    mode: Literal["blocking", "variable"] = ft.param(
         "variable", doc="blocking: hold the contact position; variable: deviate by K·(F_f − F_T)"
     )
-    gain_us_per_n: tuple[float, ...] = param(
+    gain_us_per_n: tuple[float, ...] = ft.param(
         GAIN_US_PER_N,
         doc="K per finger, µs of PWM per N (thesis: 80 thumb, 100 index/middle)",
         min_len=3,
         max_len=3,
         ge=0,
     )
-    contact_n: float = param(0.5, doc="contact detected when the TacTip force F_T exceeds this, N", ge=0)
-    release_n: float = param(0.0, doc="release when the fingertip force F_f falls below this, N (thesis: 0)")
-    min_us: float = param(
+    contact_n: float = ft.param(0.5, doc="contact detected when the TacTip force F_T exceeds this, N", ge=0)
+    release_n: float = ft.param(
+        0.0, doc="release when the fingertip force F_f falls below this, N (thesis: 0)"
+    )
+    min_us: float = ft.param(
         -300.0, doc="lowest deviation commanded, µs (negative: pushes the finger open)", le=0
     )
-    max_us: float = param(
+    max_us: float = ft.param(
         600.0, doc="highest deviation commanded, µs (positive: lets the finger close)", ge=0
     )
-    max_rate_us_per_s: float = param(
+    max_rate_us_per_s: float = ft.param(
         2000.0, doc="largest change of the deviation per second while engaged", gt=0
     )
-    stall_s: float = param(
+    stall_s: float = ft.param(
         0.2, doc="an input without valid data for this long disengages the servos, s", gt=0
     )
-    max_wait_s: float = param(
+    max_wait_s: float = ft.param(
         0.05, doc="longest a finger sample waits for the target stream's watermark before going on, s", ge=0
     )
-    max_force_n: float = param(
+    max_force_n: float = ft.param(
         50.0, doc="forces of larger magnitude are implausible: treated as missing, N", gt=0
     )
 
@@ -103,15 +104,8 @@ class ForceFeedbackConfig(Config):
             raise self.error("max_wait_s", f"must be <= stall_s ({self.stall_s:g}); got {self.max_wait_s:g}")
 
 
-class ForceFeedback(Block):
+class ForceFeedback(ft.Block):
     """Force-feedback controller per finger: engage on contact, release on negative finger force, P control.
-
-    Ports
-    -----
-    target : float64, shape (3,), units "N" — contact force F_T at the TacTips (≈ 40 Hz)
-    finger : float64, shape (3,), units "N" — signed fingertip force F_f (exo rate; drives the output)
-    cmd : float64, shape (3, 2), units "us" — per finger [engage 0/1, deviation µs], one row per
-        ``finger`` sample, plus one disengaging row when the ``finger`` stream stalls
 
     Config
     ------
@@ -175,23 +169,31 @@ class ForceFeedback(Block):
 
     config_cls = ForceFeedbackConfig
     inputs = {
-        "target": Port(
+        "target": ft.Port(
             dtype="float64",
             shape=(3,),
             units="N",
             require_rate=True,
-            doc="contact force F_T at the TacTips, N",
+            doc="contact force F_T at the TacTips (≈ 40 Hz)",
         ),
-        "finger": Port(
+        "finger": ft.Port(
             dtype="float64",
             shape=(3,),
             units="N",
             require_rate=True,
-            doc="signed fingertip force F_f, N (drives)",
+            doc="signed fingertip force F_f (exo rate; drives the output)",
         ),
     }
     outputs = {
-        "cmd": Port(dtype="float64", shape=(3, 2), units="us", doc="[engage 0/1, deviation µs] per finger")
+        "cmd": ft.Port(
+            dtype="float64",
+            shape=(3, 2),
+            units="us",
+            rate="finger",
+            labels=_CMD_LABELS,
+            doc="per finger [engage 0/1, deviation µs], one row per finger sample, plus one disengaging "
+            "row when the finger stream stalls",
+        )
     }
     counter_docs = {
         "stalled": "times live fingers were disengaged because an input had no valid data for stall_s "
@@ -212,11 +214,6 @@ class ForceFeedback(Block):
         "out_of_range_finger": "finger samples with |F| > max_force_n on a finger (implausible): ignored "
         "like NaN",
     }
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        return {
-            "cmd": StreamSpec(shape=_CMD, units="us", rate_hz=inputs["finger"].rate_hz, labels=_CMD_LABELS)
-        }
 
     def reset(self) -> None:
         cfg = self.config
@@ -311,15 +308,15 @@ class ForceFeedback(Block):
             self._last_proc = tk
             self._stall_sent = False
 
-    def _ingest(self, target: Chunk | None, finger: Chunk | None) -> dict[str, Chunk]:
+    def _ingest(self, target: ft.Chunk | None, finger: ft.Chunk | None) -> dict[str, ft.Chunk]:
         """Fill missing values per finger, track watermarks; the chunks to push into the merger."""
         cfg = self.config
-        feed: dict[str, Chunk] = {}
+        feed: dict[str, ft.Chunk] = {}
         if target is not None:
             filled, nf, oor = _fill(target.t, target.data, self._t_val, self._t_when, cfg.max_force_n)
             self.count("nonfinite_target", nf)
             self.count("out_of_range_target", oor)
-            feed["target"] = Chunk(target.t, filled, target.end)
+            feed["target"] = ft.Chunk(target.t, filled, target.end)
             marks = [self._wm_target, *([float(target.t[-1])] if len(target) else [])]
             self._wm_target = max([*marks, *([float(target.end)] if target.end is not None else [])])
         if finger is not None:
@@ -332,17 +329,17 @@ class ForceFeedback(Block):
                     keep[k] = False
             if not keep.all():
                 self.count("late", int((~keep).sum()))
-                finger = Chunk(finger.t[keep], finger.data[keep], finger.end)
+                finger = ft.Chunk(finger.t[keep], finger.data[keep], finger.end)
             filled, nf, oor = _fill(finger.t, finger.data, self._f_val, self._f_when, cfg.max_force_n)
             self.count("nonfinite_finger", nf)
             self.count("out_of_range_finger", oor)
-            feed["finger"] = Chunk(finger.t, filled, finger.end)
+            feed["finger"] = ft.Chunk(finger.t, filled, finger.end)
             self._last_in = last
             marks = [self._wm_finger, last, *([float(finger.end)] if finger.end is not None else [])]
             self._wm_finger = max(marks)
         return feed
 
-    def step(self, target: Chunk, finger: Chunk) -> dict[str, Chunk]:
+    def step(self, target: ft.Chunk, finger: ft.Chunk) -> dict[str, ft.Chunk]:
         cfg = self.config
         rows: list[np.ndarray] = []
         times: list[float] = []
@@ -361,7 +358,7 @@ class ForceFeedback(Block):
             self._stall_row(self._last_proc + cfg.stall_s, rows, times)
         return {"cmd": self._out(rows, times)}
 
-    def _out(self, rows: list, times: list) -> Chunk:
+    def _out(self, rows: list, times: list) -> ft.Chunk:
         held = self._merger.held_times()
         nxt = [float(held[0])] if len(held) else []
         if math.isfinite(self._wm_finger):
@@ -371,20 +368,20 @@ class ForceFeedback(Block):
             self._end_out = max(self._end_out, min(nxt))
             end = self._end_out
         if not rows:
-            return Chunk.empty(shape=_CMD, end=end)
-        return Chunk(np.asarray(times, np.float64), np.stack(rows), end)
+            return ft.Chunk.empty(shape=_CMD, end=end)
+        return ft.Chunk(np.asarray(times, np.float64), np.stack(rows), end)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         rows: list[np.ndarray] = []
         times: list[float] = []
         t, f, vals = self._merger.flush()
         self._compute(t, f, vals["target"], rows, times)
         if not rows:
             return {}
-        return {"cmd": Chunk(np.asarray(times, np.float64), np.stack(rows))}
+        return {"cmd": ft.Chunk(np.asarray(times, np.float64), np.stack(rows))}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(12)
         n = 200  # 2 s at 100 Hz: a grasp per finger, a NaN burst and a camera dropout
         t = np.arange(n) / 100.0
@@ -395,6 +392,6 @@ class ForceFeedback(Block):
         target[60:64, 1] = np.nan
         finger[90:93, 2] = np.inf
         target[110:140] = np.nan  # 0.3 s without a valid target: stall, then a fresh contact is needed
-        return Example(
+        return ft.Example(
             inputs={"target": target, "finger": finger}, rate_hz=100.0, units={"target": "N", "finger": "N"}
         )

@@ -11,18 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Example,
-    Port,
-    SpecError,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
+import flowtact.api as ft
 
 __all__ = ["LinearForce", "LinearForceConfig"]
 
@@ -38,16 +27,16 @@ DEFAULT_INTERCEPT_N = (17.0, 17.0, 17.0)
 
 
 @dataclass(frozen=True)
-class LinearForceConfig(BadDataConfig):
+class LinearForceConfig(ft.BadDataConfig):
     """Parameters of :class:`LinearForce`."""
 
-    slope_n: tuple[float, ...] = param(
+    slope_n: tuple[float, ...] = ft.param(
         DEFAULT_SLOPE_N, doc="slope per sensor in N per unit SSIM (one per sensor, or one for all)", min_len=1
     )
-    intercept_n: tuple[float, ...] = param(
+    intercept_n: tuple[float, ...] = ft.param(
         DEFAULT_INTERCEPT_N, doc="force at SSIM 0 per sensor in N (one per sensor, or one for all)", min_len=1
     )
-    clip_negative: bool = param(True, doc="clip negative forces to 0 (a contact force cannot pull)")
+    clip_negative: bool = ft.param(True, doc="clip negative forces to 0 (a contact force cannot pull)")
 
     def check(self) -> None:
         if len(self.slope_n) != len(self.intercept_n) and 1 not in (len(self.slope_n), len(self.intercept_n)):
@@ -57,13 +46,8 @@ class LinearForceConfig(BadDataConfig):
             )
 
 
-class LinearForce(Block):
+class LinearForce(ft.Block):
     """Contact force from SSIM per sensor: F = intercept + slope·SSIM (White 2023, Table 4.2's model).
-
-    Ports
-    -----
-    x : float64, shape (n,) or (), units "1" — SSIM per sensor (``ssim.y``)
-    y : float64, same shape, units "N" — estimated contact force F_T per sensor
 
     Config
     ------
@@ -93,17 +77,27 @@ class LinearForce(Block):
 
     name = "linear_force"
     config_cls = LinearForceConfig
-    inputs = {"x": Port(dtype="float64", units="1", ndim=(0, 1), require_rate=True, doc="SSIM per sensor")}
-    outputs = {"y": Port(dtype="float64", units="N", doc="estimated contact force per sensor")}
-    counter_docs = nonfinite_counter_docs("SSIM samples on 'x'")
+    inputs = {
+        "x": ft.Port(
+            dtype="float64",
+            units="1",
+            ndim=(0, 1),
+            require_rate=True,
+            doc="SSIM per sensor (ssim.y), shape (n,) or ()",
+        )
+    }
+    outputs = {
+        "y": ft.Port(dtype="float64", units="N", doc="estimated contact force F_T per sensor, the shape of x")
+    }
+    counter_docs = ft.nonfinite_counter_docs("SSIM samples on 'x'")
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         x = inputs["x"]
         n = x.shape[0] if x.shape else 1
         for field in ("slope_n", "intercept_n"):
             k = len(getattr(self.config, field))
             if k not in (1, n):
-                raise SpecError("x", f"'{field}' has {k} values but the SSIM stream has {n} sensors")
+                raise ft.SpecError("x", f"'{field}' has {k} values but the SSIM stream has {n} sensors")
         return {"y": x.with_(units="N")}
 
     def reset(self) -> None:
@@ -115,19 +109,19 @@ class LinearForce(Block):
         self._intercept = intercept.reshape(x.shape)
         self._last: np.ndarray | None = None
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         if len(x):
-            x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
+            x, self._last = ft.screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
         f = self._intercept + self._slope * x.data
         if self.config.clip_negative:
             f = np.maximum(f, 0.0)
-        return {"y": Chunk(x.t, f, x.end)}
+        return {"y": ft.Chunk(x.t, f, x.end)}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         t = np.arange(40) / 40.0
         ssim = np.stack([0.9 - 0.2 * t, 0.88 - 0.15 * t**2, 0.8 + 0.05 * np.sin(6 * t)], 1)
-        return Example(
+        return ft.Example(
             params={"slope_n": [-20.0, -25.0, -14.0], "intercept_n": [17.5, 21.0, 12.0]},
             inputs={"x": ssim},
             rate_hz=40.0,

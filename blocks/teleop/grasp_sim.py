@@ -7,22 +7,11 @@ this block stands in for both: gripper commands in, true contact forces out.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Example,
-    Port,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
+import flowtact.api as ft
 
 from .hand import FINGERS, N_FINGERS
 
@@ -85,16 +74,16 @@ def grasp_sim_apply(
 
 
 @dataclass(frozen=True)
-class GraspSimConfig(BadDataConfig):
+class GraspSimConfig(ft.BadDataConfig):
     """Parameters of :class:`GraspSim`."""
 
-    object_names: tuple[str, ...] = param(
+    object_names: tuple[str, ...] = ft.param(
         ("strawberry", "bottle"), doc="the objects grasped in turn", min_len=1
     )
-    stiffness_n: tuple[float, ...] = param(
+    stiffness_n: tuple[float, ...] = ft.param(
         (4.0, 40.0), doc="stiffness of each object, N per unit of gripper closure", min_len=1, gt=0
     )
-    contact: tuple[float, ...] = param(
+    contact: tuple[float, ...] = ft.param(
         (0.45, 0.45, 0.45),
         doc="closure at which each finger (thumb, index, middle) touches the object",
         min_len=3,
@@ -102,11 +91,11 @@ class GraspSimConfig(BadDataConfig):
         ge=0,
         le=1,
     )
-    tau_s: float = param(0.15, doc="time constant of a gripper finger following its command, s", gt=0)
-    damping_n_s: float = param(0.0, doc="object damping, N·s per unit closure (0: purely elastic)", ge=0)
-    max_force_n: float = param(6.0, doc="contact force at which the gripper's motors stall, N", gt=0)
-    period_s: float = param(5.0, doc="time between object swaps (one grasp per period), s", gt=0)
-    swap_at_s: float = param(
+    tau_s: float = ft.param(0.15, doc="time constant of a gripper finger following its command, s", gt=0)
+    damping_n_s: float = ft.param(0.0, doc="object damping, N·s per unit closure (0: purely elastic)", ge=0)
+    max_force_n: float = ft.param(6.0, doc="contact force at which the gripper's motors stall, N", gt=0)
+    period_s: float = ft.param(5.0, doc="time between object swaps (one grasp per period), s", gt=0)
+    swap_at_s: float = ft.param(
         0.0, doc="time within each period at which the next object is put in hand, s", ge=0
     )
 
@@ -121,14 +110,8 @@ class GraspSimConfig(BadDataConfig):
             raise self.error("swap_at_s", f"must be < period_s ({self.period_s:g}); got {self.swap_at_s:g}")
 
 
-class GraspSim(Block):
+class GraspSim(ft.Block):
     """Simulated T-MO gripper closing on an object: gripper command in, true contact force per finger out.
-
-    Ports
-    -----
-    grip : float64, shape (3,), units "1" — gripper command per finger, 0 open … 1 closed
-    force : float64, shape (3,), units "N", labels FINGERS — true contact force at each fingertip
-    object : float64, shape (), units "1" — index into ``object_names`` of the object in hand
 
     Config
     ------
@@ -166,36 +149,30 @@ class GraspSim(Block):
 
     config_cls = GraspSimConfig
     inputs = {
-        "grip": Port(
+        "grip": ft.Port(
             dtype="float64",
             shape=(3,),
             units="1",
             require_rate=True,
-            doc="gripper command per finger, 0 open, 1 closed",
+            doc="gripper command per finger, 0 open … 1 closed",
         )
     }
     outputs = {
-        "force": Port(dtype="float64", shape=(3,), units="N", doc="true contact force per finger, N"),
-        "object": Port(
+        "force": ft.Port(
+            dtype="float64", shape=(3,), units="N", labels=FINGERS, doc="true contact force at each fingertip"
+        ),
+        "object": ft.Port(
             dtype="float64",
             shape=(),
             units="1",
-            doc="index of the object in hand (categorical: object_names)",
+            categories="object_names",
+            doc="index into object_names of the object in hand",
         ),
     }
     counter_docs = {
         "clipped": "command samples with a finger outside [0, 1] (beyond open or closed): clipped into range",
-        **nonfinite_counter_docs("command samples on 'grip'"),
+        **ft.nonfinite_counter_docs("command samples on 'grip'"),
     }
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        g = inputs["grip"]
-        return {
-            "force": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=g.rate_hz, labels=FINGERS),
-            "object": StreamSpec(
-                shape=(), units="1", rate_hz=g.rate_hz, categories=tuple(self.config.object_names)
-            ),
-        }
 
     def reset(self) -> None:
         cfg = self.config
@@ -206,9 +183,9 @@ class GraspSim(Block):
         self._contact = np.asarray(cfg.contact, np.float64)
         self._last: np.ndarray | None = None
 
-    def step(self, grip: Chunk) -> dict[str, Chunk]:
+    def step(self, grip: ft.Chunk) -> dict[str, ft.Chunk]:
         cfg = self.config
-        grip, self._last = screen_nonfinite(self, grip, cfg.on_bad_data, "grip", self._last)
+        grip, self._last = ft.screen_nonfinite(self, grip, cfg.on_bad_data, "grip", self._last)
         u = grip.data
         outside = (u < 0.0) | (u > 1.0)
         if outside.any():
@@ -221,16 +198,16 @@ class GraspSim(Block):
         )  # fmt: skip
         out = {}
         if "force" in self.demanded:
-            out["force"] = Chunk(grip.t, f, grip.end)
+            out["force"] = ft.Chunk(grip.t, f, grip.end)
         if "object" in self.demanded:
-            out["object"] = Chunk(grip.t, obj, grip.end)
+            out["object"] = ft.Chunk(grip.t, obj, grip.end)
         return out
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         n = 200  # 2 s at 100 Hz, objects swapped every second: grasp, release, grasp
         t = np.arange(n) / 100.0
         grasp = np.clip(np.sin(2 * np.pi * t), 0.0, 1.0)
         grip = np.outer(grasp, [0.7, 0.8, 0.75])
         grip[150, 0] = 1.2  # out of range: clipped
-        return Example(params={"period_s": 1.0, "damping_n_s": 0.5}, inputs={"grip": grip}, rate_hz=100.0)
+        return ft.Example(params={"period_s": 1.0, "damping_n_s": 0.5}, inputs={"grip": grip}, rate_hz=100.0)

@@ -20,9 +20,7 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
-from flowtact.align import Aligner
-from flowtact.limits import MAX_TICK_S
+import flowtact.api as ft
 
 from .hand import FINGERS
 from .tactip_sim import pressed_frames
@@ -64,12 +62,12 @@ TABLE_3_1: dict[str, tuple[float, float, float]] = {
 # -- shared helpers ----------------------------------------------------------------------------------
 
 
-def _per_sensor(block: Block, field: str, values: Sequence[Any], n: int) -> list[Any]:
+def _per_sensor(block: ft.Block, field: str, values: Sequence[Any], n: int) -> list[Any]:
     """A per-sensor tuple expanded to ``n`` values (one value is used for every sensor)."""
     if len(values) == 1:
         return list(values) * n
     if len(values) != n:
-        raise SpecError(
+        raise ft.SpecError(
             None,
             f"{block.node} ({block.name}): '{field}' has {len(values)} values but the frames have {n} "
             "sensors (give one value per sensor, or a single value for all)",
@@ -81,8 +79,8 @@ def _labels(n: int) -> tuple[str, ...] | None:
     return FINGERS if n == len(FINGERS) else None
 
 
-def _frames_out(x: Chunk, data: np.ndarray) -> Chunk:
-    return Chunk(x.t, data, x.end)
+def _frames_out(x: ft.Chunk, data: np.ndarray) -> ft.Chunk:
+    return ft.Chunk(x.t, data, x.end)
 
 
 # -- example frames: emulated TacTips (examples, tests and benches) ----------------------------------
@@ -113,32 +111,27 @@ def _example_frames_cached(forces_n: tuple[float, ...], crop: bool, seed: int) -
 
 
 @dataclass(frozen=True)
-class CropConfig(Config):
+class CropConfig(ft.Config):
     """Parameters of :class:`Crop`."""
 
-    x0_px: tuple[int, ...] = param(
+    x0_px: tuple[int, ...] = ft.param(
         ((FRAME_W - CROP_W) // 2,) * 3,
         doc="left column of each sensor's crop (one per sensor, or one for all)",
         ge=0,
         min_len=1,
     )
-    y0_px: tuple[int, ...] = param(
+    y0_px: tuple[int, ...] = ft.param(
         ((FRAME_H - CROP_H) // 2,) * 3,
         doc="top row of each sensor's crop (one per sensor, or one for all)",
         ge=0,
         min_len=1,
     )
-    width_px: int = param(CROP_W, doc="crop width in pixels (the thesis: 240)", ge=1)
-    height_px: int = param(CROP_H, doc="crop height in pixels (the thesis: 90)", ge=1)
+    width_px: int = ft.param(CROP_W, doc="crop width in pixels (the thesis: 240)", ge=1)
+    height_px: int = ft.param(CROP_H, doc="crop height in pixels (the thesis: 90)", ge=1)
 
 
-class Crop(Block):
+class Crop(ft.Block):
     """Crop each sensor's frame to a window (White 2023: 320×240 → 90×240 around the pins).
-
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — frames, one per sensor
-    y : uint8, shape (n, height_px, width_px), units "DN" — the crops (contiguous copies)
 
     Config
     ------
@@ -164,26 +157,26 @@ class Crop(Block):
     name = "crop"
     config_cls = CropConfig
     inputs = {
-        "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
+        "x": ft.Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
     }
     outputs = {
-        "y": Port(
+        "y": ft.Port(
             dtype="uint8",
             units="DN",
             ndim=(3,),
             require_rate=True,
-            doc="cropped frames (sensors, height_px, width_px)",
+            doc="the crops (contiguous copies), (sensors, height_px, width_px)",
         )
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         n, h, w = inputs["x"].shape
         c = self.config
         for s, (x0, y0) in enumerate(
             zip(_per_sensor(self, "x0_px", c.x0_px, n), _per_sensor(self, "y0_px", c.y0_px, n), strict=True)
         ):
             if x0 + c.width_px > w or y0 + c.height_px > h:
-                raise SpecError(
+                raise ft.SpecError(
                     "x",
                     f"crop of sensor {s} (x0={x0}, y0={y0}, {c.width_px}×{c.height_px}) does not fit in "
                     f"the {w}×{h} frames (x0 + width_px <= {w} and y0 + height_px <= {h} needed)",
@@ -196,7 +189,7 @@ class Crop(Block):
         self._x0 = _per_sensor(self, "x0_px", c.x0_px, n)
         self._y0 = _per_sensor(self, "y0_px", c.y0_px, n)
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         c = self.config
         n = len(self._x0)
         out = np.empty((len(x), n, c.height_px, c.width_px), np.uint8)
@@ -206,8 +199,8 @@ class Crop(Block):
         return {"y": _frames_out(x, out)}
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(
+    def example(cls) -> ft.Example:
+        return ft.Example(
             params={"x0_px": [40, 38, 42], "y0_px": [75]},
             inputs={"x": example_frames(range(5), crop=False)},
             rate_hz=40.0,
@@ -220,22 +213,17 @@ class Crop(Block):
 
 
 @dataclass(frozen=True)
-class AdaptiveThresholdConfig(Config):
+class AdaptiveThresholdConfig(ft.Config):
     """Parameters of :class:`AdaptiveThreshold`."""
 
-    c_dn: float = param(-25.0, doc="constant C subtracted from the Gaussian local mean (the thesis: -25)")
-    radius_px: int = param(
+    c_dn: float = ft.param(-25.0, doc="constant C subtracted from the Gaussian local mean (the thesis: -25)")
+    radius_px: int = ft.param(
         15, doc="radius of the local region (the thesis: 15); block size 2·radius + 1", ge=1
     )
 
 
-class AdaptiveThreshold(Block):
+class AdaptiveThreshold(ft.Block):
     """Gaussian adaptive threshold of each sensor's frame (White 2023, eq. 3.1: T = mean_G(I_L) − C).
-
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — frames
-    y : uint8, same shape, units "DN" — 255 where the pixel exceeds its threshold T, else 0
 
     Config
     ------
@@ -265,14 +253,17 @@ class AdaptiveThreshold(Block):
     config_cls = AdaptiveThresholdConfig
     requires = {"cv2": "vision"}
     inputs = {
-        "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
+        "x": ft.Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)")
     }
     outputs = {
-        "y": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="binary images (0 or 255)")
+        "y": ft.Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            labels=(),
+            doc="the same shape as x: 255 where the pixel exceeds its threshold T, else 0",
+        )
     }
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        return {"y": inputs["x"].with_(labels=None)}
 
     def reset(self) -> None:
         import cv2
@@ -280,7 +271,7 @@ class AdaptiveThreshold(Block):
         self._cv2 = cv2
         self._block = 2 * self.config.radius_px + 1
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         cv2, c = self._cv2, self.config
         out = np.empty(x.data.shape, np.uint8)
         for i in range(len(x)):
@@ -292,8 +283,8 @@ class AdaptiveThreshold(Block):
         return {"y": _frames_out(x, out)}
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(
+    def example(cls) -> ft.Example:
+        return ft.Example(
             inputs={"x": example_frames(range(5))}, rate_hz=40.0, units={"x": "DN"}, duration_s=5 / 40.0
         )
 
@@ -318,64 +309,64 @@ _PER_SENSOR = (
 
 
 @dataclass(frozen=True)
-class BlobDetectConfig(Config):
+class BlobDetectConfig(ft.Config):
     """Parameters of :class:`BlobDetect` (per-sensor tuples default to White 2023, Table 3.1)."""
 
-    min_threshold_dn: tuple[float, ...] = param(
+    min_threshold_dn: tuple[float, ...] = ft.param(
         _t31("min_threshold"),
         doc="lowest binarisation threshold per sensor (Table 3.1)",
         ge=0,
         le=255,
         min_len=1,
     )
-    max_threshold_dn: tuple[float, ...] = param(
+    max_threshold_dn: tuple[float, ...] = ft.param(
         _t31("max_threshold"),
         doc="highest binarisation threshold per sensor (Table 3.1)",
         ge=0,
         le=256,
         min_len=1,
     )
-    threshold_step_dn: float = param(
+    threshold_step_dn: float = ft.param(
         10.0, doc="step between thresholds (OpenCV default; not in the thesis)", gt=0
     )
-    min_area_px2: tuple[float, ...] = param(
+    min_area_px2: tuple[float, ...] = ft.param(
         _t31("min_area"), doc="smallest blob area in px² per sensor (Table 3.1)", ge=0, min_len=1
     )
-    max_area_px2: tuple[float, ...] = param(
+    max_area_px2: tuple[float, ...] = ft.param(
         _t31("max_area"), doc="largest blob area in px² per sensor (Table 3.1)", gt=0, min_len=1
     )
-    min_circularity: tuple[float, ...] = param(
+    min_circularity: tuple[float, ...] = ft.param(
         _t31("min_circularity"), doc="smallest 4πA/p² per sensor (Table 3.1)", ge=0, le=1, min_len=1
     )
-    min_inertia_ratio: tuple[float, ...] = param(
+    min_inertia_ratio: tuple[float, ...] = ft.param(
         _t31("min_inertia"),
         doc="smallest minor/major axis ratio per sensor (Table 3.1 'Min Inertia')",
         ge=0,
         le=1,
         min_len=1,
     )
-    min_convexity: tuple[float, ...] = param(
+    min_convexity: tuple[float, ...] = ft.param(
         _t31("min_convexity"),
         doc="smallest area / convex-hull area per sensor (Table 3.1)",
         ge=0,
         le=1,
         min_len=1,
     )
-    min_dist_between_blobs_px: float = param(
+    min_dist_between_blobs_px: float = ft.param(
         10.0, doc="blob centres closer than this are merged (OpenCV default; not in the thesis)", ge=0
     )
-    min_repeatability: int = param(
+    min_repeatability: int = ft.param(
         2, doc="thresholds a blob must appear at to count (OpenCV default; not in the thesis)", ge=1
     )
-    blob_color: Literal["bright", "dark"] = param(
+    blob_color: Literal["bright", "dark"] = ft.param(
         "bright", doc="pins are bright on dark skin in TacTip images"
     )
-    max_pins: int = param(30, doc="rows of the pins output (the TacTip's 30 pins)", ge=1)
+    max_pins: int = ft.param(30, doc="rows of the pins output (the TacTip's 30 pins)", ge=1)
 
     def state_bytes(self) -> dict[str, float]:
         """The pins output of a longest tick at 100 frames/s: (frames, sensors, max_pins, 3) float64."""
         sensors = max(len(getattr(self, f)) for f in _PER_SENSOR)
-        return {"max_pins": 100 * MAX_TICK_S * sensors * self.max_pins * 3 * 8.0}
+        return {"max_pins": 100 * ft.MAX_TICK_S * sensors * self.max_pins * 3 * 8.0}
 
     def check(self) -> None:
         n = next((len(getattr(self, f)) for f in _PER_SENSOR if len(getattr(self, f)) > 1), 1)
@@ -405,17 +396,8 @@ class BlobDetectConfig(Config):
         return max(len(getattr(self, f)) for f in _PER_SENSOR)
 
 
-class BlobDetect(Block):
+class BlobDetect(ft.Block):
     """Pin positions by OpenCV's SimpleBlobDetector with the thesis's per-sensor parameters (Table 3.1).
-
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — raw (cropped) grayscale frames
-    pins : float64, shape (n, max_pins, 3), units "px"
-        Rows (x, y, diameter) of the detected blobs in the input image's pixel coordinates
-        (pixel centres at integers, x = column, y = row), sorted by y then x; NaN rows after
-        the last blob when fewer than ``max_pins`` were found.
-    count : float64, shape (n,), units "1" — blobs detected per sensor (may exceed max_pins)
 
     Config
     ------
@@ -449,33 +431,45 @@ class BlobDetect(Block):
     config_cls = BlobDetectConfig
     requires = {"cv2": "vision"}
     inputs = {
-        "x": Port(
-            dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="grayscale frames (sensors, H, W)"
+        "x": ft.Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            require_rate=True,
+            doc="raw (cropped) grayscale frames (sensors, H, W)",
         )
     }
     outputs = {
-        "pins": Port(
-            dtype="float64", units="px", doc="(sensors, max_pins, 3) rows x, y, diameter; NaN rows unused"
+        "pins": ft.Port(
+            dtype="float64",
+            units="px",
+            doc=(
+                "rows (x, y, diameter) of the detected blobs in the input image's pixel coordinates "
+                "(pixel centres at integers, x = column, y = row), sorted by y then x; NaN rows after the"
+                " last blob when fewer than max_pins were found"
+            ),
         ),
-        "count": Port(dtype="float64", units="1", doc="number of blobs detected per sensor"),
+        "count": ft.Port(dtype="float64", units="1", doc="blobs detected per sensor (may exceed max_pins)"),
     }
     counter_docs = {
         "pins_dropped": "blobs beyond max_pins in an image: the smallest left out of 'pins' ('count' "
         "includes them); if frequent, raise max_pins or tighten the detector",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         n = inputs["x"].shape[0]
         if self.config.n_sensors() not in (1, n):
-            raise SpecError(
+            raise ft.SpecError(
                 "x",
                 f"the per-sensor parameters describe {self.config.n_sensors()} sensors but the frames have "
                 f"{n} (give one value per sensor, or a single value for all)",
             )
         rate = inputs["x"].rate_hz
         return {
-            "pins": StreamSpec(dtype="float64", shape=(n, self.config.max_pins, 3), units="px", rate_hz=rate),
-            "count": StreamSpec(dtype="float64", shape=(n,), units="1", rate_hz=rate, labels=_labels(n)),
+            "pins": ft.StreamSpec(
+                dtype="float64", shape=(n, self.config.max_pins, 3), units="px", rate_hz=rate
+            ),
+            "count": ft.StreamSpec(dtype="float64", shape=(n,), units="1", rate_hz=rate, labels=_labels(n)),
         }
 
     def reset(self) -> None:
@@ -513,7 +507,7 @@ class BlobDetect(Block):
         rows = np.array([(k.pt[0], k.pt[1], k.size) for k in kps], np.float64).reshape(-1, 3)
         return rows[np.lexsort((rows[:, 0], rows[:, 1]))]
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         m, n = len(x), x.data.shape[1]
         p = self.config.max_pins
         pins = np.full((m, n, p, 3), np.nan)
@@ -527,12 +521,12 @@ class BlobDetect(Block):
                     keep = np.sort(np.argsort(-rows[:, 2], kind="stable")[:p])
                     rows = rows[keep]
                 pins[i, s, : len(rows)] = rows
-        out = {"pins": Chunk(x.t, pins, x.end), "count": Chunk(x.t, count, x.end)}
+        out = {"pins": ft.Chunk(x.t, pins, x.end), "count": ft.Chunk(x.t, count, x.end)}
         return {k: v for k, v in out.items() if k in self.demanded}
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(
+    def example(cls) -> ft.Example:
+        return ft.Example(
             inputs={"x": example_frames(range(5))}, rate_hz=40.0, units={"x": "DN"}, duration_s=5 / 40.0
         )
 
@@ -590,22 +584,16 @@ def blob_mask_numpy(frames: np.ndarray, pins: np.ndarray, scale: float = 1.0) ->
 
 
 @dataclass(frozen=True)
-class BlobMaskConfig(Config):
+class BlobMaskConfig(ft.Config):
     """Parameters of :class:`BlobMask`."""
 
-    scale: float = param(
+    scale: float = ft.param(
         1.0, doc="circle diameter kept around each pin, as a multiple of the blob diameter", gt=0
     )
 
 
-class BlobMask(Block):
+class BlobMask(ft.Block):
     """Keep only the pins: each frame masked to circles at the detected blobs (White 2023, Fig. 3.1 d).
-
-    Ports
-    -----
-    x : uint8, shape (n, H, W), units "DN" — frames (the ones the blobs were detected on)
-    pins : float64, shape (n, P, 3), units "px" — ``blob_detect.pins`` rows (x, y, diameter)
-    y : uint8, shape (n, H, W), units "DN" — the frame inside the circles, 0 elsewhere
 
     Config
     ------
@@ -636,47 +624,53 @@ class BlobMask(Block):
     name = "blob_mask"
     config_cls = BlobMaskConfig
     inputs = {
-        "x": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)"),
-        "pins": Port(
+        "x": ft.Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames (sensors, H, W)"),
+        "pins": ft.Port(
             dtype="float64",
             units="px",
             ndim=(3,),
             require_rate=True,
-            doc="pin rows (x, y, diameter) per sensor, NaN rows ignored",
+            doc="blob_detect.pins rows (x, y, diameter) per sensor, NaN rows ignored",
         ),
     }
     outputs = {
-        "y": Port(dtype="uint8", units="DN", ndim=(3,), require_rate=True, doc="frames masked to the pins")
+        "y": ft.Port(
+            dtype="uint8",
+            units="DN",
+            ndim=(3,),
+            require_rate=True,
+            doc="the frame inside the circles, 0 elsewhere",
+        )
     }
     counter_docs = {
         "unpaired_at_end": "frames or pin rows with no partner on the other input when the stream ended: "
         "not masked ('x' and 'pins' delivered different numbers of samples)",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         n = inputs["x"].shape[0]
         pins = inputs["pins"]
         if pins.shape[2] != 3:
-            raise SpecError(
+            raise ft.SpecError(
                 "pins", f"input 'pins' must be rows (x, y, diameter): (sensors, pins, 3); got {pins.shape}"
             )
         if pins.shape[0] != n:
-            raise SpecError("pins", f"'pins' has {pins.shape[0]} sensors but the frames have {n}")
+            raise ft.SpecError("pins", f"'pins' has {pins.shape[0]} sensors but the frames have {n}")
         if pins.units != "px":
-            raise SpecError("pins", f"input 'pins' must be in 'px', got '{pins.units}'")
+            raise ft.SpecError("pins", f"input 'pins' must be in 'px', got '{pins.units}'")
         if not math.isclose(pins.rate_hz or 0.0, inputs["x"].rate_hz or 0.0, rel_tol=1e-9):
-            raise SpecError(
+            raise ft.SpecError(
                 "pins", f"'pins' is {pins.rate_hz} Hz but the frames are {inputs['x'].rate_hz} Hz"
             )
         return {"y": inputs["x"].with_(labels=None)}
 
     def reset(self) -> None:
         rate = self.input_specs["x"].rate_hz or 1.0
-        self._align = Aligner(self.node, self.input_specs, ["x", "pins"], tol_s=1e-6 / rate)
+        self._align = ft.Aligner(self.node, self.input_specs, ["x", "pins"], tol_s=1e-6 / rate)
         self._ends: dict[str, float] = {}
         self._shape = tuple(self.input_specs["x"].shape)
 
-    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
+    def step(self, **inputs: ft.Chunk) -> dict[str, ft.Chunk]:
         for p, c in inputs.items():
             if c.end is not None:
                 self._ends[p] = max(self._ends.get(p, -math.inf), c.end)
@@ -687,14 +681,14 @@ class BlobMask(Block):
         if len(t):
             _mask_kernel(frames, pins, float(self.config.scale), out)
         end = min(self._ends.values()) if len(self._ends) == 2 else None
-        return {"y": Chunk(t, out, end)}
+        return {"y": ft.Chunk(t, out, end)}
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         self.count("unpaired_at_end", sum(self._align.pending().values()))
         return {}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         frames = example_frames(range(5))
         rng = np.random.default_rng(3)
         pins = np.full((5, 3, 30, 3), np.nan)
@@ -704,7 +698,7 @@ class BlobMask(Block):
                 pins[i, s, :k, 0] = rng.uniform(0, 240, k)
                 pins[i, s, :k, 1] = rng.uniform(0, 90, k)
                 pins[i, s, :k, 2] = rng.uniform(6, 10, k)
-        return Example(
+        return ft.Example(
             inputs={"x": frames, "pins": pins},
             rate_hz=40.0,
             units={"x": "DN", "pins": "px"},

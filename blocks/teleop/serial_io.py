@@ -11,13 +11,12 @@ import stat
 import subprocess
 import time
 from collections import OrderedDict, deque
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source
+import flowtact.api as ft
 from flowtact.blocks.devices.clocksync import ClockSync
 from flowtact.blocks.teleop.exo_protocol import (
     DEVICE_MAX_DEV_US,
@@ -31,8 +30,6 @@ from flowtact.blocks.teleop.exo_protocol import (
     parse_line,
 )
 from flowtact.blocks.teleop.hand import FINGERS, N_FINGERS
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import Config, param
 from flowtact.python_child import python_command
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
@@ -54,45 +51,45 @@ MAX_OUT_BYTES = 1024
 
 
 @dataclass(frozen=True)
-class SerialIoConfig(Config):
-    port: str = param(
+class SerialIoConfig(ft.Config):
+    port: str = ft.param(
         "sim",
         doc="'sim' (an emulated exoskeleton in-process, graph time: offline and --fast runs), 'emulator' "
         "(start `flowtact sim exo` on a pseudo-terminal and talk to it), or a device such as /dev/ttyACM0",
     )
-    baudrate: int = param(115200, gt=0, doc="serial baud rate (ignored by native-USB boards and ptys)")
-    rate_hz: float = param(100.0, gt=0, doc="nominal packet rate of the device (the output streams' rate)")
-    min_us: float = param(
+    baudrate: int = ft.param(115200, gt=0, doc="serial baud rate (ignored by native-USB boards and ptys)")
+    rate_hz: float = ft.param(100.0, gt=0, doc="nominal packet rate of the device (the output streams' rate)")
+    min_us: float = ft.param(
         -500.0, ge=-DEVICE_MAX_DEV_US, le=DEVICE_MAX_DEV_US, doc="lowest servo deviation ever sent (µs)"
     )
-    max_us: float = param(
+    max_us: float = ft.param(
         500.0, ge=-DEVICE_MAX_DEV_US, le=DEVICE_MAX_DEV_US, doc="highest servo deviation ever sent (µs)"
     )
-    reconnect_s: float = param(0.1, gt=0, doc="after an unplug, retry opening the port this often")
-    give_up_s: float | None = param(
+    reconnect_s: float = ft.param(0.1, gt=0, doc="after an unplug, retry opening the port this often")
+    give_up_s: float | None = ft.param(
         None, gt=0, doc="raise if the port stays unavailable this long (None: keep trying forever)"
     )
-    max_latency_s: float = param(
+    max_latency_s: float = ft.param(
         0.1, gt=0, doc="watermark lag while no packet comes; packets stamped before the watermark are dropped"
     )
-    latency_s: float = param(
+    latency_s: float = ft.param(
         0.0, ge=0, doc="known constant device delay from sampling to sending, subtracted from the stamps"
     )
-    require_checksum: bool = param(True, doc="reject device lines without a '*XX' checksum")
-    poll_bracket: bool = param(
+    require_checksum: bool = ft.param(True, doc="reject device lines without a '*XX' checksum")
+    poll_bracket: bool = ft.param(
         True, doc="give the clock estimator the previous read time too (halves tick-locked polling bias)"
     )
-    emulator_args: tuple[str, ...] = param(
+    emulator_args: tuple[str, ...] = ft.param(
         (),
         doc="extra flags for `flowtact sim exo` (port: emulator), e.g. [--truth, --drift-ppm, 120]; never "
         "--link or --log (a graph names no files: run the emulator yourself for those)",
     )
-    startup_timeout_s: float = param(10.0, gt=0, doc="port: emulator — how long to wait for it to start")
-    sim_latency_s: float = param(
+    startup_timeout_s: float = ft.param(10.0, gt=0, doc="port: emulator — how long to wait for it to start")
+    sim_latency_s: float = ft.param(
         0.002, ge=0, doc="port: sim — mean transport delay of a packet (exponential, capped at 5×)"
     )
-    sim_drift_ppm: float = param(50.0, ge=-5000, le=5000, doc="port: sim — device clock error")
-    sim_user: Literal["grasp", "idle"] = param("grasp", doc="port: sim — what the simulated hand does")
+    sim_drift_ppm: float = ft.param(50.0, ge=-5000, le=5000, doc="port: sim — device clock error")
+    sim_user: Literal["grasp", "idle"] = ft.param("grasp", doc="port: sim — what the simulated hand does")
 
     def check(self) -> None:
         problem = port_problem(self.port)
@@ -150,28 +147,8 @@ class _Sample:
     send_t: float
 
 
-class SerialIo(Source):
+class SerialIo(ft.Source):
     """Exchange packets with the exoskeleton over a serial line, stamped in graph time.
-
-    Ports
-    -----
-    cmd : float64 (3, 2) "us", optional, delayed (closes the control loop)
-        Per finger (thumb, index, middle): column 0 engage (≥ 0.5 engages), column 1 deviation
-        from the contact position in µs of PWM (positive lets the finger close further). The
-        latest sample that arrived since the last step is sent; NaN/inf never reach the line.
-    angles : float64 (3, 3) "rad"
-        Exoskeleton joint angles φ1 (servo encoder), φ2, φ3 (passive) per finger.
-    fsr : float64 (3,) "ADC"
-        Raw FSR readings 0..1023 (eq. 3.10 is applied downstream).
-    engaged : float64 (3,) "1"
-        The device's own report of which servos are engaged (1.0) — the echo of the commands.
-    device_t : float64 () "s"
-        The device's clock (its µs counter, unwrapped), for diagnosing the alignment.
-    rtt : float64 () "s"
-        Round trip of the latest acknowledged command (host send → device ack read), NaN before.
-    send_t : float64 () "s"
-        The true sampling time in graph time when the device sends the optional ``h=`` field
-        (emulators with ``--truth``, and ``port: sim``); NaN otherwise. For testing the alignment.
 
     Config
     ------
@@ -239,24 +216,65 @@ class SerialIo(Source):
     requires = {"serial": "serial"}
     sink = True  # it drives servos: it runs even when nothing consumes its outputs
     inputs = {
-        "cmd": Port(
+        "cmd": ft.Port(
             dtype="float64",
             shape=(N_FINGERS, 2),
             units="us",
             delay=True,
             optional=True,
-            doc="servo commands per finger: [engage 0/1, deviation µs] (one-step delayed: the loop)",
+            doc="per finger (thumb, index, middle): column 0 engage (≥ 0.5 engages), column 1 deviation "
+            "from the contact position in µs of PWM (positive lets the finger close further). The latest "
+            "sample that arrived since the last step is sent; NaN/inf never reach the line. One step "
+            "delayed: it closes the control loop",
         )
     }
     outputs = {
-        "angles": Port(dtype="float64", shape=(N_FINGERS, 3), units="rad", doc="joint angles φ1, φ2, φ3"),
-        "fsr": Port(dtype="float64", shape=(N_FINGERS,), units="ADC", doc="raw FSR readings 0..1023"),
-        "engaged": Port(dtype="float64", shape=(N_FINGERS,), units="1", doc="servo engaged (device echo)"),
-        "device_t": Port(dtype="float64", shape=(), units="s", doc="the device's own clock, unwrapped"),
-        "rtt": Port(
-            dtype="float64", shape=(), units="s", doc="round trip of the latest acknowledged command"
+        "angles": ft.Port(
+            dtype="float64",
+            shape=(N_FINGERS, 3),
+            units="rad",
+            rate="rate_hz",
+            labels=ANGLE_LABELS,
+            doc="exoskeleton joint angles φ1 (servo encoder), φ2, φ3 (passive) per finger",
         ),
-        "send_t": Port(dtype="float64", shape=(), units="s", doc="true sampling time if the device sends it"),
+        "fsr": ft.Port(
+            dtype="float64",
+            shape=(N_FINGERS,),
+            units="ADC",
+            rate="rate_hz",
+            labels=FINGERS,
+            doc="raw FSR readings 0..1023 (eq. 3.10 is applied downstream)",
+        ),
+        "engaged": ft.Port(
+            dtype="float64",
+            shape=(N_FINGERS,),
+            units="1",
+            rate="rate_hz",
+            labels=FINGERS,
+            doc="the device's own report of which servos are engaged (1.0): the echo of the commands",
+        ),
+        "device_t": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="s",
+            rate="rate_hz",
+            doc="the device's clock (its µs counter, unwrapped), for diagnosing the alignment",
+        ),
+        "rtt": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="s",
+            rate="rate_hz",
+            doc="round trip of the latest acknowledged command (host send → device ack read), NaN before",
+        ),
+        "send_t": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="s",
+            rate="rate_hz",
+            doc="the true sampling time in graph time when the device sends the optional ``h=`` field "
+            "(emulators with ``--truth``, and ``port: sim``); NaN otherwise. For testing the alignment",
+        ),
     }
     counter_docs = {
         "packets": "data packets received from the device (before any were dropped as late or out of order)",
@@ -295,21 +313,9 @@ class SerialIo(Source):
         self._logged: set[str] = set()
 
     # -- compile time -------------------------------------------------------------------------
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
-        c = self.config
-        rate = c.rate_hz
-        return {
-            "angles": StreamSpec("float64", (N_FINGERS, 3), "rad", rate, labels=ANGLE_LABELS),
-            "fsr": StreamSpec("float64", (N_FINGERS,), "ADC", rate, labels=FINGERS),
-            "engaged": StreamSpec("float64", (N_FINGERS,), "1", rate, labels=FINGERS),
-            "device_t": StreamSpec("float64", (), "s", rate),
-            "rtt": StreamSpec("float64", (), "s", rate),
-            "send_t": StreamSpec("float64", (), "s", rate),
-        }
-
     @classmethod
-    def example(cls) -> Example:
-        return Example(params={"port": "sim", "rate_hz": 100.0}, rate_hz=100.0, duration_s=1.0)
+    def example(cls) -> ft.Example:
+        return ft.Example(params={"port": "sim", "rate_hz": 100.0}, rate_hz=100.0, duration_s=1.0)
 
     # -- state --------------------------------------------------------------------------------
     @classmethod
@@ -410,7 +416,7 @@ class SerialIo(Source):
         return first[5:]
 
     # -- the step -----------------------------------------------------------------------------
-    def step(self, now: float, cmd: Chunk | None = None) -> dict[str, Chunk]:
+    def step(self, now: float, cmd: ft.Chunk | None = None) -> dict[str, ft.Chunk]:
         if self.config.port == "sim":
             return self._step_sim(now, cmd)
         if not self._opened:
@@ -434,7 +440,7 @@ class SerialIo(Source):
         self._read()
         return self._emit(now)
 
-    def _step_sim(self, now: float, cmd: Chunk | None) -> dict[str, Chunk]:
+    def _step_sim(self, now: float, cmd: ft.Chunk | None) -> dict[str, ft.Chunk]:
         c = self.config
         dev = self._dev
         while dev.next_time() < now:  # the device samples up to now (graph time = its true time)
@@ -674,28 +680,28 @@ class SerialIo(Source):
         return Command(seq, (eng[0], eng[1], eng[2]), (dev[0], dev[1], dev[2]))
 
     # -- output ---------------------------------------------------------------------------------
-    def _emit(self, now: float) -> dict[str, Chunk]:
+    def _emit(self, now: float) -> dict[str, ft.Chunk]:
         ready = [s for s in self._ready if s.t < now]
         self._ready = self._ready[len(ready) :]
         # held samples (t >= now) stay after the watermark: it never passes now
         self._end = max(self._end, ready[-1].t if ready else -math.inf, now - self.config.max_latency_s)
         t = np.array([s.t for s in ready], np.float64)
         n = len(ready)
-        out: dict[str, Chunk] = {}
+        out: dict[str, ft.Chunk] = {}
         want = self.demanded
         if "angles" in want:
             phi = np.array([s.phi for s in ready], np.float64).reshape(n, N_FINGERS, 3) * 1e-3
-            out["angles"] = Chunk(t, phi, self._end)
+            out["angles"] = ft.Chunk(t, phi, self._end)
         if "fsr" in want:
-            out["fsr"] = Chunk(
+            out["fsr"] = ft.Chunk(
                 t, np.array([s.fsr for s in ready], np.float64).reshape(n, N_FINGERS), self._end
             )
         if "engaged" in want:
             bits = np.array([s.status for s in ready], np.int64).reshape(n, 1)
-            out["engaged"] = Chunk(t, ((bits >> np.arange(N_FINGERS)) & 1).astype(np.float64), self._end)
+            out["engaged"] = ft.Chunk(t, ((bits >> np.arange(N_FINGERS)) & 1).astype(np.float64), self._end)
         for name in ("device_t", "rtt", "send_t"):
             if name in want:
-                out[name] = Chunk(t, np.array([getattr(s, name) for s in ready], np.float64), self._end)
+                out[name] = ft.Chunk(t, np.array([getattr(s, name) for s in ready], np.float64), self._end)
         return out
 
     def _say(self, key: str, level: int, message: str) -> None:

@@ -23,19 +23,7 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Example,
-    Port,
-    SpecError,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
-from flowtact.limits import NOMINAL_FRAME_BYTES
+import flowtact.api as ft
 
 from .hand import FINGERS
 
@@ -272,14 +260,14 @@ def _mean_reference(frames: list[np.ndarray]) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class SsimConfig(BadDataConfig):
+class SsimConfig(ft.BadDataConfig):
     """Parameters of :class:`Ssim`."""
 
-    precision: Literal["float64", "float32"] = param(
+    precision: Literal["float64", "float32"] = ft.param(
         "float64",
         doc="final formula in float64 (equals scikit-image to ~1e-14) or float32 (within 1e-6, a little faster)",
     )
-    reference_frames: int = param(
+    reference_frames: int = ft.param(
         1,
         doc="the reference is the rounded mean of this many frames from the start (and after a recapture)",
         ge=1,
@@ -287,20 +275,11 @@ class SsimConfig(BadDataConfig):
 
     def state_bytes(self) -> dict[str, float]:
         """The frames collected for the reference (uint8 copies, then their float64 mean)."""
-        return {"reference_frames": self.reference_frames * NOMINAL_FRAME_BYTES * 2.0}
+        return {"reference_frames": self.reference_frames * ft.NOMINAL_FRAME_BYTES * 2.0}
 
 
-class Ssim(Block):
+class Ssim(ft.Block):
     """Mean SSIM of each sensor's image against a reference captured at start-up (White 2023, eq. 3.2).
-
-    Ports
-    -----
-    x : uint8, shape (n, H, W) (n sensors; H, W >= 7) or (H, W), units "DN"
-        Frames: raw, cropped, thresholded or masked images (any uint8 image with range 0..255).
-    recapture : float64, shape (), units "1", optional
-        A sample > 0.5 at time t makes the first frame with time >= t the start of a new reference.
-    y : float64, shape (n,) (or () for (H, W) frames), units "1", labels thumb/index/middle for n = 3
-        Mean SSIM of each sensor's frame against its reference, one sample per frame, same times.
 
     Config
     ------
@@ -354,14 +333,17 @@ class Ssim(Block):
     name = "ssim"
     config_cls = SsimConfig
     inputs = {
-        "x": Port(
+        "x": ft.Port(
             dtype="uint8",
             units="DN",
             ndim=(2, 3),
             require_rate=True,
-            doc="frames (n, H, W) uint8, one image per sensor",
+            doc=(
+                "frames (n, H, W) (n sensors; H, W ≥ 7) or (H, W): raw, cropped, thresholded or masked "
+                "images (any uint8 image with range 0..255)"
+            ),
         ),
-        "recapture": Port(
+        "recapture": ft.Port(
             dtype="float64",
             shape=(),
             units="1",
@@ -369,24 +351,33 @@ class Ssim(Block):
             doc="a sample > 0.5 makes the next frame (time >= its time) the new reference",
         ),
     }
-    outputs = {"y": Port(dtype="float64", units="1", doc="mean SSIM of each sensor's frame vs its reference")}
+    outputs = {
+        "y": ft.Port(
+            dtype="float64",
+            units="1",
+            doc=(
+                "mean SSIM of each sensor's frame against its reference, shape (n,) (or () for (H, W) "
+                "frames), one sample per frame, same times; labels thumb, index, middle for n = 3"
+            ),
+        )
+    }
     counter_docs = {
         "recaptures": "frames that started a new reference after a recapture request: expected when "
         "recapture pulses are sent",
         "reference_short": "the stream ended while a reference was still being collected: it is the "
         "mean of fewer than reference_frames frames",
-        **nonfinite_counter_docs("recapture samples"),
+        **ft.nonfinite_counter_docs("recapture samples"),
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         x = inputs["x"]
         if min(x.shape[-2:]) < WIN:
-            raise SpecError(
+            raise ft.SpecError(
                 "x", f"input 'x' frames must be at least {WIN}×{WIN} pixels (the window); got {x.shape}"
             )
         shape = x.shape[:1] if len(x.shape) == 3 else ()
         labels = FINGERS if shape == (len(FINGERS),) else None
-        return {"y": StreamSpec(dtype="float64", shape=shape, units="1", rate_hz=x.rate_hz, labels=labels)}
+        return {"y": ft.StreamSpec(dtype="float64", shape=shape, units="1", rate_hz=x.rate_hz, labels=labels)}
 
     def reset(self) -> None:
         x = self.input_specs["x"]
@@ -405,7 +396,7 @@ class Ssim(Block):
         self._x_end: float | None = None
 
     # -- the stream logic ------------------------------------------------------------------------
-    def step(self, x: Chunk, recapture: Chunk | None = None) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk, recapture: ft.Chunk | None = None) -> dict[str, ft.Chunk]:
         if x.end is not None:
             self._x_end = x.end if self._x_end is None else max(self._x_end, x.end)
         if recapture is not None:
@@ -425,7 +416,7 @@ class Ssim(Block):
             self._pend_t, self._pend_f = self._pend_t[n:], self._pend_f[n:]
         return {"y": self._emit(*self._process(t, frames))}
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         t_out, y_out = self._process(self._pend_t, self._pend_f)
         self._pend_t, self._pend_f = np.empty(0), self._pend_f[:0]
         if self._collect:
@@ -434,12 +425,12 @@ class Ssim(Block):
             t_out, y_out = np.concatenate([t_out, t2]), np.concatenate([y_out, y2])
         return {"y": self._emit(t_out, y_out)} if len(t_out) else {}
 
-    def _add_recapture(self, c: Chunk) -> None:
+    def _add_recapture(self, c: ft.Chunk) -> None:
         if c.end is not None:
             self._rc_end = max(self._rc_end, c.end)
         if not len(c):
             return
-        c, self._rc_hold = screen_nonfinite(self, c, self.config.on_bad_data, "recapture", self._rc_hold)
+        c, self._rc_hold = ft.screen_nonfinite(self, c, self.config.on_bad_data, "recapture", self._rc_hold)
         if len(c):
             self._rc_t = np.concatenate([self._rc_t, c.t])
             self._rc_v = np.concatenate([self._rc_v, c.data])
@@ -501,7 +492,7 @@ class Ssim(Block):
         self._ref = SsimReference(_mean_reference(list(ff)), self.config.precision)
         return tt, self._ref.compare(ff)
 
-    def _emit(self, t: np.ndarray, y: np.ndarray) -> Chunk:
+    def _emit(self, t: np.ndarray, y: np.ndarray) -> ft.Chunk:
         end = self._x_end
         held = [float(self._pend_t[0])] if len(self._pend_t) else []
         if self._collect:
@@ -509,10 +500,10 @@ class Ssim(Block):
         if end is not None and held:
             end = min(end, *held)
         data = y[:, 0] if self._single else y
-        return Chunk(np.asarray(t, np.float64), np.ascontiguousarray(data, np.float64), end)
+        return ft.Chunk(np.asarray(t, np.float64), np.ascontiguousarray(data, np.float64), end)
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(7)
         base = rng.integers(20, 60, (3, 24, 32)).astype(np.int16)
         base[:, 8:16:3, 4:28:4] = 220  # a few bright "pins"
@@ -521,7 +512,7 @@ class Ssim(Block):
             shifted = np.roll(base, i % 3, axis=2) + rng.integers(-3, 4, base.shape)
             frames[i] = np.clip(shifted, 0, 255)
         recapture = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
-        return Example(
+        return ft.Example(
             params={"reference_frames": 2},
             inputs={"x": frames, "recapture": recapture},
             rate_hz=40.0,

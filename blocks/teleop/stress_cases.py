@@ -9,7 +9,7 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError
+import flowtact.api as ft
 from flowtact.stress import EPS, Outcome, StressCase
 from flowtact.testing import run_offline
 
@@ -158,7 +158,7 @@ def fsr_out_of_range(policy: str) -> Outcome:
     r[[40, 41, 80, 120], [0, 1, 2, 1]] = [-5.0, 2000.0, math.nan, math.inf]
     try:
         cmd, counters = _feedback_chain(r, phi, policy)
-    except BadDataError as e:
+    except ft.BadDataError as e:
         return Outcome(
             f"fsr_bad_{policy}", "fsr_force → force_feedback", "readings −5, 2000, NaN, +inf", f"stops: “{e}”",
             "raise: clean one-line error", policy == "raise" and "\n" not in str(e),

@@ -19,19 +19,8 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from flowtact.block import (
-    BadDataConfig,
-    Example,
-    Port,
-    Source,
-    SpecError,
-    nonfinite_counter_docs,
-    screen_nonfinite,
-)
+import flowtact.api as ft
 from flowtact.blocks.signal.shapes import raised_cosine
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.limits import MAX_TICK_S
-from flowtact.params import param
 
 from .hand import FINGERS, N_FINGERS
 
@@ -68,61 +57,65 @@ GOLDEN = 0x9E3779B97F4A7C15
 
 
 @dataclass(frozen=True)
-class TactipSimConfig(BadDataConfig):
-    scenario: Literal["taps", "grasp", "rest"] = param(
+class TactipSimConfig(ft.BadDataConfig):
+    scenario: Literal["taps", "grasp", "rest"] = ft.param(
         "taps",
         doc="force drive without a force input: taps of rising force, soft/firm grasps, or no contact",
     )
-    fps: float = param(40.0, doc="frame rate of every output (the paper's cameras run at 40 FPS)", gt=0)
-    onset_s: float = param(0.25, doc="time of the first tap or grasp", ge=0)
-    force_min_n: float = param(0.5, doc="taps: peak force of the first tap at each position", ge=0)
-    force_max_n: float = param(5.0, doc="taps: peak force of the last tap at each position", gt=0)
-    levels: int = param(10, doc="taps: taps of rising peak force at one position before it moves", ge=1)
-    tap_s: float = param(
+    fps: float = ft.param(40.0, doc="frame rate of every output (the paper's cameras run at 40 FPS)", gt=0)
+    onset_s: float = ft.param(0.25, doc="time of the first tap or grasp", ge=0)
+    force_min_n: float = ft.param(0.5, doc="taps: peak force of the first tap at each position", ge=0)
+    force_max_n: float = ft.param(5.0, doc="taps: peak force of the last tap at each position", gt=0)
+    levels: int = ft.param(10, doc="taps: taps of rising peak force at one position before it moves", ge=1)
+    tap_s: float = ft.param(
         0.5, doc="taps: contact time of one tap (raised-cosine rise, hold, fall: thirds)", gt=0
     )
-    tap_period_s: float = param(1.0, doc="taps: time between the onsets of successive taps", gt=0)
-    position_mm: tuple[float, ...] = param(
+    tap_period_s: float = ft.param(1.0, doc="taps: time between the onsets of successive taps", gt=0)
+    position_mm: tuple[float, ...] = ft.param(
         (9.0, 3.0),
         doc="taps: contact positions are drawn uniformly within ±x, ±y mm of the pin-array centre",
         ge=0,
         min_len=2,
         max_len=2,
     )
-    jitter_mm: float = param(0.3, doc="taps: extra per-tap jitter of the contact position", ge=0)
-    level_jitter: float = param(
+    jitter_mm: float = ft.param(0.3, doc="taps: extra per-tap jitter of the contact position", ge=0)
+    level_jitter: float = ft.param(
         0.5,
         doc="taps: peak-force jitter as a fraction of one level step (covers the range densely)",
         ge=0,
         le=1,
     )
-    shear_ratio: float = param(
+    shear_ratio: float = ft.param(
         0.3,
         doc="taps: tangential force up to this fraction of the normal force, random direction per tap",
         ge=0,
     )
-    size_spread: float = param(
+    size_spread: float = ft.param(
         0.3,
         doc="contact-size factor exp(±size_spread) per tap position (±half per grasp): object curvature",
         ge=0,
     )
-    grasp_period_s: float = param(4.0, doc="grasp: time between grasp onsets (soft and firm alternate)", gt=0)
-    soft_force_n: float = param(2.5, doc="grasp: thumb peak force on the soft object", ge=0)
-    firm_force_n: float = param(4.0, doc="grasp: thumb peak force on the firm object", ge=0)
-    soft_rise_s: float = param(1.2, doc="grasp: force rise time on the soft object (slow)", gt=0)
-    firm_rise_s: float = param(0.15, doc="grasp: force rise time on the firm object (fast)", gt=0)
-    hold_s: float = param(1.0, doc="grasp: time the peak force is held", ge=0)
-    release_s: float = param(0.3, doc="grasp: force fall time at release", gt=0)
-    contact_mm: tuple[float, ...] = param(
+    grasp_period_s: float = ft.param(
+        4.0, doc="grasp: time between grasp onsets (soft and firm alternate)", gt=0
+    )
+    soft_force_n: float = ft.param(2.5, doc="grasp: thumb peak force on the soft object", ge=0)
+    firm_force_n: float = ft.param(4.0, doc="grasp: thumb peak force on the firm object", ge=0)
+    soft_rise_s: float = ft.param(1.2, doc="grasp: force rise time on the soft object (slow)", gt=0)
+    firm_rise_s: float = ft.param(0.15, doc="grasp: force rise time on the firm object (fast)", gt=0)
+    hold_s: float = ft.param(1.0, doc="grasp: time the peak force is held", ge=0)
+    release_s: float = ft.param(0.3, doc="grasp: force fall time at release", gt=0)
+    contact_mm: tuple[float, ...] = ft.param(
         (0.0, 0.0),
         doc="contact (x, y mm) under an input-driven force: 2 values for all sensors, or x, y per sensor",
         min_len=2,
         max_len=6,
     )
-    displacement_mm: float = param(0.85, doc="largest radial pin displacement at 5 N (grows as F^0.75)", ge=0)
-    noise_dn: float = param(3.0, doc="sensor noise standard deviation in gray levels (DN)", ge=0)
-    vignette: float = param(0.6, doc="lens vignetting depth: 0 none, 1 pure cos^4 falloff", ge=0, le=1)
-    unit_seed: int = param(
+    displacement_mm: float = ft.param(
+        0.85, doc="largest radial pin displacement at 5 N (grows as F^0.75)", ge=0
+    )
+    noise_dn: float = ft.param(3.0, doc="sensor noise standard deviation in gray levels (DN)", ge=0)
+    vignette: float = ft.param(0.6, doc="lens vignetting depth: 0 none, 1 pure cos^4 falloff", ge=0, le=1)
+    unit_seed: int = ft.param(
         2023,
         doc="which physical TacTips: fixes each sensor's pin layout, lighting and lens (not the noise)",
         ge=0,
@@ -130,7 +123,7 @@ class TactipSimConfig(BadDataConfig):
 
     def state_bytes(self) -> dict[str, float]:
         """A longest tick of frames: three uint8 frames each, rendered through float64 scratch."""
-        return {"fps": self.fps * MAX_TICK_S * 3 * HEIGHT * WIDTH * 9}
+        return {"fps": self.fps * ft.MAX_TICK_S * 3 * HEIGHT * WIDTH * 9}
 
     def check(self) -> None:
         if self.force_max_n < self.force_min_n:
@@ -561,21 +554,8 @@ def _count_frames(mark: float, fps: float, *, strict: bool) -> int:
     return k + 1
 
 
-class TactipSim(Source):
+class TactipSim(ft.Source):
     """Three emulated TacTips (thumb, index, middle): 30-pin camera frames and the true contact force.
-
-    Ports
-    -----
-    force (input, optional) : float64 (3,), units "N"
-        True contact force from a gripper simulator (closed loop). When connected, frame ``k``
-        renders the latest force sample with ``t <= k / fps`` (0 before the first) at the contact
-        position ``contact_mm``, and the scenario is not used.
-    frames : uint8 (3, 240, 320), units "DN"
-        Gray camera frames, axis 0 = ``FINGERS`` (thumb, index, middle), at ``fps``.
-    force : float64 (3,), units "N", labels FINGERS
-        The contact force each frame shows (scenario truth, or the input sample used).
-    contact : float64 (3, 2), units "mm"
-        Contact centre (x along the finger, y across, from the pin-array centre) of each frame.
 
     Config
     ------
@@ -652,43 +632,40 @@ class TactipSim(Source):
 
     config_cls = TactipSimConfig
     inputs = {
-        "force": Port(
+        "force": ft.Port(
             dtype="float64",
             shape=(N_FINGERS,),
             units="N",
             optional=True,
-            doc="true contact force per sensor from a gripper simulator (replaces the scenario)",
+            doc="true contact force from a gripper simulator (closed loop). When connected, frame k "
+            "renders the latest force sample with t ≤ k / fps (0 before the first) at the contact "
+            "position contact_mm, and the scenario is not used",
         )
     }
     outputs = {
-        "frames": Port(dtype="uint8", shape=(N_FINGERS, HEIGHT, WIDTH), units="DN", doc="gray camera frames"),
-        "force": Port(shape=(N_FINGERS,), units="N", doc="true contact force shown by each frame"),
-        "contact": Port(shape=(N_FINGERS, 2), units="mm", doc="contact centre (x, y) of each frame"),
+        "frames": ft.Port(
+            dtype="uint8",
+            shape=(N_FINGERS, HEIGHT, WIDTH),
+            units="DN",
+            rate="fps",
+            doc="gray camera frames, axis 0 = FINGERS (thumb, index, middle)",
+        ),
+        "force": ft.Port(
+            shape=(N_FINGERS,),
+            units="N",
+            rate="fps",
+            labels=FINGERS,
+            doc="the contact force each frame shows (scenario truth, or the input sample used)",
+        ),
+        "contact": ft.Port(
+            shape=(N_FINGERS, 2),
+            units="mm",
+            rate="fps",
+            labels=tuple(f"{f} {a}" for f in FINGERS for a in "xy"),
+            doc="contact centre (x along the finger, y across, from the pin-array centre) of each frame",
+        ),
     }
-    counter_docs = nonfinite_counter_docs("force samples on 'force'")
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        spec = inputs.get("force")
-        if spec is not None:
-            if spec.events:
-                raise SpecError("force", "expects a sampled force stream, got events")
-            if spec.units != "N":
-                raise SpecError("force", f"expects units N, got {spec.units!r} ({spec.describe()})")
-            if tuple(spec.shape) != (N_FINGERS,):
-                raise SpecError(
-                    "force", f"expects one force per sensor, shape ({N_FINGERS},); got {spec.describe()}"
-                )
-        rate = self.config.fps
-        return {
-            "frames": StreamSpec(dtype="uint8", shape=(N_FINGERS, HEIGHT, WIDTH), units="DN", rate_hz=rate),
-            "force": StreamSpec(shape=(N_FINGERS,), units="N", rate_hz=rate, labels=FINGERS),
-            "contact": StreamSpec(
-                shape=(N_FINGERS, 2),
-                units="mm",
-                rate_hz=rate,
-                labels=tuple(f"{f} {a}" for f in FINGERS for a in "xy"),
-            ),
-        }
+    counter_docs = ft.nonfinite_counter_docs("force samples on 'force'")
 
     def reset(self) -> None:
         c = self.config
@@ -707,10 +684,10 @@ class TactipSim(Source):
         self.last_now = 0.0
         _units(c.unit_seed, c.vignette)  # build the sensors now, not on the first frame
 
-    def _absorb(self, chunk: Chunk | None) -> None:
+    def _absorb(self, chunk: ft.Chunk | None) -> None:
         if chunk is None:
             return
-        chunk, self.last_good = screen_nonfinite(
+        chunk, self.last_good = ft.screen_nonfinite(
             self, chunk, self.config.on_bad_data, "force", self.last_good
         )
         if len(chunk):
@@ -742,7 +719,7 @@ class TactipSim(Source):
         self.pending_f = self.pending_f[j:]
         return f
 
-    def step(self, now: float, force: Chunk | None = None) -> dict[str, Chunk]:
+    def step(self, now: float, force: ft.Chunk | None = None) -> dict[str, ft.Chunk]:
         self.last_now = max(self.last_now, float(now))
         due = self.due(self.last_now, self.config.fps)
         if self.driven:
@@ -750,13 +727,13 @@ class TactipSim(Source):
             due = min(due, self._ready())
         return self._emit(due)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         if not self.driven:
             return {}
         # end of stream: the force input has nothing more, render what is due with the held force
         return self._emit(self.due(self.last_now, self.config.fps))
 
-    def _emit(self, due: int) -> dict[str, Chunk]:
+    def _emit(self, due: int) -> dict[str, ft.Chunk]:
         c = self.config
         n = max(due - self.i, 0)
         idx = self.i + np.arange(n)
@@ -771,18 +748,18 @@ class TactipSim(Source):
             f, pos, shear, size = truth.force, truth.position, truth.shear, truth.size
         end = min(self.last_now, self.i / c.fps)
         want = self.demanded
-        out: dict[str, Chunk] = {}
+        out: dict[str, ft.Chunk] = {}
         if "frames" in want:
-            out["frames"] = Chunk(t, render(f, pos, idx, self.seed_frames, c, shear=shear, size=size), end)
+            out["frames"] = ft.Chunk(t, render(f, pos, idx, self.seed_frames, c, shear=shear, size=size), end)
         if "force" in want:
-            out["force"] = Chunk(t, f, end)
+            out["force"] = ft.Chunk(t, f, end)
         if "contact" in want:
-            out["contact"] = Chunk(t, pos, end)
+            out["contact"] = ft.Chunk(t, pos, end)
         return out
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(
+    def example(cls) -> ft.Example:
+        return ft.Example(
             params={"scenario": "taps", "onset_s": 0.05, "tap_period_s": 0.3, "tap_s": 0.25, "levels": 3},
             rate_hz=40.0,
             duration_s=1.0,

@@ -34,10 +34,11 @@ from typing import Any
 
 import numpy as np
 
+import flowtact.api as ft
 from flowtact.command import CommandParser, run_command
 from flowtact.commands import Command
 from flowtact.errors import UsageError
-from flowtact.limits import MAX_SEED, cli_float, cli_int
+from flowtact.limits import cli_float, cli_int
 from flowtact.terminal_bar import TerminalBar
 
 from .cnn import ARCHS, TORCH_HINT, Arch, Preprocess, build_model, import_torch, n_parameters, save_checkpoint
@@ -736,7 +737,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--seed",
-        type=cli_int(0, MAX_SEED),
+        type=cli_int(0, ft.MAX_SEED),
         default=0,
         help="seed of the split, initial weights and batch order",
     )

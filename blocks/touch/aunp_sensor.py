@@ -7,16 +7,12 @@ graph's force reconstruction and afferent models can be checked against the trut
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.limits import MAX_TICK_S
-from flowtact.params import Config, param
+import flowtact.api as ft
 
 from .aunp import SENSITIVITY_PER_N
 from .aunp_samples import SCENARIOS, sensor_samples, trial_constants
@@ -30,49 +26,51 @@ NOISE_AHEAD = 1024
 
 
 @dataclass(frozen=True)
-class AunpSensorConfig(Config):
-    scenario: Literal["touch", "slip", "rest"] = param(
+class AunpSensorConfig(ft.Config):
+    scenario: Literal["touch", "slip", "rest"] = ft.param(
         "touch", doc="trial played: normal-force touch, tangential slip, or baseline load only"
     )
-    rate_hz: float = param(1000.0, doc="sample rate of every output (the paper samples at 1 kHz)", gt=0)
-    baseline_n: float = param(0.12, doc="normal force holding the sensor (the paper's 120 mN)", ge=0)
-    indentation_um: float = param(
+    rate_hz: float = ft.param(1000.0, doc="sample rate of every output (the paper samples at 1 kHz)", gt=0)
+    baseline_n: float = ft.param(0.12, doc="normal force holding the sensor (the paper's 120 mN)", ge=0)
+    indentation_um: float = ft.param(
         20.0, doc="indentation of the bump added by the probe (touch and slip)", ge=0
     )
-    stiffness_n_per_mm: float = param(
+    stiffness_n_per_mm: float = ft.param(
         10.0, doc="normal stiffness of the PDMS bump turning indentation into added Fz", gt=0
     )
-    onset_s: float = param(0.2, doc="time the probe starts loading the bump (first trial)", ge=0)
-    ramp_s: float = param(0.01, doc="duration of the raised-cosine normal loading ramp", gt=0)
-    unload_s: float = param(0.03, doc="duration of the raised-cosine normal unloading ramp", gt=0)
-    hold_s: float = param(
+    onset_s: float = ft.param(0.2, doc="time the probe starts loading the bump (first trial)", ge=0)
+    ramp_s: float = ft.param(0.01, doc="duration of the raised-cosine normal loading ramp", gt=0)
+    unload_s: float = ft.param(0.03, doc="duration of the raised-cosine normal unloading ramp", gt=0)
+    hold_s: float = ft.param(
         0.5, doc="touch: plateau of the added normal force; slip: time held after the slip", ge=0
     )
-    period_s: float = param(2.0, doc="time between the onsets of repeated trials", gt=0)
-    repeat: int = param(1, doc="number of trials played (0 = repeat for ever)", ge=0)
-    shear_ratio: float = param(
+    period_s: float = ft.param(2.0, doc="time between the onsets of repeated trials", gt=0)
+    repeat: int = ft.param(1, doc="number of trials played (0 = repeat for ever)", ge=0)
+    shear_ratio: float = ft.param(
         0.8, doc="touch: tangential/normal ratio of the probe load on the plateau (<= friction_mu)", ge=0
     )
-    shear_angle_deg: float = param(
+    shear_angle_deg: float = ft.param(
         0.0, doc="direction in the x-y plane of the touch's tangential force and of the slip drag (0 = +x)"
     )
-    shear_rise_s: float = param(0.08, doc="touch: raised-cosine build-up time of the tangential force", gt=0)
-    shear_release_s: float = param(
+    shear_rise_s: float = ft.param(
+        0.08, doc="touch: raised-cosine build-up time of the tangential force", gt=0
+    )
+    shear_release_s: float = ft.param(
         0.003, doc="touch: time the stored tangential force takes to spring back at unloading", gt=0
     )
-    friction_mu: float = param(1.0, doc="static friction coefficient of probe on PDMS (eq. 4, mu_s)", gt=0)
-    kinetic_ratio: float = param(0.6, doc="slip: kinetic/static friction ratio (mu_k / mu_s)", gt=0, le=1)
-    drag_s: float = param(0.3, doc="slip: tangential loading time from zero to the friction limit", gt=0)
-    slip_s: float = param(0.26, doc="slip: duration of the slip event (the paper's ~260 ms)", gt=0)
-    slip_turn_deg: float = param(
+    friction_mu: float = ft.param(1.0, doc="static friction coefficient of probe on PDMS (eq. 4, mu_s)", gt=0)
+    kinetic_ratio: float = ft.param(0.6, doc="slip: kinetic/static friction ratio (mu_k / mu_s)", gt=0, le=1)
+    drag_s: float = ft.param(0.3, doc="slip: tangential loading time from zero to the friction limit", gt=0)
+    slip_s: float = ft.param(0.26, doc="slip: duration of the slip event (the paper's ~260 ms)", gt=0)
+    slip_turn_deg: float = ft.param(
         180.0, doc="slip: rotation of the tangential force during the slip event", ge=-360, le=360
     )
-    noise_sd: float = param(1e-5, doc="white noise of each gauge and of the reference, in ΔR/R", ge=0)
-    temp_drift_c: float = param(0.5, doc="amplitude of the slow temperature drift (0 = off)", ge=0)
-    temp_period_s: float = param(20.0, doc="period of the temperature drift", gt=0)
-    temp_coeff_per_c: float = param(-1e-3, doc="temperature coefficient of every gauge, ΔR/R per °C")
-    ambient_c: float = param(25.0, doc="mean sensor temperature")
-    sensitivity_per_n: tuple[float, ...] = param(
+    noise_sd: float = ft.param(1e-5, doc="white noise of each gauge and of the reference, in ΔR/R", ge=0)
+    temp_drift_c: float = ft.param(0.5, doc="amplitude of the slow temperature drift (0 = off)", ge=0)
+    temp_period_s: float = ft.param(20.0, doc="period of the temperature drift", gt=0)
+    temp_coeff_per_c: float = ft.param(-1e-3, doc="temperature coefficient of every gauge, ΔR/R per °C")
+    ambient_c: float = ft.param(25.0, doc="mean sensor temperature")
+    sensitivity_per_n: tuple[float, ...] = ft.param(
         SENSITIVITY_PER_N,
         doc="gauge sensitivities (Xs, Ys, Zs) of eq. 2, ΔR/R per N",
         gt=0,
@@ -90,7 +88,7 @@ class AunpSensorConfig(Config):
 
     def state_bytes(self) -> dict[str, float]:
         """A longest tick of output: 10 float64 channels (r, ref, temp_c, force) and a few scratch copies."""
-        return {"rate_hz": self.rate_hz * MAX_TICK_S * 8 * 10 * 4}
+        return {"rate_hz": self.rate_hz * ft.MAX_TICK_S * 8 * 10 * 4}
 
     def check(self) -> None:
         if self.shear_ratio > self.friction_mu:
@@ -113,20 +111,8 @@ class AunpSensorConfig(Config):
             )
 
 
-class AunpSensor(Source):
+class AunpSensor(ft.Source):
     """Synthetic four-gauge AuNP tactile sensor (Rager et al.) playing touch, slip or rest trials.
-
-    Ports
-    -----
-    r : float64 (4,), units "1"
-        ΔR/R of gauges 1..4 (eq. 2 layout: gauges 1 and 3 on the x axis, 2 and 4 on the y axis)
-        including the common temperature term and white noise.
-    ref : float64 (), units "1"
-        The reference gauge: no strain, same temperature term, own noise.
-    temp_c : float64 (), units "degC"
-        The sensor temperature.
-    force : float64 (3,), units "N", labels (Fx, Fy, Fz)
-        The TRUE force on the bump, for evaluation (noise- and drift-free).
 
     Config
     ------
@@ -201,25 +187,29 @@ class AunpSensor(Source):
 
     config_cls = AunpSensorConfig
     outputs = {
-        "r": Port(shape=(4,), units="1", doc="ΔR/R of gauges 1..4 (strain + temperature + noise)"),
-        "ref": Port(shape=(), units="1", doc="ΔR/R of the unstrained reference gauge (temperature + noise)"),
-        "temp_c": Port(shape=(), units="degC", doc="sensor temperature"),
-        "force": Port(shape=(3,), units="N", doc="true force [Fx, Fy, Fz] on the bump, for evaluation"),
+        "r": ft.Port(
+            shape=(4,),
+            units="1",
+            rate="rate_hz",
+            labels=("r1", "r2", "r3", "r4"),
+            doc="ΔR/R of gauges 1..4 (eq. 2 layout: gauges 1 and 3 on the x axis, 2 and 4 on the y axis), "
+            "including the common temperature term and white noise",
+        ),
+        "ref": ft.Port(
+            shape=(),
+            units="1",
+            rate="rate_hz",
+            doc="ΔR/R of the reference gauge: no strain, the same temperature term, its own noise",
+        ),
+        "temp_c": ft.Port(shape=(), units="degC", rate="rate_hz", doc="the sensor temperature"),
+        "force": ft.Port(
+            shape=(3,),
+            units="N",
+            rate="rate_hz",
+            labels=("Fx", "Fy", "Fz"),
+            doc="the TRUE force on the bump, for evaluation (noise- and drift-free)",
+        ),
     }
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # noqa: ARG002 — a source: its outputs come from its config
-        rate = self.config.rate_hz
-        labels = {"r": ("r1", "r2", "r3", "r4"), "force": ("Fx", "Fy", "Fz")}
-        return {
-            name: StreamSpec(
-                dtype="float64",
-                shape=p.shape or (),
-                units=p.units or "1",
-                rate_hz=rate,
-                labels=labels.get(name),
-            )
-            for name, p in self.outputs.items()
-        }
 
     def reset(self) -> None:
         self.i = 0
@@ -239,7 +229,7 @@ class AunpSensor(Source):
         self._noise_i = i + n
         return self._noise[i : i + n]
 
-    def step(self, now: float) -> dict[str, Chunk]:
+    def step(self, now: float) -> dict[str, ft.Chunk]:
         c = self.config
         n = max(self.due(now, c.rate_hz) - self.i, 0)
         want = self.demanded
@@ -248,8 +238,8 @@ class AunpSensor(Source):
         t, f, r, ref, temp = sensor_samples(self.i, n, c.rate_hz, self._scenario, self._p, noise)
         self.i += n
         made = {"r": r, "ref": ref, "temp_c": temp, "force": f}
-        return {k: Chunk(t, made[k]) for k in self.outputs if k in want}
+        return {k: ft.Chunk(t, made[k]) for k in self.outputs if k in want}
 
     @classmethod
-    def example(cls) -> Example:
-        return Example(params={"scenario": "touch", "onset_s": 0.1, "hold_s": 0.3}, duration_s=0.8)
+    def example(cls) -> ft.Example:
+        return ft.Example(params={"scenario": "touch", "onset_s": 0.1, "hold_s": 0.3}, duration_s=0.8)

@@ -7,26 +7,13 @@ gauges 1..4; gauges 1 and 3 lie on the x axis, 2 and 4 on the y axis (blocks/tou
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 from numba import njit
 
-from flowtact import (
-    BadDataConfig,
-    Block,
-    Chunk,
-    Example,
-    Port,
-    SpecError,
-    StreamSpec,
-    nonfinite_counter_docs,
-    param,
-    screen_nonfinite,
-)
-from flowtact.align import Aligner, screen_aligned
+import flowtact.api as ft
 
 from .aunp import SENSITIVITY_PER_N, reduced_matrix
 
@@ -63,26 +50,26 @@ def _forces(r: np.ndarray, ref: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, 
 
 
 @dataclass(frozen=True)
-class GaugeForceConfig(BadDataConfig):
+class GaugeForceConfig(ft.BadDataConfig):
     """Parameters of :class:`GaugeForce`."""
 
-    mode: Literal["general", "reduced"] = param(
+    mode: Literal["general", "reduced"] = ft.param(
         "reduced", doc="general: F = A·r with 'matrix' (eq. 1); reduced: orthogonal identical gauges (eq. 2)"
     )
-    matrix: tuple[tuple[float, ...], ...] | None = param(
+    matrix: tuple[tuple[float, ...], ...] | None = ft.param(
         None,
         doc="3×4 calibration matrix A, rows Fx, Fy, Fz, in N per unit ΔR/R (mode general)",
         min_len=3,
         max_len=3,
     )
-    sensitivity_per_n: tuple[float, ...] = param(
+    sensitivity_per_n: tuple[float, ...] = ft.param(
         SENSITIVITY_PER_N,
         doc="(Xs, Ys, Zs): ΔR/R per newton of eq. 2 (mode reduced)",
         min_len=3,
         max_len=3,
         gt=0,
     )
-    tare_samples: int = param(0, doc="subtract the mean force of the first k samples (0 = off)", ge=0)
+    tare_samples: int = ft.param(0, doc="subtract the mean force of the first k samples (0 = off)", ge=0)
 
     def check(self) -> None:
         if self.mode == "general":
@@ -106,15 +93,8 @@ class GaugeForceConfig(BadDataConfig):
         return np.array(reduced_matrix(*self.sensitivity_per_n), np.float64)
 
 
-class GaugeForce(Block):
+class GaugeForce(ft.Block):
     """Force [Fx, Fy, Fz] from the four strain gauges: eq. 1 (F = A·r) or eq. 2 of Rager et al.
-
-    Ports
-    -----
-    r : float64, shape (4,), units "1" — ΔR/R of gauges 1..4
-    ref : float64, shape (), units "1", optional — reference gauge, subtracted from every gauge
-        (temperature compensation); must be sample-aligned with ``r``
-    f : float64, shape (3,), units "N", labels (Fx, Fy, Fz)
 
     Config
     ------
@@ -148,17 +128,23 @@ class GaugeForce(Block):
 
     config_cls = GaugeForceConfig
     inputs = {
-        "r": Port(dtype="float64", shape=(4,), units="1", require_rate=True, doc="ΔR/R of gauges 1..4"),
-        "ref": Port(
+        "r": ft.Port(dtype="float64", shape=(4,), units="1", require_rate=True, doc="ΔR/R of gauges 1..4"),
+        "ref": ft.Port(
             dtype="float64",
             shape=(),
             units="1",
             optional=True,
             require_rate=True,
-            doc="reference gauge ΔR/R (temperature)",
+            same_rate="r",
+            doc="reference gauge ΔR/R, subtracted from every gauge (temperature compensation); must be "
+            "sample-aligned with r",
         ),
     }
-    outputs = {"f": Port(dtype="float64", shape=(3,), units="N", doc="force [Fx, Fy, Fz] in N")}
+    outputs = {
+        "f": ft.Port(
+            dtype="float64", shape=(3,), units="N", rate="r", labels=_LABELS, doc="force [Fx, Fy, Fz]"
+        )
+    }
     counter_docs = {
         "nonfinite_drop": "instants where 'r' or 'ref' had NaN/inf, removed (on_bad_data: drop): "
         "upstream sent bad data",
@@ -172,36 +158,30 @@ class GaugeForce(Block):
         "of fewer samples",
     }
 
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        r = inputs["r"]
-        if "ref" in inputs and not math.isclose(inputs["ref"].rate_hz or 0.0, r.rate_hz or 0.0, rel_tol=1e-9):
-            raise SpecError("ref", f"'ref' is {inputs['ref'].rate_hz:g} Hz but 'r' is {r.rate_hz:g} Hz")
-        return {"f": StreamSpec(dtype="float64", shape=(3,), units="N", rate_hz=r.rate_hz, labels=_LABELS)}
-
     def reset(self) -> None:
         self._a = self.config.calibration_matrix()
         self._ports = ["r", "ref"] if "ref" in self.input_specs else ["r"]
         rate = self.input_specs["r"].rate_hz or 1.0
-        self._align = Aligner(self.node, self.input_specs, self._ports, tol_s=1e-6 / rate)
+        self._align = ft.Aligner(self.node, self.input_specs, self._ports, tol_s=1e-6 / rate)
         self._last: dict[str, np.ndarray | None] = {p: None for p in self._ports}
         self._offset: np.ndarray | None = None if self.config.tare_samples else np.zeros(3)
         self._acc = np.zeros(3)
         self._seen = 0
         self._held: list[tuple[np.ndarray, np.ndarray]] = []
 
-    def step(self, **inputs: Chunk) -> dict[str, Chunk]:
+    def step(self, **inputs: ft.Chunk) -> dict[str, ft.Chunk]:
         t, data = self._align.push(inputs)
         if len(t):
-            t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
+            t, data = ft.screen_aligned(self, self.config.on_bad_data, t, data, self._last)
         f, overflow = _forces(data["r"], data.get("ref", _NO_REF), self._a)
         self.count("overflow", overflow)
         if not self.config.tare_samples:
-            return {"f": Chunk(t, f)}  # no offset: f − 0 is f, bit for bit
+            return {"f": ft.Chunk(t, f)}  # no offset: f − 0 is f, bit for bit
         if self._offset is None:
             return {"f": self._tare(t, f)}
-        return {"f": Chunk(t, f - self._offset)}
+        return {"f": ft.Chunk(t, f - self._offset)}
 
-    def _tare(self, t: np.ndarray, f: np.ndarray) -> Chunk:
+    def _tare(self, t: np.ndarray, f: np.ndarray) -> ft.Chunk:
         k = self.config.tare_samples
         take = min(k - self._seen, len(t))
         for i in range(take):  # sequential sum: the same additions whatever the chunking
@@ -210,17 +190,17 @@ class GaugeForce(Block):
         if len(t):
             self._held.append((t, f))
         if self._seen < k:
-            return Chunk.empty(shape=(3,))
+            return ft.Chunk.empty(shape=(3,))
         return self._release()
 
-    def _release(self) -> Chunk:
+    def _release(self) -> ft.Chunk:
         self._offset = self._acc / self._seen
         t = np.concatenate([h[0] for h in self._held])
         f = np.concatenate([h[1] for h in self._held])
         self._held = []
-        return Chunk(t, f - self._offset)
+        return ft.Chunk(t, f - self._offset)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         self.count("unpaired_at_end", sum(self._align.pending().values()))
         if self._offset is None and self._seen:
             self.count("tare_short", 1)
@@ -228,7 +208,7 @@ class GaugeForce(Block):
         return {}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(4)
         n = 400
         t = np.arange(n) / 1000.0
@@ -250,24 +230,19 @@ class GaugeForce(Block):
             + drift[:, None]
             + rng.normal(0, 1e-5, (n, 4))
         )
-        return Example(params={"tare_samples": 30}, inputs={"r": r, "ref": drift + 0.001})
+        return ft.Example(params={"tare_samples": 30}, inputs={"r": r, "ref": drift + 0.001})
 
 
 # -- shear_angle ----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class ShearAngleConfig(BadDataConfig):
+class ShearAngleConfig(ft.BadDataConfig):
     """Parameters of :class:`ShearAngle`."""
 
 
-class ShearAngle(Block):
+class ShearAngle(ft.Block):
     """Direction of the shear force from the gauges: Θ = atan2(r2 − r4, r3 − r1) (eq. 3, Rager et al.).
-
-    Ports
-    -----
-    r : float64, shape (4,), units "1" — ΔR/R of gauges 1..4
-    theta : float64, shape (), units "rad", in (−π, π]; 0 along +x (gauge 3), π/2 along +y (gauge 2)
 
     Config
     ------
@@ -291,29 +266,35 @@ class ShearAngle(Block):
     """
 
     config_cls = ShearAngleConfig
-    inputs = {"r": Port(dtype="float64", shape=(4,), units="1", require_rate=True, doc="ΔR/R of gauges 1..4")}
-    outputs = {"theta": Port(dtype="float64", shape=(), units="rad", doc="shear angle in radians")}
-    counter_docs = nonfinite_counter_docs("gauge samples")
-
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        return {"theta": StreamSpec(dtype="float64", shape=(), units="rad", rate_hz=inputs["r"].rate_hz)}
+    inputs = {
+        "r": ft.Port(dtype="float64", shape=(4,), units="1", require_rate=True, doc="ΔR/R of gauges 1..4")
+    }
+    outputs = {
+        "theta": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="rad",
+            doc="shear angle in (−π, π]; 0 along +x (gauge 3), π/2 along +y (gauge 2)",
+        )
+    }
+    counter_docs = ft.nonfinite_counter_docs("gauge samples")
 
     def reset(self) -> None:
         self._last: np.ndarray | None = None
 
-    def step(self, r: Chunk) -> dict[str, Chunk]:
+    def step(self, r: ft.Chunk) -> dict[str, ft.Chunk]:
         if len(r) == 0:
-            return {"theta": Chunk.empty()}
-        r, self._last = screen_nonfinite(self, r, self.config.on_bad_data, "r", self._last)
+            return {"theta": ft.Chunk.empty()}
+        r, self._last = ft.screen_nonfinite(self, r, self.config.on_bad_data, "r", self._last)
         d = r.data
-        return {"theta": Chunk(r.t, np.arctan2(d[:, 1] - d[:, 3], d[:, 2] - d[:, 0]))}
+        return {"theta": ft.Chunk(r.t, np.arctan2(d[:, 1] - d[:, 3], d[:, 2] - d[:, 0]))}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         rng = np.random.default_rng(5)
         n = 300
         phi = np.linspace(-3.0, 3.0, n)
         r = 0.01 + rng.normal(0, 1e-4, (n, 4))
         r[:, 2] += 0.005 * np.cos(phi)
         r[:, 1] += 0.005 * np.sin(phi)
-        return Example(inputs={"r": r})
+        return ft.Example(inputs={"r": r})

@@ -8,7 +8,7 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError
+import flowtact.api as ft
 from flowtact.stress import EPS, Outcome, StressCase
 from flowtact.testing import run_offline
 
@@ -46,7 +46,7 @@ def gauge_bad(policy: str) -> Outcome:
     blk = GaugeForce(on_bad_data=policy, tare_samples=20)
     try:
         f = run_offline(blk, r=r, ref=ref, chunk=9)["f"].data
-    except BadDataError as e:
+    except ft.BadDataError as e:
         return Outcome(
             f"nonfinite_{policy}", "gauge_force", "NaN on r (in the tare window), −inf on ref",
             f"stops: “{e}”", "raise: clean one-line error", policy == "raise" and "\n" not in str(e),

@@ -98,8 +98,8 @@ def test_char_is_the_letter_whose_dots_lie_under_the_finger_centre():
 
 def test_the_scan_ends_when_the_line_is_read_and_ends_at_says_when():
     blk = BrailleScan(text="abc", speed_mm_s=40.0)
-    blk.specs({})
-    end = blk.ends_at()
+    assert blk.specs({})["char"].categories  # the declared categories, the config's rate
+    end = blk.ends_at({})
     out = run_source(blk, end + 1.0, tick_s=0.05)
     x = out["position"].data
     lo, hi = blk.config.track()
@@ -113,9 +113,9 @@ def test_ends_at_with_a_steered_speed_is_the_bound_at_the_slowest_speed():
     from flowtact import StreamSpec
 
     blk = BrailleScan(text="abc", min_speed_mm_s=10.0)
-    blk.specs({"speed": StreamSpec("float64", (), "mm/s", 250.0)})
+    speed = {"speed": StreamSpec("float64", (), "mm/s", 250.0)}
     lo, hi = blk.config.track()
-    assert (hi - lo) / 10.0 < blk.ends_at() <= (hi - lo) / 10.0 + 1 / 250.0 + 1e-9
+    assert (hi - lo) / 10.0 < blk.ends_at(speed) <= (hi - lo) / 10.0 + 1 / 250.0 + 1e-9
 
 
 def test_a_speed_command_steers_the_next_sample_and_lateral_moves_the_finger():

@@ -135,7 +135,8 @@ def test_npz_data_is_read_at_reset_not_at_compile(tmp_path):
     b = Replay(path=str(p))
     spec = b.specs({})["y"]  # header only
     assert spec.shape == (2,) and spec.rate_hz == 10.0
-    assert isinstance(b._src.data, tuple)  # noqa: SLF001 — not loaded yet: when loading happens is the test
+    assert b._src is None  # noqa: SLF001 — specs() keeps nothing: when loading happens is the test
+    assert isinstance(b._inspect().data, tuple)  # noqa: SLF001 — inspecting reads the npz header only
     b.bind({})
     loaded = b._src.data  # noqa: SLF001 — as above
     assert isinstance(loaded, np.ndarray) and not loaded.flags.writeable

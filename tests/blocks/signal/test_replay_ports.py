@@ -47,7 +47,7 @@ def test_csv_columns_found_by_port_name(tmp_path, style):
     assert b.output_specs["ref"] == StreamSpec("float64", (), "1", 100.0)
     np.testing.assert_array_equal(out["r"].data[:, 3], [3, 13, 23, 33, 43])
     np.testing.assert_array_equal(out["ref"].data, [4, 14, 24, 34, 44])
-    assert b.ends_at() == pytest.approx(0.05)
+    assert b.ends_at({}) == pytest.approx(0.05)
 
 
 def test_explicit_map_and_units_from_the_replaced_port(tmp_path):
@@ -105,7 +105,7 @@ def test_h5_streams_by_node_and_port_with_units_checked(tmp_path):
     b = SENSOR(path=str(path), node="sensor")
     out = run_source(b, 0.1, tick_s=0.03)
     assert set(out) == {"r", "ref"} and len(out["r"]) == 100
-    assert b.ends_at() == pytest.approx(0.1)
+    assert b.ends_at({}) == pytest.approx(0.1)
     with pytest.raises(SpecError, match=r"port 'ref' of aunp_sensor is in '1'; 'other\.x' in .* is in 'N'"):
         SENSOR(path=str(path), ports="ref=other.x", node="sensor").bind({})
     with pytest.raises(
