@@ -1,10 +1,9 @@
 """Tests of the iir block (blocks/signal/iir.py): scipy's design and filtering are the oracle."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from touchsim_dev import EPS, ba_error_bound, touchsim_traces
 
 from flowtact import ConfigError, SpecError, StreamSpec
 from flowtact.blocks.signal.iir import Iir, sos_apply, sos_apply_python
@@ -12,34 +11,8 @@ from flowtact.testing import run_offline
 
 signal = pytest.importorskip("scipy.signal")
 
-DEV = Path("/work/shared/touchsim/touchsim_dev.npz")
-EPS = np.finfo(np.float64).eps
 
-
-def touchsim_traces():
-    if not DEV.exists():
-        pytest.skip(f"{DEV} (TouchSim's development set) is not on this machine")
-    z = np.load(DEV)
-    keys = sorted({k.rsplit("|", 1)[0] for k in z.files})
-    return [(k, {f: z[f"{k}|{f}"] for f in ("s", "d", "I", "p", "spk")}) for k in keys]
-
-
-def ba_error_bound(b, a, x, y):
-    """A float64 error bound for ``lfilter(b, a, x)`` against the exact filter (and so against our
-    sos form, whose own error is far smaller): the rounding of each step's products and sums
-    (≤ (len(b)+len(a))·ε·(Σ|b|·max|x| + Σ|a|·max|y|)) and of the coefficients themselves
-    (ε·|a_k|, ε·|b_k|: the same sums) both enter the recursion as a per-step error e, which the
-    all-pole part 1/A(z) amplifies by at most ‖g‖₁ (g its impulse response). Direct form at
-    a low cut-off is ill-conditioned exactly through ‖g‖₁ (thousands here)."""
-    imp = np.zeros(20000)
-    imp[0] = 1.0
-    g1 = np.abs(signal.lfilter([1.0], a, imp)).sum()
-    per_step = (
-        (len(b) + len(a) + 2) * EPS * (np.abs(b).sum() * np.abs(x).max() + np.abs(a).sum() * np.abs(y).max())
-    )
-    return 2 * g1 * per_step
-
-
+@pytest.mark.oracle
 def test_touchsim_prefilter_equals_scipy_butter_lfilter_on_every_dev_trace():
     """Deliver 1 (prefilter stage): butter(3, 0.004·p0) + lfilter on d (and s for SA1) — TouchSim's
     prefilter — for all 68 traces, one filter per column in a single block (per-channel cut-offs)."""
