@@ -1,0 +1,118 @@
+"""A synthetic ramp-and-hold at the receptors: the static (s) and dynamic (d) terms TouchSim's
+afferent models take, for graphs that run without a replayed file."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from flowtact import Chunk, Config, Example, Port, SpecError, StreamSpec, param
+from flowtact.block import Source
+from flowtact.blocks.signal.shapes import raised_cosine
+
+__all__ = ["TouchsimProbe", "TouchsimProbeConfig"]
+
+
+@dataclass(frozen=True)
+class TouchsimProbeConfig(Config):
+    """Parameters of :class:`TouchsimProbe`."""
+
+    n: int = param(1, doc="afferents (columns of s and d), each under the same stimulus", ge=1)
+    rate_hz: float = param(5000.0, doc="sampling rate (TouchSim's models are fitted at 5 kHz)", gt=0)
+    s_peak: tuple[float, ...] = param(
+        (0.0128,), doc="s on the plateau, per afferent (one value: all)", min_len=1
+    )
+    d_peak: tuple[float, ...] = param(
+        (4.0,), doc="largest |d| during the ramps, per afferent (one value: all)", min_len=1
+    )
+    onset_s: float = param(0.05, doc="time the ramp on starts, s", ge=0)
+    ramp_s: float = param(0.05, doc="duration of each ramp (on and off), s", gt=0)
+    hold_s: float = param(0.6, doc="plateau between the ramps, s", ge=0)
+    tail_s: float = param(0.1, doc="rest after the ramp off before the stream ends, s", ge=0)
+
+    def length_s(self) -> float:
+        return self.onset_s + 2 * self.ramp_s + self.hold_s + self.tail_s
+
+
+class TouchsimProbe(Source):
+    """Ramp-and-hold s and d at n receptors: a stand-in for TouchSim's skin mechanics.
+
+    Ports
+    -----
+    s : float64 (n,), "1" — TouchSim's static term at each receptor
+    d : float64 (n,), "1" — TouchSim's dynamic term at each receptor
+
+    Config
+    ------
+    See :class:`TouchsimProbeConfig`.
+
+    Notes
+    -----
+    Not TouchSim's skin mechanics (a pin's indentation through its elastic half-space): a smooth
+    (raised-cosine) ramp on, hold, ramp off. s follows the indentation, s_peak·r(t); d is its
+    rate of change, scaled so that |d| peaks at d_peak: d = d_peak·r'(t)/max|r'| (positive on,
+    negative off). The defaults are the magnitudes of the development set's 0.3 mm ramp at an
+    SA1 receptor. Replay real s and d with ``--replay probe=FILE.npz`` (arrays t, s, d; see
+    docs/touchsim.md). Sample i at t = i/rate_hz; the stream ends after ``length_s``.
+
+    Example
+    -------
+    >>> from flowtact.blocks.touch.touchsim_probe import TouchsimProbe
+    >>> from flowtact.testing import run_source
+    >>> out = run_source(TouchsimProbe(n=2), 1.0, tick_s=0.1)
+    >>> out["s"].data.shape, round(float(out["d"].data.max()), 3)
+    ((4250, 2), 4.0)
+    """
+
+    config_cls = TouchsimProbeConfig
+    outputs = {
+        "s": Port(dtype="float64", ndim=1, units="1", doc="static term per receptor"),
+        "d": Port(dtype="float64", ndim=1, units="1", doc="dynamic term per receptor"),
+    }
+
+    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:  # noqa: ARG002 - a source: none
+        cfg = self.config
+        for name in ("s_peak", "d_peak"):
+            if len(getattr(cfg, name)) not in (1, cfg.n):
+                raise SpecError(
+                    name,
+                    f"{name} has {len(getattr(cfg, name))} values for n = {cfg.n} afferents (give 1 or {cfg.n})",
+                )
+        spec = StreamSpec(dtype="float64", shape=(cfg.n,), units="1", rate_hz=cfg.rate_hz)
+        return {"s": spec, "d": spec}
+
+    def ends_at(self) -> float | None:
+        return self.config.length_s()
+
+    def reset(self) -> None:
+        cfg = self.config
+        self._i = 0
+        self._total = round(cfg.length_s() * cfg.rate_hz)
+        self._s = np.broadcast_to(np.asarray(cfg.s_peak, np.float64), (cfg.n,))
+        self._d = np.broadcast_to(np.asarray(cfg.d_peak, np.float64), (cfg.n,))
+
+    def _shape(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """r(t) and r'(t)/max|r'| of the ramp-and-hold."""
+        cfg = self.config
+        on = (t - cfg.onset_s) / cfg.ramp_s
+        off = (t - cfg.onset_s - cfg.ramp_s - cfg.hold_s) / cfg.ramp_s
+        r = raised_cosine(on) - raised_cosine(off)
+        dr = np.where((on > 0) & (on < 1), np.sin(np.pi * on), 0.0) - np.where(
+            (off > 0) & (off < 1), np.sin(np.pi * off), 0.0
+        )
+        return r, dr
+
+    def step(self, now: float) -> dict[str, Chunk]:
+        cfg = self.config
+        end = min(self.due(now, cfg.rate_hz), self._total)
+        i = np.arange(self._i, max(end, self._i))
+        self._i = max(end, self._i)
+        t = i / cfg.rate_hz
+        r, dr = self._shape(t)
+        return {"s": Chunk(t, r[:, None] * self._s), "d": Chunk(t, dr[:, None] * self._d)}
+
+    @classmethod
+    def example(cls) -> Example:
+        return Example(params={"n": 3, "s_peak": [0.0128, 0.0029, 0.0019], "d_peak": [4.0, 0.14, 0.09]})
