@@ -30,7 +30,8 @@ class TouchsimProbeConfig(Config):
     onset_s: float = param(0.05, doc="time the ramp on starts, s", ge=0)
     ramp_s: float = param(0.05, doc="duration of each ramp (on and off), s", gt=0)
     hold_s: float = param(0.6, doc="plateau between the ramps, s", ge=0)
-    tail_s: float = param(0.1, doc="rest after the ramp off before the stream ends, s", ge=0)
+    tail_s: float = param(0.1, doc="rest after the ramp off before the stream ends (or repeats), s", ge=0)
+    repeat: bool = param(False, doc="play the ramp-and-hold again and again (a stream that never ends)")
 
     def length_s(self) -> float:
         return self.onset_s + 2 * self.ramp_s + self.hold_s + self.tail_s
@@ -55,7 +56,8 @@ class TouchsimProbe(Source):
     rate of change, scaled so that |d| peaks at d_peak: d = d_peak·r'(t)/max|r'| (positive on,
     negative off). The defaults are the magnitudes of the development set's 0.3 mm ramp at an
     SA1 receptor. Replay real s and d with ``--replay probe=FILE.npz`` (arrays t, s, d; see
-    docs/touchsim.md). Sample i at t = i/rate_hz; the stream ends after ``length_s``.
+    docs/touchsim.md). Sample i at t = i/rate_hz; the stream ends after ``length_s``, or with
+    ``repeat`` starts again every ``length_s`` (times continuing) and never ends.
 
     Example
     -------
@@ -84,12 +86,13 @@ class TouchsimProbe(Source):
         return {"s": spec, "d": spec}
 
     def ends_at(self) -> float | None:
-        return self.config.length_s()
+        return None if self.config.repeat else self.config.length_s()
 
     def reset(self) -> None:
         cfg = self.config
         self._i = 0
-        self._total = round(cfg.length_s() * cfg.rate_hz)
+        self._period = cfg.length_s()
+        self._total = round(self._period * cfg.rate_hz) if not cfg.repeat else np.iinfo(np.int64).max
         self._s = np.broadcast_to(np.asarray(cfg.s_peak, np.float64), (cfg.n,))
         self._d = np.broadcast_to(np.asarray(cfg.d_peak, np.float64), (cfg.n,))
 
@@ -110,7 +113,7 @@ class TouchsimProbe(Source):
         i = np.arange(self._i, max(end, self._i))
         self._i = max(end, self._i)
         t = i / cfg.rate_hz
-        r, dr = self._shape(t)
+        r, dr = self._shape(np.mod(t, self._period) if cfg.repeat else t)
         return {"s": Chunk(t, r[:, None] * self._s), "d": Chunk(t, dr[:, None] * self._d)}
 
     @classmethod
