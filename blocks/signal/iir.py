@@ -29,23 +29,28 @@ __all__ = ["Iir", "IirConfig", "design_sos", "sos_apply", "sos_apply_python"]
 def sos_apply(x: np.ndarray, sos: np.ndarray, zi: np.ndarray) -> np.ndarray:
     """Second-order sections per channel, transposed direct form II (scipy's ``sosfilt``).
 
-    ``x`` (n, C), ``sos`` (C, S, 6) with a0 = 1, ``zi`` (C, S, 2) the state, updated in place.
-    Returns y (n, C). Strictly sequential per channel: chunk boundaries never change a bit.
+    ``x`` (n, C), ``sos`` (S, 6, C) with a0 = 1 (section s of channel c: ``sos[s, :, c]``), ``zi``
+    (S, 2, C) the state, updated in place. Returns y (n, C). Channels innermost, so a sample of
+    every channel is one vectorised pass over contiguous rows. Strictly sequential in time and
+    the same arithmetic per channel whatever the chunking: chunk boundaries never change a bit.
     """
     n, nc = x.shape
-    ns = sos.shape[1]
+    ns = sos.shape[0]
     y = np.empty((n, nc))
-    for c in range(nc):
-        for i in range(n):
-            v = x[i, c]
-            for s in range(ns):
-                b0, b1, b2 = sos[c, s, 0], sos[c, s, 1], sos[c, s, 2]
-                a1, a2 = sos[c, s, 4], sos[c, s, 5]
-                out = b0 * v + zi[c, s, 0]
-                zi[c, s, 0] = b1 * v - a1 * out + zi[c, s, 1]
-                zi[c, s, 1] = b2 * v - a2 * out
-                v = out
-            y[i, c] = v
+    v = np.empty(nc)
+    for i in range(n):
+        for c in range(nc):
+            v[c] = x[i, c]
+        for s in range(ns):
+            b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
+            z0, z1 = zi[s, 0], zi[s, 1]
+            for c in range(nc):
+                out = b0[c] * v[c] + z0[c]
+                z0[c] = b1[c] * v[c] - a1[c] * out + z1[c]
+                z1[c] = b2[c] * v[c] - a2[c] * out
+                v[c] = out
+        for c in range(nc):
+            y[i, c] = v[c]
     return y
 
 
@@ -189,8 +194,8 @@ class Iir(Block):
             design_sos(cfg.family, cfg.order, cfg.btype, wn, cfg.ripple_db, cfg.stop_db)
             for wn in self._edges(self._nc, float(spec.rate_hz or 0.0))
         ]
-        self._sos = np.ascontiguousarray(np.stack(sos), np.float64)  # (C, S, 6)
-        self._zi = np.zeros((self._nc, self._sos.shape[1], 2))
+        self._sos = np.ascontiguousarray(np.stack(sos, axis=-1), np.float64)  # (S, 6, C)
+        self._zi = np.zeros((self._sos.shape[0], 2, self._nc))
         self._last: np.ndarray | None = None
 
     def step(self, x: Chunk) -> dict[str, Chunk]:

@@ -66,13 +66,16 @@ def test_other_families_equal_scipy_sosfilt_bit_for_bit(params, design):
 
 def test_kernel_equals_its_python_twin_and_state_carries_across_calls():
     rng = np.random.default_rng(4)
-    sos = np.stack([signal.butter(3, w, output="sos") for w in (0.01, 0.2)])
-    x = rng.normal(size=(500, 2))
-    z1, z2 = np.zeros((2, 2, 2)), np.zeros((2, 2, 2))
+    sos = np.stack([signal.butter(3, w, output="sos") for w in (0.01, 0.2, 0.3)], axis=-1)  # (S, 6, C)
+    x = rng.normal(size=(500, 3))
+    z1, z2 = np.zeros((2, 2, 3)), np.zeros((2, 2, 3))
     whole = sos_apply(x, sos, z1)
     parts = np.concatenate([sos_apply_python(x[:123], sos, z2), sos_apply_python(x[123:], sos, z2)])
     assert_array_equal(whole, parts)
     assert_array_equal(z1, z2)
+    assert_allclose(
+        whole[:, 2], signal.sosfilt(np.ascontiguousarray(sos[..., 2]), x[:, 2]), rtol=0, atol=64 * EPS
+    )  # channel last
 
 
 def test_zero_initial_state_a_step_starts_at_b0():
