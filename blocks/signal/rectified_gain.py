@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from numba import njit
 
 from flowtact import (
     BadDataConfig,
@@ -23,9 +24,67 @@ from flowtact import (
 from flowtact.align import Aligner, screen_aligned
 from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state
 
-__all__ = ["RectifiedGain", "RectifiedGainConfig", "rectified_current"]
+__all__ = [
+    "RectifiedGain",
+    "RectifiedGainConfig",
+    "add_rectified",
+    "add_rectified_ahead",
+    "finish_current",
+    "rectified_current",
+]
 
 _INPUTS = ("x1", "x2", "x3")
+
+
+@njit(cache=True)
+def add_rectified(
+    y: np.ndarray, head: np.ndarray, x: np.ndarray, k: int, gp: np.ndarray, gn: np.ndarray
+) -> None:
+    """``y[i] += g⁺·max(r_i, 0) − g⁻·min(r_i, 0)`` per channel, rows ``r = [head[:k], x…]`` (k ∈ {0, 1}:
+    a held-back sample first), for the ``len(y)`` first rows. Channels innermost (vectorised)."""
+    n, nc = y.shape
+    for i in range(n):
+        r = head[i] if i < k else x[i - k]
+        for c in range(nc):
+            v = r[c]
+            y[i, c] += gp[c] * max(v, 0.0) - gn[c] * min(v, 0.0)
+
+
+@njit(cache=True)
+def add_rectified_ahead(
+    y: np.ndarray, head: np.ndarray, x: np.ndarray, k: int, gp: np.ndarray, gn: np.ndarray
+) -> None:
+    """The same on the ahead difference ``Δ_i = r_{i+1} − r_i`` of the rows ``r = [head[:k], x…]``
+    (so ``len(y) ≤ k + len(x) − 1``)."""
+    n, nc = y.shape
+    for i in range(n):
+        r = head[i] if i < k else x[i - k]
+        q = x[i + 1 - k]
+        for c in range(nc):
+            v = q[c] - r[c]
+            y[i, c] += gp[c] * max(v, 0.0) - gn[c] * min(v, 0.0)
+
+
+@njit(cache=True)
+def finish_current(y: np.ndarray, xi: np.ndarray, sd: np.ndarray, sat: np.ndarray, noisy: bool) -> int:
+    """In place: ``y += sd·ξ`` (``xi`` flat, sample-major) when ``noisy``, then ``p·y/(p+|y|)`` where
+    ``sat`` p > 0 (NaN → 0). Returns how many values are then not finite (overflow)."""
+    n, nc = y.shape
+    bad = 0
+    for i in range(n):
+        for c in range(nc):
+            v = y[i, c]
+            if noisy:
+                v = v + sd[c] * xi[i * nc + c]
+            p = sat[c]
+            if p > 0.0:
+                v = p * v / (p + abs(v))
+                if v != v:
+                    v = 0.0
+            y[i, c] = v
+            if not math.isfinite(v):
+                bad += 1
+    return bad
 
 
 def rectified_current(
@@ -37,7 +96,8 @@ def rectified_current(
     """``Σ (g⁺·max(x,0) − g⁻·min(x,0))`` over ``terms`` (x (n, C), g⁺ (C,), g⁻ (C,)) in order, plus
     ``noise_sd·xi``, then ``p·I/(p+|I|)`` where ``saturation`` p > 0 (NaN → 0 there).
 
-    Elementwise in a fixed order, so the result of a sample never depends on its neighbours.
+    The plain-numpy statement of what the kernels compute (the test reference): elementwise in a
+    fixed order, so the result of a sample never depends on its neighbours.
     """
     with np.errstate(over="ignore", invalid="ignore"):  # overflow: ±inf (counted by the block)
         x0, gp, gn = terms[0]
@@ -227,48 +287,48 @@ class RectifiedGain(Block):
         self._held_t = np.empty(0)
         self._held: dict[str, np.ndarray] = {p: np.empty((0, self._nc)) for p in self._ports}
 
-    def _current(self, data: dict[str, np.ndarray], delta: np.ndarray | None) -> np.ndarray:
-        n = len(next(iter(data.values())))
-        terms = [(data[p], gp, gn) for p, gp, gn in self._terms]
-        if delta is not None:
-            terms.append((delta, *self._gd))
-        if not terms:
-            terms = [(np.zeros((n, self._nc)), self._gd[0] * 0.0, self._gd[1] * 0.0)]
-        xi = None
-        if self._rng_state is not None:
-            xi = np.empty(n * self._nc)
+    def _current(self, head: dict[str, np.ndarray], x: dict[str, np.ndarray], k: int, n: int) -> np.ndarray:
+        """The current of ``n`` rows ``[head[:k], x…]`` of every input (the ahead difference looks one
+        row further), noise and saturation included."""
+        y = np.zeros((n, self._nc))
+        for p, gp, gn in self._terms:
+            add_rectified(y, head[p], x[p], k, gp, gn)
+        if self._ahead is not None:
+            add_rectified_ahead(y, head[self._ahead], x[self._ahead], k, *self._gd)
+        noisy = self._rng_state is not None
+        xi = np.empty(n * self._nc if noisy else 0)
+        if noisy:
             fill_normal(self._rng_state, xi)
-            xi = xi.reshape(n, self._nc)
-        y = rectified_current(terms, xi, self._sd, self._sat)
-        self.count("overflow", int(np.count_nonzero(~np.isfinite(y))))
+        self.count("overflow", finish_current(y, xi, self._sd, self._sat, noisy))
         return y
 
     def step(self, **inputs: Chunk) -> dict[str, Chunk]:
         t, data = self._align.push(inputs)
         if len(t):
             t, data = screen_aligned(self, self.config.on_bad_data, t, data, self._last)
-        data = {p: d.reshape(len(t), self._nc) for p, d in data.items()}
+        m = len(t)
+        data = {p: np.ascontiguousarray(d.reshape(m, self._nc), np.float64) for p, d in data.items()}
         if self._ahead is None:
-            y = self._current(data, None) if len(t) else np.empty((0, self._nc))
-            return {"y": Chunk(t, y.reshape(len(t), *self._shape))}
-        if not len(t):
+            y = self._current(data, data, 0, m) if m else np.empty((0, self._nc))
+            return {"y": Chunk(t, y.reshape(m, *self._shape))}
+        if not m:
             return {"y": Chunk.empty(shape=self._shape)}
-        t = np.concatenate([self._held_t, t])
-        data = {p: np.concatenate([self._held[p], data[p]]) for p in self._ports}
+        k = len(self._held_t)  # 1 once a sample is held back, 0 at the start
+        n = k + m - 1
+        head = self._held if k else data
+        t_out = np.concatenate([self._held_t, t[:-1]]) if k else t[:-1]
+        y = self._current(head, data, k, n)
         self._held_t = t[-1:].copy()
         self._held = {p: d[-1:].copy() for p, d in data.items()}
-        n = len(t) - 1
-        a = data[self._ahead]
-        y = self._current({p: d[:n] for p, d in data.items()}, a[1:] - a[:-1])
-        return {"y": Chunk(t[:n], y.reshape(n, *self._shape))}
+        return {"y": Chunk(t_out, y.reshape(n, *self._shape))}
 
     def flush(self) -> dict[str, Chunk]:
         self.count("unpaired_at_end", sum(self._align.pending().values()))
         if self._ahead is None or not len(self._held_t):
             return {}
-        t, data = self._held_t, self._held
+        t, held = self._held_t, self._held
         self._held_t = np.empty(0)
-        y = self._current(data, np.zeros((1, self._nc)))
+        y = self._current(held, held, 1, 1)  # Δ = held − held = 0: TouchSim's last sample
         return {"y": Chunk(t, y.reshape(1, *self._shape))}
 
     @classmethod
