@@ -38,6 +38,8 @@ CHECKED_ONLY = {
     "flowtact bench braille --quick --out bench-braille": "flowtact bench --list",
     # a dozen closed-loop readings of 104 letters: no arguments to parse; compiled only
     "python scripts/braille_controller_validation.py": "python -m py_compile scripts/braille_controller_validation.py",
+    # three fresh numba compiles of the normal generator under different CPU tunings: minutes under load
+    "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",
 }
 
 
