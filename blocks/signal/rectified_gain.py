@@ -27,9 +27,7 @@ from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state
 __all__ = [
     "RectifiedGain",
     "RectifiedGainConfig",
-    "add_rectified",
-    "add_rectified_ahead",
-    "finish_current",
+    "fused_current",
     "rectified_current",
 ]
 
@@ -37,52 +35,65 @@ _INPUTS = ("x1", "x2", "x3")
 
 
 @njit(cache=True)
-def add_rectified(
-    y: np.ndarray, head: np.ndarray, x: np.ndarray, k: int, gp: np.ndarray, gn: np.ndarray
-) -> None:
-    """``y[i] += g⁺·max(r_i, 0) − g⁻·min(r_i, 0)`` per channel, rows ``r = [head[:k], x…]`` (k ∈ {0, 1}:
-    a held-back sample first), for the ``len(y)`` first rows. Channels innermost (vectorised)."""
-    n, nc = y.shape
-    for i in range(n):
-        r = head[i] if i < k else x[i - k]
-        for c in range(nc):
-            v = r[c]
-            y[i, c] += gp[c] * max(v, 0.0) - gn[c] * min(v, 0.0)
+def _rect(v: float, gp: float, gn: float) -> float:
+    return gp * max(v, 0.0) - gn * min(v, 0.0)
 
 
 @njit(cache=True)
-def add_rectified_ahead(
-    y: np.ndarray, head: np.ndarray, x: np.ndarray, k: int, gp: np.ndarray, gn: np.ndarray
-) -> None:
-    """The same on the ahead difference ``Δ_i = r_{i+1} − r_i`` of the rows ``r = [head[:k], x…]``
-    (so ``len(y) ≤ k + len(x) − 1``)."""
+def fused_current(
+    y: np.ndarray,
+    h1: np.ndarray,
+    x1: np.ndarray,
+    h2: np.ndarray,
+    x2: np.ndarray,
+    h3: np.ndarray,
+    x3: np.ndarray,
+    k: int,
+    gains: np.ndarray,
+    active: np.ndarray,
+    ahead: int,
+    xi: np.ndarray,
+    sd: np.ndarray,
+    sat: np.ndarray,
+    noisy: bool,
+) -> int:
+    """The whole current in one pass: ``y[i]`` from rows ``[h[:k], x…]`` of each active input (gains
+    rows 2j, 2j+1), the ahead difference of input ``ahead`` (gains rows 6, 7; −1: none), noise
+    ``sd·ξ``, then saturation where ``sat`` > 0 (NaN → 0). The same sums in the same order as
+    :func:`rectified_current`. Returns how many values are not finite (overflow)."""  # fmt: skip
     n, nc = y.shape
-    for i in range(n):
-        r = head[i] if i < k else x[i - k]
-        q = x[i + 1 - k]
-        for c in range(nc):
-            v = q[c] - r[c]
-            y[i, c] += gp[c] * max(v, 0.0) - gn[c] * min(v, 0.0)
-
-
-@njit(cache=True)
-def finish_current(y: np.ndarray, xi: np.ndarray, sd: np.ndarray, sat: np.ndarray, noisy: bool) -> int:
-    """In place: ``y += sd·ξ`` (``xi`` flat, sample-major) when ``noisy``, then ``p·y/(p+|y|)`` where
-    ``sat`` p > 0 (NaN → 0). Returns how many values are then not finite (overflow)."""
-    n, nc = y.shape
+    a1, a2, a3 = active[0], active[1], active[2]
     bad = 0
     for i in range(n):
+        r1 = h1[i] if i < k else x1[i - k]
+        r2 = h2[i] if i < k else x2[i - k]
+        r3 = h3[i] if i < k else x3[i - k]
+        q, ra = r1, r1  # no ahead difference: never read
+        if ahead == 0:
+            q, ra = x1[i + 1 - k], r1
+        elif ahead == 1:
+            q, ra = x2[i + 1 - k], r2
+        elif ahead == 2:
+            q, ra = x3[i + 1 - k], r3
         for c in range(nc):
-            v = y[i, c]
+            acc = 0.0
+            if a1:
+                acc += _rect(r1[c], gains[0, c], gains[1, c])
+            if a2:
+                acc += _rect(r2[c], gains[2, c], gains[3, c])
+            if a3:
+                acc += _rect(r3[c], gains[4, c], gains[5, c])
+            if ahead >= 0:
+                acc += _rect(q[c] - ra[c], gains[6, c], gains[7, c])
             if noisy:
-                v = v + sd[c] * xi[i * nc + c]
+                acc = acc + sd[c] * xi[i * nc + c]
             p = sat[c]
             if p > 0.0:
-                v = p * v / (p + abs(v))
-                if v != v:
-                    v = 0.0
-            y[i, c] = v
-            if not math.isfinite(v):
+                acc = p * acc / (p + abs(acc))
+                if acc != acc:
+                    acc = 0.0
+            y[i, c] = acc
+            if not math.isfinite(acc):
                 bad += 1
     return bad
 
@@ -278,6 +289,14 @@ class RectifiedGain(Block):
         self._terms = [(p, full(g[p][0]), full(g[p][1])) for p in self._ports if _nonzero(g[p])]
         self._ahead = cfg.ahead if cfg.ahead in self._ports and _nonzero(g["ahead"]) else None
         self._gd = (full(g["ahead"][0]), full(g["ahead"][1]))
+        used = {p for p, _, _ in self._terms}
+        self._active = np.array([p in used for p in _INPUTS])
+        self._ahead_i = _INPUTS.index(self._ahead) if self._ahead is not None else -1
+        self._gains = np.zeros((8, self._nc))
+        for j, p in enumerate(_INPUTS):
+            if p in used:
+                self._gains[2 * j], self._gains[2 * j + 1] = full(g[p][0]), full(g[p][1])
+        self._gains[6], self._gains[7] = self._gd
         self._sd = full(cfg.noise_sd)
         self._sat = full(cfg.saturation)
         self._rng_state = seed_state(self.rng) if self._sd.any() else None
@@ -289,17 +308,29 @@ class RectifiedGain(Block):
 
     def _current(self, head: dict[str, np.ndarray], x: dict[str, np.ndarray], k: int, n: int) -> np.ndarray:
         """The current of ``n`` rows ``[head[:k], x…]`` of every input (the ahead difference looks one
-        row further), noise and saturation included."""
-        y = np.zeros((n, self._nc))
-        for p, gp, gn in self._terms:
-            add_rectified(y, head[p], x[p], k, gp, gn)
-        if self._ahead is not None:
-            add_rectified_ahead(y, head[self._ahead], x[self._ahead], k, *self._gd)
+        row further), noise and saturation included: one pass of :func:`fused_current`."""
+        y = np.empty((n, self._nc))
+        h0, x0 = head["x1"], x["x1"]  # stand-ins for inputs not used (never read: zero flags)
+        hx = [(head.get(p, h0), x.get(p, x0)) for p in _INPUTS]
         noisy = self._rng_state is not None
         xi = np.empty(n * self._nc if noisy else 0)
         if noisy:
             fill_normal(self._rng_state, xi)
-        self.count("overflow", finish_current(y, xi, self._sd, self._sat, noisy))
+        bad = fused_current(
+            y,
+            *hx[0],
+            *hx[1],
+            *hx[2],
+            k,
+            self._gains,
+            self._active,
+            self._ahead_i,
+            xi,
+            self._sd,
+            self._sat,
+            noisy,
+        )
+        self.count("overflow", bad)
         return y
 
     def step(self, **inputs: Chunk) -> dict[str, Chunk]:
