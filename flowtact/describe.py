@@ -90,7 +90,8 @@ def _port_text(port: Any, output: bool, derived: bool, inputs: Any = ()) -> str:
         else "shape (" + ", ".join(map(str, port.shape)) + ("," if len(port.shape) == 1 else "") + ")"
     )
     if port.shape is None and port.ndim is not None:
-        shape = "shape " + " or ".join({0: "()", 1: "(C,)"}.get(n, f"{n}-d") for n in port.ndim)
+        dims = (port.ndim,) if isinstance(port.ndim, int) else port.ndim  # one rank, or the ranks allowed
+        shape = "shape " + " or ".join({0: "()", 1: "(C,)"}.get(n, f"{n}-d") for n in dims)
     parts = [f"{port.dtype or 'any dtype'} {shape}"]
     if port.units:
         parts.append(f"units {port.units}")

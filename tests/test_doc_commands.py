@@ -24,7 +24,7 @@ RUN_ELSEWHERE = {
     "docs/sweeps.md": "tests/sweeps/test_sweeps_doc.py",
 }
 #: Pages whose commands this test runs, in page order.
-RUN_HERE = ("docs/braille.md", "docs/recordings.md")
+RUN_HERE = ("docs/braille.md", "docs/recordings.md", "docs/touch-encoding.md", "docs/touchsim.md")
 #: Commands too long for the test suite (minutes on a busy 2-core machine): replaced by a check
 #: that the same program starts and parses its arguments. Everything else runs in full.
 CHECKED_ONLY = {
@@ -38,6 +38,8 @@ CHECKED_ONLY = {
     "flowtact bench braille --quick --out bench-braille": "flowtact bench --list",
     # a dozen closed-loop readings of 104 letters: no arguments to parse; compiled only
     "python scripts/braille_controller_validation.py": "python -m py_compile scripts/braille_controller_validation.py",
+    # three fresh numba compiles of the normal generator under different CPU tunings: minutes under load
+    "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",
 }
 
 

@@ -1,0 +1,54 @@
+"""CPU time of TouchSim's prefilter (iir) and current (rectified_gain) for a whole hand: 17 000
+channels at 5 kHz in 50-sample chunks (10 ms ticks), noise and saturation on; median of 40 chunks.
+
+    python scripts/touchsim_stage_costs.py
+
+Prints milliseconds of CPU per 10 ms of signal (< 10: faster than real time on one core) and the
+load average (other processes slow it through shared caches).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from flowtact import Chunk, StreamSpec
+from flowtact.blocks.signal.iir import Iir
+from flowtact.blocks.signal.rectified_gain import RectifiedGain
+
+N, FS, CHUNK = 17_000, 5000.0, 50
+
+
+def main() -> None:
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(CHUNK, N))
+    spec = StreamSpec(dtype="float64", shape=(N,), rate_hz=FS)
+    iir = Iir(cutoff_hz=list(rng.uniform(70, 370, N)))
+    iir.bind({"x": spec})
+    gains = RectifiedGain(
+        pos1=[0.4], neg1=[0.3], pos2=[0.3], neg2=[0.2], ahead="x2", ahead_pos=[1.0], ahead_neg=[2.0],
+        noise_sd=[0.05], saturation=[10.0],
+    )  # fmt: skip
+    gains.bind({"x1": spec, "x2": spec})
+
+    def cost(step) -> float:  # type: ignore[no-untyped-def]
+        times = []
+        for k in range(40):
+            c = Chunk((np.arange(CHUNK) + k * CHUNK) / FS, x)
+            t0 = time.process_time()
+            step(c)
+            times.append(time.process_time() - t0)
+        return float(np.median(times[1:]))  # the first call may compile
+
+    a, b = cost(lambda c: iir(x=c)), cost(lambda c: gains(x1=c, x2=c))
+    per = 1e3 * CHUNK / FS
+    print(f"N={N:,} at {FS:g} Hz, {CHUNK}-sample chunks: CPU ms per {per:g} ms of signal")
+    print(f"  iir (butter 3, per-channel cut-offs): {a * 1e3:.1f}")
+    print(f"  rectified_gain (s, d, ahead Δd, noise, saturation): {b * 1e3:.1f}")
+    print(f"  load average {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()

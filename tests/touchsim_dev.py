@@ -1,0 +1,53 @@
+"""TouchSim's development set (../shared/touchsim) for the tests of its stages, and the error bound
+of scipy's (b, a) filtering that every comparison with TouchSim's own numbers inherits."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DEV = Path("/work/shared/touchsim/touchsim_dev.npz")
+EPS = np.finfo(np.float64).eps
+
+
+def touchsim_traces() -> list[tuple[str, dict[str, np.ndarray]]]:
+    """The 68 traces ``STIM|CLASS|IDX`` -> {s, d, I, p, spk}, sorted; skips when the set is absent."""
+    if not DEV.exists():
+        pytest.skip(f"{DEV} (TouchSim's development set) is not on this machine")
+    z = np.load(DEV)
+    keys = sorted({k.rsplit("|", 1)[0] for k in z.files})
+    return [(k, {f: z[f"{k}|{f}"] for f in ("s", "d", "I", "p", "spk")}) for k in keys]
+
+
+def ba_error_bound(b: np.ndarray, a: np.ndarray, x: np.ndarray, y: np.ndarray) -> float:
+    """A float64 error bound for ``lfilter(b, a, x)`` (output ``y``) against the exact filter.
+
+    The rounding of each step's products and sums (≤ (len(b)+len(a))·ε·(Σ|b|·max|x| + Σ|a|·max|y|))
+    and of the coefficients themselves (ε·|a_k|, ε·|b_k|: the same sums) enter the recursion as a
+    per-step error that the all-pole part 1/A(z) amplifies by at most ‖g‖₁ (g its impulse
+    response): the direct form at a low cut-off is ill-conditioned exactly through ‖g‖₁ (thousands
+    here). Our sos form's own error is far below it, so it bounds |ours − scipy's ba| too.
+    """
+    from scipy import signal
+
+    imp = np.zeros(20000)
+    imp[0] = 1.0
+    g1 = np.abs(signal.lfilter([1.0], a, imp)).sum()
+    per_step = (
+        (len(b) + len(a) + 2) * EPS * (np.abs(b).sum() * np.abs(x).max() + np.abs(a).sum() * np.abs(y).max())
+    )
+    return float(2 * g1 * per_step)
+
+
+def prefilter_bound(key: str, tr: dict[str, np.ndarray]) -> float:
+    """How far any correct float64 prefilter + weighting may put I from another's: each filtered
+    input's bound times the gains it meets (Δd counts d's error twice)."""
+    from scipy import signal
+
+    p = tr["p"]
+    b, a = signal.butter(3, 0.004 * p[0])
+    bd = ba_error_bound(b, a, tr["d"], signal.lfilter(b, a, tr["d"]))
+    out = bd * (abs(p[3]) + abs(p[4]) + 2 * (abs(p[5]) + abs(p[6])))
+    if key.split("|")[1] == "SA1":
+        out += ba_error_bound(b, a, tr["s"], signal.lfilter(b, a, tr["s"])) * (abs(p[1]) + abs(p[2]))
+    return out
