@@ -30,7 +30,9 @@ from flowtact.blocks.spiking._lif_kernels import (
     order_within_steps,
     seed_streams,
 )
+from flowtact.blocks.spiking._lif_last_kernels import lif_last
 from flowtact.blocks.spiking._spike_history import history_table
+from flowtact.blocks.spiking.nlif_models import per_unit_models
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.finite import all_finite
 from flowtact.limits import NOMINAL_RATE_HZ
@@ -49,8 +51,11 @@ NLIF_DEFAULTS: dict[str, Any] = {
     "h_weights": (),
     "h_peaks_s": (0.002, 0.05),
     "h_offset_s": 0.005,
+    "history": "sum",
+    "threshold": 1.0,
+    "threshold_block_s": 0.0,
 }
-_PER_NEURON = ("tau_s", "v_leak", "gain", "sigma")
+_PER_NEURON = ("tau_s", "v_leak", "gain", "sigma", "threshold")
 _F64 = np.dtype(np.float64)
 #: Neurons per cache tile in the kernels (noise-free runs; see lif_kernels).
 TILE = 4096
@@ -69,7 +74,13 @@ SPIKE_BUFFER_MIN = 4096
 class NlifConfig(BadDataConfig):
     """Parameters of :class:`Nlif`; ``None`` means the value in :data:`NLIF_DEFAULTS`."""
 
-    n: int = param(1, doc="number of neurons in the population", ge=1)
+    n: int = param(1, doc="number of neurons in the population (with models: 1 or len(models))", ge=1)
+    models: tuple[str, ...] | None = param(
+        None,
+        doc="one nlif preset per unit (e.g. [SA1.0, RA.3, PC.1] or touch.SA1.0): per-unit parameters "
+        "from each; explicit parameters override them for every unit",
+        min_len=1,
+    )
     tau_s: float | tuple[float, ...] | None = param(
         None, doc="membrane time constant in s, one value or one per neuron (default 0.01)", gt=0
     )
@@ -94,8 +105,10 @@ class NlifConfig(BadDataConfig):
         doc="exp: exact for held input; euler: Euler-Maruyama; exp_interp: linear input, "
         "interpolated spike times, one sample of latency (default exp)",
     )
-    h_weights: tuple[float, ...] | None = param(
-        None, doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none)"
+    h_weights: tuple[float, ...] | tuple[tuple[float, ...], ...] | None = param(
+        None,
+        doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none); "
+        "one list per unit with history: last",
     )
     h_peaks_s: tuple[float, ...] | None = param(
         None,
@@ -109,35 +122,71 @@ class NlifConfig(BadDataConfig):
         None, doc="post-spike basis: log-time offset b in s (small = finer early lags; default 0.005)", gt=0
     )
 
+    history: Literal["sum", "last"] | None = param(
+        None,
+        doc="post-spike current: sum (every past spike's kernel, Rager) or last (only the most "
+        "recent spike's, TouchSim's renewal model) (default sum)",
+    )
+    threshold: float | tuple[float, ...] | None = param(
+        None, doc="spike threshold (reset 0), one value or n; not 1 only with history: last (default 1)", gt=0
+    )
+    threshold_block_s: float | None = param(
+        None,
+        doc="threshold blocked after a spike (v keeps integrating): interval >= ceil(x/dt) steps; "
+        "history: last only (default 0)",
+        ge=0,
+    )
+
+    @property
+    def size(self) -> int:
+        """Units in the population: ``len(models)`` when models are given, else ``n``."""
+        return len(self.models) if self.models else self.n
+
     def state_bytes(self) -> dict[str, float]:
         """Per neuron: a dozen rows of coefficients and state, a chunk of ``v`` and the post-spike
         history ring (about 2 × the last basis peak at :data:`NOMINAL_RATE_HZ`)."""
         weights = NLIF_DEFAULTS["h_weights"] if self.h_weights is None else self.h_weights
         peaks = NLIF_DEFAULTS["h_peaks_s"] if self.h_peaks_s is None else self.h_peaks_s
         ring = 2.0 * max(peaks) * NOMINAL_RATE_HZ if any(w != 0 for w in weights) else 0.0
-        return {"n": self.n * 8.0 * (80 + ring)}
+        return {"n": self.size * 8.0 * (80 + ring)}
 
     def resolved(self) -> dict[str, Any]:
-        """Every model parameter, defaults filled in (per-neuron values as arrays)."""
+        """Every model parameter, defaults filled in (per-neuron values as arrays; with history:
+        last, ``h_weights`` is an (n, columns) array)."""
+        n = self.size
+        given = {key: getattr(self, key) for key in NLIF_DEFAULTS}
+        unit = per_unit_models(self, self.models, given) if self.models else {}
         out: dict[str, Any] = {}
         for key, default in NLIF_DEFAULTS.items():
-            value = getattr(self, key)
+            value = given[key] if given[key] is not None else unit.get(key)
             out[key] = default if value is None else value
         for key in _PER_NEURON:
             arr = np.atleast_1d(np.asarray(out[key], dtype=np.float64))
-            out[key] = np.broadcast_to(arr, (self.n,)).copy() if arr.shape[0] == 1 else arr
-        out["h_weights"] = tuple(float(w) for w in out["h_weights"])
+            out[key] = np.broadcast_to(arr, (n,)).copy() if arr.shape[0] == 1 else arr
+        w = out["h_weights"]
+        if w and isinstance(w[0], (tuple, list, np.ndarray)):
+            if len(w) != n or len({len(row) for row in w}) != 1:
+                raise self.error("h_weights", f"one list per unit needs {n} lists of one length")
+            out["h_weights"] = np.array(w, dtype=np.float64).reshape(n, -1)
+        elif out["history"] == "last":
+            out["h_weights"] = np.broadcast_to(np.array(w, dtype=np.float64), (n, len(w))).copy()
+        else:
+            out["h_weights"] = tuple(float(x) for x in w)
         out["h_peaks_s"] = tuple(float(p) for p in out["h_peaks_s"])
         out["refractory_s"] = float(out["refractory_s"])
         out["h_offset_s"] = float(out["h_offset_s"])
+        out["threshold_block_s"] = float(out["threshold_block_s"])
         return out
 
     def check(self) -> None:
+        if self.models and self.n not in (1, len(self.models)):
+            raise self.error("n", f"must be 1 or len(models) = {len(self.models)}; got {self.n}")
         for key in _PER_NEURON:
             value = getattr(self, key)
-            if isinstance(value, (tuple, list)) and len(value) not in (1, self.n):
-                raise self.error(key, f"must have 1 or n = {self.n} values; got {len(value)}")
+            if isinstance(value, (tuple, list)) and len(value) not in (1, self.size):
+                raise self.error(key, f"must have 1 or n = {self.size} values; got {len(value)}")
         p = self.resolved()
+        self._check_history(p)
         if not (p["tau_s"] > 0).all():
             raise self.error("tau_s", "must be > 0")
         if not (p["sigma"] >= 0).all():
@@ -151,9 +200,10 @@ class NlifConfig(BadDataConfig):
         for key in ("v_leak", "gain"):
             if not np.isfinite(p[key]).all():
                 raise self.error(key, "must be finite")
-        if len(p["h_weights"]) == 1:
+        cols = p["h_weights"].shape[1] if isinstance(p["h_weights"], np.ndarray) else len(p["h_weights"])
+        if cols == 1:
             raise self.error("h_weights", "needs at least 2 basis weights (or none)")
-        if p["h_weights"]:
+        if cols:
             first, last = p["h_peaks_s"]
             if not 0 <= first < last:
                 raise self.error(
@@ -161,6 +211,27 @@ class NlifConfig(BadDataConfig):
                 )
             if not p["h_offset_s"] > 0:
                 raise self.error("h_offset_s", "must be > 0")
+
+    def _check_history(self, p: dict[str, Any]) -> None:
+        """The last-spike mode's parameters: per-unit ones are refused by the summed mode."""
+        if p["history"] not in ("sum", "last"):
+            raise self.error("history", f"must be 'sum' or 'last'; got {p['history']!r}")
+        if p["history"] == "last":
+            if p["integrator"] == "exp_interp":
+                raise self.error("integrator", "exp_interp has no history: last (use exp or euler)")
+            if not np.isfinite(p["h_weights"]).all():
+                raise self.error("h_weights", "must be finite")
+        else:
+            if isinstance(p["h_weights"], np.ndarray):
+                raise self.error("h_weights", "one list per unit needs history: last")
+            if not (p["threshold"] == 1.0).all():
+                raise self.error("threshold", "other than 1 needs history: last")
+            if p["threshold_block_s"] != 0.0:
+                raise self.error("threshold_block_s", "needs history: last")
+        if not (p["threshold"] > 0).all() or not np.isfinite(p["threshold"]).all():
+            raise self.error("threshold", "must be finite and > 0")
+        if not p["threshold_block_s"] >= 0:
+            raise self.error("threshold_block_s", "must be >= 0")
 
 
 def _row_buffer(n_rows: int, n: int, first: int = 0) -> np.ndarray:
@@ -278,7 +349,7 @@ class Nlif(Block):
 
     # -- specs -------------------------------------------------------------------------------
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        n = self.config.n
+        n = self.config.size
         x = inputs["x"]
         if x.shape not in ((), (n,)):
             raise SpecError(
@@ -301,7 +372,7 @@ class Nlif(Block):
     def reset(self) -> None:
         p = self.config.resolved()
         spec = self.input_specs["x"]
-        n = self.config.n
+        n = self.config.size
         self._n = n
         self._m = 1 if spec.shape == () else n
         self._dt = dt = 1.0 / float(spec.rate_hz)  # type: ignore[arg-type]
@@ -327,7 +398,10 @@ class Nlif(Block):
         self._refc = rows[len(coef) + 2].view(np.int64)[:n]
         self._work = rows[len(coef) + 3 :]
         self._xbuf = _row_buffer(1, max(NOISE_FILL, n), len(coef) + 3 + n_work)[0]
-        w = p["h_weights"]
+        self._renewal = p["history"] == "last"
+        if self._renewal:
+            self._reset_last(p, dt)
+        w = () if self._renewal else p["h_weights"]
         if w and any(x != 0.0 for x in w):
             self._h = history_table(w, p["h_peaks_s"], p["h_offset_s"], dt)
             self._ring = np.zeros((n, len(self._h) - 1))  # (N, L): see _spike_history
@@ -351,6 +425,27 @@ class Nlif(Block):
         self._interp = self._method == "exp_interp"
         self._want_v = "v" in self.demanded
         self._want_spikes = "spikes" in self.demanded
+
+    def _reset_last(self, p: dict[str, Any], dt: float) -> None:
+        """State of the last-spike mode: per-unit thresholds, the basis columns any unit weights
+        (J, L + 2; the last entry 0, where lags past the kernel are capped), lags since the last
+        spike (capped: the first spike is never blocked) and the threshold block in steps."""
+        n = self._n
+        w = p["h_weights"]
+        used = [j for j in range(w.shape[1]) if (w[:, j] != 0.0).any()]
+        if used:
+            eye = np.eye(w.shape[1])
+            cols = [history_table(eye[j], p["h_peaks_s"], p["h_offset_s"], dt) for j in used]
+            self._basis = np.zeros((len(used), len(cols[0]) + 1))
+            self._basis[:, :-1] = cols
+            self._basis[:, 0] = 0.0  # lag 0 is never read (the cap is L + 1)
+        else:
+            self._basis = np.zeros((0, 2))
+        self._w = np.ascontiguousarray(w[:, used].T)
+        self._thr = p["threshold"].copy()
+        self._lag = np.full(n, self._basis.shape[1] - 1, np.int64)
+        self._n_block = max(0, math.ceil(p["threshold_block_s"] / dt - 1e-9) - 1)
+        self._xlast = np.zeros(n)
 
     # -- stepping ----------------------------------------------------------------------------
     def _empty(self) -> dict[str, Chunk]:
@@ -397,7 +492,13 @@ class Nlif(Block):
             need = min(SPIKE_RESERVE_MAX, math.ceil(steps_in * self._spike_rate * 1.25))
             if need > self._spk[0].shape[0]:
                 self._spk = _spike_buffers(need, self._interp)
-        if self._interp:
+        if self._renewal:
+            steps, idx, n = lif_last(
+                u, self._coef, self._thr, self._w, self._basis, self._v, self._lag, self._refc, self._n_block,
+                self._n_clamp, self._noise, self._rng_state, self._no_xi, self._xlast, v_out, *self._spk,
+            )  # fmt: skip
+            self._spk, offs = (steps, idx), None
+        elif self._interp:
             steps, offs, idx, n, self._pos = lif_interp(
                 u_first, u, self._dt, self._coef, self._v, self._rl, self._ref_s, self._ring, self._pos,
                 self._h, self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
