@@ -432,19 +432,18 @@ class Nlif(Block):
         spike (capped: the first spike is never blocked) and the threshold block in steps."""
         n = self._n
         w = p["h_weights"]
+        self._n_block = max(0, math.ceil(p["threshold_block_s"] / dt - 1e-9) - 1)
         used = [j for j in range(w.shape[1]) if (w[:, j] != 0.0).any()]
-        if used:
-            eye = np.eye(w.shape[1])
-            cols = [history_table(eye[j], p["h_peaks_s"], p["h_offset_s"], dt) for j in used]
-            self._basis = np.zeros((len(used), len(cols[0]) + 1))
-            self._basis[:, :-1] = cols
-            self._basis[:, 0] = 0.0  # lag 0 is never read (the cap is L + 1)
-        else:
-            self._basis = np.zeros((0, 2))
+        eye = np.eye(w.shape[1])
+        cols = [history_table(eye[j], p["h_peaks_s"], p["h_offset_s"], dt) for j in used]
+        # the lag cap (last entry) must exceed both the kernel and the threshold block
+        width = max([len(c) + 1 for c in cols] + [self._n_block + 2])
+        self._basis = np.zeros((len(used), width))
+        for r, c in enumerate(cols):
+            self._basis[r, 1 : len(c)] = c[1:]  # lag 0 is never read
         self._w = np.ascontiguousarray(w[:, used].T)
         self._thr = p["threshold"].copy()
-        self._lag = np.full(n, self._basis.shape[1] - 1, np.int64)
-        self._n_block = max(0, math.ceil(p["threshold_block_s"] / dt - 1e-9) - 1)
+        self._lag = np.full(n, width - 1, np.int64)
         self._xlast = np.zeros(n)
 
     # -- stepping ----------------------------------------------------------------------------

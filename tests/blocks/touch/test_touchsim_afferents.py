@@ -6,10 +6,10 @@ development set (17 models × 4 stimuli, noise off, made by TouchSim's code), To
 post-spike basis (/work/shared/touchsim/README.md). A copy of those arrays, 2 MB.
 """
 
+import itertools
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.touchsim import TOUCHSIM_PRESETS, TOUCHSIM_RATE_HZ, touchsim_models
@@ -24,7 +24,7 @@ def dev_set():
     z = np.load(DATA)
     names = [str(x) for x in z["names"]]
     bounds = np.concatenate([[0], np.cumsum(z["counts"])])
-    spikes = [z["spikes"][a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    spikes = [z["spikes"][a:b] for a, b in itertools.pairwise(bounds)]
     models = [".".join(n.split("|")[1:]) for n in names]
     return names, models, np.ascontiguousarray(z["I"].T), spikes
 
@@ -71,13 +71,15 @@ def test_all_68_dev_traces_spike_for_spike_from_touchsims_current():
     names, models, current, expected = dev_set()
     out = run_offline(Nlif(models=models), x=current, rate_hz=TOUCHSIM_RATE_HZ, chunk=997)
     got = spike_indices(out, len(names))
-    bad = [(n, len(e), len(g)) for n, e, g in zip(names, expected, got, strict=True) if not np.array_equal(e, g)]
+    bad = [
+        (n, len(e), len(g)) for n, e, g in zip(names, expected, got, strict=True) if not np.array_equal(e, g)
+    ]
     assert not bad, f"{len(bad)} of 68 traces differ (name, TouchSim's count, ours): {bad[:5]}"
     assert sum(len(e) for e in expected) == 1703  # the README's total: the whole set was compared
 
 
 def test_each_model_alone_as_a_preset():
-    names, models, current, expected = dev_set()
+    names, _models, current, expected = dev_set()
     k = names.index("sine100|PC|1")
     out = run_offline(Nlif(preset="touch.PC.1"), x=current[:, k : k + 1], rate_hz=TOUCHSIM_RATE_HZ)
     np.testing.assert_array_equal(spike_indices(out, 1)[0], expected[k])
@@ -92,7 +94,9 @@ def test_summed_history_misses_touchsims_spikes():
     differ = []
     for k, m in enumerate(models):
         change = {"history": "sum", "threshold_block_s": 0.0}
-        out = run_offline(Nlif(preset=f"touch.{m}", **change), x=current[:, k : k + 1], rate_hz=TOUCHSIM_RATE_HZ)
+        out = run_offline(
+            Nlif(preset=f"touch.{m}", **change), x=current[:, k : k + 1], rate_hz=TOUCHSIM_RATE_HZ
+        )
         if not np.array_equal(spike_indices(out, 1)[0], expected[k]):
             differ.append(names[k])
     assert len(differ) >= 10, differ
