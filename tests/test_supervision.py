@@ -316,6 +316,7 @@ SHIPPED = {
     "tactip_dataset": "sim.force",
     "braille_open": "scan.position",
     "braille": "scan.position",
+    "touchsim_currents": "afferents.spikes",
 }
 
 

@@ -7,12 +7,15 @@ post-spike basis (/work/shared/touchsim/README.md). A copy of those arrays, 2 MB
 """
 
 import itertools
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.touchsim import TOUCHSIM_PRESETS, TOUCHSIM_RATE_HZ, touchsim_models
+from flowtact.record import read_recording
 from flowtact.testing import run_offline
 
 DATA = Path(__file__).parent / "data" / "touchsim_dev_currents.npz"
@@ -100,3 +103,28 @@ def test_summed_history_misses_touchsims_spikes():
         if not np.array_equal(spike_indices(out, 1)[0], expected[k]):
             differ.append(names[k])
     assert len(differ) >= 10, differ
+
+
+def test_the_shipped_graph_replays_touchsims_current_spike_for_spike(tmp_path):
+    """Deliver 2: ``flowtact run graphs/touchsim_currents.yaml --fast --replay current=FILE.npz``
+    with TouchSim's currents of one stimulus (17 traces, one per model, in the graph's column
+    order): the recording's ``afferents.spikes`` are TouchSim's, unit index = column."""
+    names, _, current, expected = dev_set()
+    cols = [names.index(f"noise7|{m.replace('.', '|')}") for m in MODEL_NAMES]
+    t = np.arange(current.shape[0]) / TOUCHSIM_RATE_HZ
+    np.savez(tmp_path / "touchsim_noise7.npz", t=t, y=np.ascontiguousarray(current[:, cols]))
+    graph = Path(__file__).parents[3] / "graphs" / "touchsim_currents.yaml"
+    cmd = ["run", str(graph), "--fast", "--replay", "current=touchsim_noise7.npz", "--record", "out.h5"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "flowtact.cli", *cmd],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    spikes = read_recording(tmp_path / "out.h5").streams["afferents.spikes"]
+    got = spike_indices({"spikes": spikes}, len(MODEL_NAMES))
+    for unit, col in enumerate(cols):
+        np.testing.assert_array_equal(got[unit], expected[col], err_msg=names[col])
+    assert len(spikes.t) == sum(len(expected[c]) for c in cols) > 300
