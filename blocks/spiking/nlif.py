@@ -319,6 +319,14 @@ class Nlif(Block):
       populations run in cache-sized tiles) — identical whatever the chunking.
     * Presets: ``touch.SA1`` / ``touch.FA1`` (``flowtact.blocks.touch.presets``) are the Rager
       afferents; that module justifies each value (the paper does not print τ, V_leak, σ or h).
+    * ``history: last`` (grid integrators; kernel ``_lif_last_kernels``): only the most recent
+      spike's post-spike current acts, ``I_hist[n] = h((n − m)·dt)`` after the last spike at step
+      ``m`` (a renewal process, TouchSim's afferents); ``threshold_block_s`` then blocks the
+      threshold (not the membrane: v keeps integrating) for the steps starting less than it after
+      the spike's step; ``threshold`` and ``h_weights`` may be given per unit. ``models:`` names one
+      preset per unit (``[SA1.0, RA.3, PC.1]``: TouchSim's 17 models, ``flowtact.blocks.touch.touchsim``),
+      filling the per-unit parameters from each. The summed mode (default) refuses these options,
+      and its kernel and results are unchanged. docs/touchsim.md.
 
     Example
     -------
@@ -444,7 +452,7 @@ class Nlif(Block):
         self._w = np.ascontiguousarray(w[:, used].T)
         self._thr = p["threshold"].copy()
         self._lag = np.full(n, width - 1, np.int64)
-        self._xlast = np.zeros(n)
+        self._xi_step = np.zeros(n)
 
     # -- stepping ----------------------------------------------------------------------------
     def _empty(self) -> dict[str, Chunk]:
@@ -494,7 +502,7 @@ class Nlif(Block):
         if self._renewal:
             steps, idx, n = lif_last(
                 u, self._coef, self._thr, self._w, self._basis, self._v, self._lag, self._refc, self._n_block,
-                self._n_clamp, self._noise, self._rng_state, self._no_xi, self._xlast, v_out, *self._spk,
+                self._n_clamp, self._noise, self._rng_state, self._no_xi, self._xi_step, v_out, *self._spk,
             )  # fmt: skip
             self._spk, offs = (steps, idx), None
         elif self._interp:
