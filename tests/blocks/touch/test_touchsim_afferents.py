@@ -128,3 +128,23 @@ def test_the_shipped_graph_replays_touchsims_current_spike_for_spike(tmp_path):
     for unit, col in enumerate(cols):
         np.testing.assert_array_equal(got[unit], expected[col], err_msg=names[col])
     assert len(spikes.t) == sum(len(expected[c]) for c in cols) > 300
+
+
+def test_an_unknown_model_in_the_graph_is_refused_at_its_place(tmp_path):
+    graph = Path(__file__).parents[3] / "graphs" / "touchsim_currents.yaml"
+    text = graph.read_text().replace("models: [SA1.0, SA1.1,", "models: [SA1.0, SA1.9,")
+    (tmp_path / "g.yaml").write_text(text)
+    (tmp_path / "touchsim_currents.npz").symlink_to(graph.with_suffix(".npz"))
+    proc = subprocess.run(
+        [sys.executable, "-m", "flowtact.cli", "validate", "g.yaml"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    line = proc.stderr.splitlines()[0]
+    assert (
+        line.startswith("g.yaml:")
+        and "afferents (nlif): 'models' item 1: 'SA1.9' is not an nlif preset" in line
+    )
