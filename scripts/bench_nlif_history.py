@@ -7,7 +7,9 @@ thread, CPU time (process_time) of the median of ``--repeats``. Rows:
 
 * ``sum``:  RA.3's parameters with ``history: sum`` (Rager's kernel path) — the baseline;
 * ``last``: the same with ``history: last`` and the threshold block (the renewal kernel);
-* ``mixed``: ``models:`` cycling through all 17 TouchSim models (per-unit τ, gain, weights).
+* ``mixed``: ``models:`` cycling through all 17 TouchSim models (per-unit τ, gain, weights);
+* ``noisy``: ``mixed`` with each model's noise at the neuron (σ = p8·sqrt(fs): one exact normal per
+  unit and step; TouchSim adds it before saturation, which this row ignores — a cost measure only).
 
     NUMBA_NUM_THREADS=1 python scripts/bench_nlif_history.py
 """
@@ -55,7 +57,8 @@ def main() -> None:
     ap.add_argument("--chunk", type=int, default=250)
     ap.add_argument("--repeats", type=int, default=3)
     a = ap.parse_args()
-    names = list(touchsim_models())
+    p = touchsim_models()
+    names = list(p)
     mixed = [names[k % len(names)] for k in range(a.n)]
     cls = np.array([{"SA1": 0.08, "RA": 0.3, "PC": 6.0}[m.split(".")[0]] for m in mixed])
     n_chunks = round(a.seconds * TOUCHSIM_RATE_HZ / a.chunk)
@@ -63,6 +66,7 @@ def main() -> None:
         "sum": (Nlif(n=a.n, preset="touch.RA.3", history="sum", threshold_block_s=0.0), np.full(a.n, 0.3)),
         "last": (Nlif(n=a.n, preset="touch.RA.3"), np.full(a.n, 0.3)),
         "mixed": (Nlif(models=mixed), cls),
+        "noisy": (Nlif(models=mixed, sigma=[p[m][8] * TOUCHSIM_RATE_HZ**0.5 for m in mixed]), cls),
     }
     steps = a.n * n_chunks * a.chunk
     print(f"N = {a.n}, {a.seconds} s at 5 kHz in chunks of {a.chunk}; load average {os.getloadavg()}")
@@ -79,11 +83,13 @@ def main() -> None:
             f"{name:6s} {rates[name]:.3e} neuron-steps/s  ({spikes} spikes, {spikes / a.n / a.seconds:.0f}/s per unit)"
         )
     print(
-        f"last / sum = {rates['last'] / rates['sum']:.2f}; mixed / sum = {rates['mixed'] / rates['sum']:.2f}"
+        f"last / sum = {rates['last'] / rates['sum']:.2f}; mixed / sum = {rates['mixed'] / rates['sum']:.2f}; "
+        f"noisy / mixed = {rates['noisy'] / rates['mixed']:.2f}"
     )
-    print(
-        f"real-time factor of the whole hand, one core, noise off (mixed): {rates['mixed'] / (a.n * TOUCHSIM_RATE_HZ):.1f}x"
-    )
+    for name in ("mixed", "noisy"):
+        print(
+            f"real-time factor of the whole hand, one core ({name}): {rates[name] / (a.n * TOUCHSIM_RATE_HZ):.1f}x"
+        )
     print(f"load average after: {os.getloadavg()}")
 
 
