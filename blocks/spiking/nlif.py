@@ -30,7 +30,7 @@ from flowtact.blocks.spiking._lif_kernels import (
     order_within_steps,
     seed_streams,
 )
-from flowtact.blocks.spiking._lif_last_kernels import lif_last
+from flowtact.blocks.spiking._lif_unit_kernels import lif_units
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.blocks.spiking.nlif_models import per_unit_models
 from flowtact.chunk import Chunk, StreamSpec
@@ -107,8 +107,8 @@ class NlifConfig(BadDataConfig):
     )
     h_weights: tuple[float, ...] | tuple[tuple[float, ...], ...] | None = param(
         None,
-        doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none); "
-        "one list per unit with history: last",
+        doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none), "
+        "or one list per unit",
     )
     h_peaks_s: tuple[float, ...] | None = param(
         None,
@@ -128,12 +128,12 @@ class NlifConfig(BadDataConfig):
         "recent spike's, TouchSim's renewal model) (default sum)",
     )
     threshold: float | tuple[float, ...] | None = param(
-        None, doc="spike threshold (reset 0), one value or n; not 1 only with history: last (default 1)", gt=0
+        None, doc="spike threshold (reset 0), one value or n (default 1)", gt=0
     )
     threshold_block_s: float | None = param(
         None,
-        doc="threshold blocked after a spike (v keeps integrating): interval >= ceil(x/dt) steps; "
-        "history: last only (default 0)",
+        doc="threshold blocked after a spike (v keeps integrating, unlike refractory_s): intervals "
+        ">= ceil(x/dt) steps (default 0)",
         ge=0,
     )
 
@@ -168,8 +168,6 @@ class NlifConfig(BadDataConfig):
             if len(w) != n or len({len(row) for row in w}) != 1:
                 raise self.error("h_weights", f"one list per unit needs {n} lists of one length")
             out["h_weights"] = np.array(w, dtype=np.float64).reshape(n, -1)
-        elif out["history"] == "last":
-            out["h_weights"] = np.broadcast_to(np.array(w, dtype=np.float64), (n, len(w))).copy()
         else:
             out["h_weights"] = tuple(float(x) for x in w)
         out["h_peaks_s"] = tuple(float(p) for p in out["h_peaks_s"])
@@ -212,22 +210,28 @@ class NlifConfig(BadDataConfig):
             if not p["h_offset_s"] > 0:
                 raise self.error("h_offset_s", "must be > 0")
 
+    def per_unit(self, p: dict[str, Any]) -> bool:
+        """Whether the population runs on the per-unit kernel (``_lif_unit_kernels``): the last-spike
+        history, per-unit post-spike weights, a threshold other than 1 or a threshold block. Otherwise
+        the shared-parameter kernels run, as before these options existed."""
+        return (
+            p["history"] == "last"
+            or isinstance(p["h_weights"], np.ndarray)
+            or not (p["threshold"] == 1.0).all()
+            or p["threshold_block_s"] > 0.0
+        )
+
     def _check_history(self, p: dict[str, Any]) -> None:
-        """The last-spike mode's parameters: per-unit ones are refused by the summed mode."""
+        """The options of the per-unit kernel (grid integrators only)."""
         if p["history"] not in ("sum", "last"):
             raise self.error("history", f"must be 'sum' or 'last'; got {p['history']!r}")
-        if p["history"] == "last":
-            if p["integrator"] == "exp_interp":
-                raise self.error("integrator", "exp_interp has no history: last (use exp or euler)")
-            if not np.isfinite(p["h_weights"]).all():
-                raise self.error("h_weights", "must be finite")
-        else:
-            if isinstance(p["h_weights"], np.ndarray):
-                raise self.error("h_weights", "one list per unit needs history: last")
-            if not (p["threshold"] == 1.0).all():
-                raise self.error("threshold", "other than 1 needs history: last")
-            if p["threshold_block_s"] != 0.0:
-                raise self.error("threshold_block_s", "needs history: last")
+        if self.per_unit(p) and p["integrator"] == "exp_interp":
+            raise self.error(
+                "integrator",
+                "exp_interp has no history: last, per-unit h_weights, threshold or threshold block (use exp or euler)",
+            )
+        if isinstance(p["h_weights"], np.ndarray) and not np.isfinite(p["h_weights"]).all():
+            raise self.error("h_weights", "must be finite")
         if not (p["threshold"] > 0).all() or not np.isfinite(p["threshold"]).all():
             raise self.error("threshold", "must be finite and > 0")
         if not p["threshold_block_s"] >= 0:
@@ -319,14 +323,15 @@ class Nlif(Block):
       populations run in cache-sized tiles) — identical whatever the chunking.
     * Presets: ``touch.SA1`` / ``touch.FA1`` (``flowtact.blocks.touch.presets``) are the Rager
       afferents; that module justifies each value (the paper does not print τ, V_leak, σ or h).
-    * ``history: last`` (grid integrators; kernel ``_lif_last_kernels``): only the most recent
-      spike's post-spike current acts, ``I_hist[n] = h((n − m)·dt)`` after the last spike at step
-      ``m`` (a renewal process, TouchSim's afferents); ``threshold_block_s`` then blocks the
-      threshold (not the membrane: v keeps integrating) for the steps starting less than it after
-      the spike's step; ``threshold`` and ``h_weights`` may be given per unit. ``models:`` names one
-      preset per unit (``[SA1.0, RA.3, PC.1]``: TouchSim's 17 models, ``flowtact.blocks.touch.touchsim``),
-      filling the per-unit parameters from each. The summed mode (default) refuses these options,
-      and its kernel and results are unchanged. docs/touchsim.md.
+    * ``history: last``: only the most recent spike's post-spike current acts,
+      ``I_hist[n] = h((n − m)·dt)`` after the last spike at step ``m`` (a renewal process,
+      TouchSim's afferents). ``threshold_block_s`` blocks the threshold (not the membrane: v keeps
+      integrating) for the steps starting less than it after the spike's step; ``threshold`` and
+      ``h_weights`` may be given per unit. ``models:`` names one preset per unit (``[SA1.0, RA.3,
+      PC.1]``: TouchSim's 17 models, ``flowtact.blocks.touch.touchsim``; or ``[SA1, FA1]``), filling
+      the per-unit parameters from each. Any of these runs the per-unit kernel
+      (``_lif_unit_kernels``, grid integrators only); without them the shared-parameter kernels run
+      as before, bit for bit. docs/touchsim.md.
 
     Example
     -------
@@ -406,10 +411,10 @@ class Nlif(Block):
         self._refc = rows[len(coef) + 2].view(np.int64)[:n]
         self._work = rows[len(coef) + 3 :]
         self._xbuf = _row_buffer(1, max(NOISE_FILL, n), len(coef) + 3 + n_work)[0]
-        self._renewal = p["history"] == "last"
-        if self._renewal:
-            self._reset_last(p, dt)
-        w = () if self._renewal else p["h_weights"]
+        self._units = self.config.per_unit(p)
+        if self._units:
+            self._reset_units(p, dt)
+        w = () if self._units else p["h_weights"]
         if w and any(x != 0.0 for x in w):
             self._h = history_table(w, p["h_peaks_s"], p["h_offset_s"], dt)
             self._ring = np.zeros((n, len(self._h) - 1))  # (N, L): see _spike_history
@@ -434,12 +439,14 @@ class Nlif(Block):
         self._want_v = "v" in self.demanded
         self._want_spikes = "spikes" in self.demanded
 
-    def _reset_last(self, p: dict[str, Any], dt: float) -> None:
-        """State of the last-spike mode: per-unit thresholds, the basis columns any unit weights
-        (J, L + 2; the last entry 0, where lags past the kernel are capped), lags since the last
-        spike (capped: the first spike is never blocked) and the threshold block in steps."""
+    def _reset_units(self, p: dict[str, Any], dt: float) -> None:
+        """State of the per-unit kernel: thresholds, the basis columns any unit weights (J, L + 2; the
+        last entry 0, where lags past the kernel are capped), lags since the last spike (capped: the
+        first spike is never blocked), the threshold block in steps, and the summed mode's ring."""
         n = self._n
         w = p["h_weights"]
+        if not isinstance(w, np.ndarray):
+            w = np.broadcast_to(np.array(w, dtype=np.float64), (n, len(w)))
         self._n_block = max(0, math.ceil(p["threshold_block_s"] / dt - 1e-9) - 1)
         used = [j for j in range(w.shape[1]) if (w[:, j] != 0.0).any()]
         eye = np.eye(w.shape[1])
@@ -452,6 +459,9 @@ class Nlif(Block):
         self._w = np.ascontiguousarray(w[:, used].T)
         self._thr = p["threshold"].copy()
         self._lag = np.full(n, width - 1, np.int64)
+        summed = p["history"] == "sum" and len(used) > 0
+        self._unit_ring = np.zeros((n, width - 2 if summed else 0))
+        self._unit_pos = 0
         self._xi_step = np.zeros(n)
 
     # -- stepping ----------------------------------------------------------------------------
@@ -499,10 +509,11 @@ class Nlif(Block):
             need = min(SPIKE_RESERVE_MAX, math.ceil(steps_in * self._spike_rate * 1.25))
             if need > self._spk[0].shape[0]:
                 self._spk = _spike_buffers(need, self._interp)
-        if self._renewal:
-            steps, idx, n = lif_last(
+        if self._units:
+            steps, idx, n, self._unit_pos = lif_units(
                 u, self._coef, self._thr, self._w, self._basis, self._v, self._lag, self._refc, self._n_block,
-                self._n_clamp, self._noise, self._rng_state, self._no_xi, self._xi_step, v_out, *self._spk,
+                self._n_clamp, self._unit_ring, self._unit_pos, self._noise, self._rng_state, self._no_xi,
+                self._xi_step, v_out, *self._spk,
             )  # fmt: skip
             self._spk, offs = (steps, idx), None
         elif self._interp:

@@ -1,6 +1,7 @@
-"""nlif's last-spike (renewal) mode: the kernel against its one-step-at-a-time twin, the threshold
-block against the membrane clamp, per-unit parameters, ``models:``, and the conformance suite
-(chunking invariance included) on a mixed, noisy population."""
+"""nlif's per-unit kernel: the last-spike (renewal) and summed histories against a one-step-at-a-time
+twin, the threshold block against the membrane clamp, per-unit parameters, ``models:``, the summed
+per-unit path against the shared-parameter kernel, and the conformance suite (chunking invariance
+included) on a mixed, noisy population."""
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ import pytest
 from flowtact import ConfigError
 from flowtact.block import Example
 from flowtact.blocks.spiking._lif_kernels import NOISE_EXTERNAL, NOISE_INTERNAL, NOISE_OFF, seed_streams
-from flowtact.blocks.spiking._lif_last_kernels import lif_last, lif_last_py
+from flowtact.blocks.spiking._lif_unit_kernels import lif_units, lif_units_py
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.testing import CHECKS, run_offline
 
@@ -31,11 +32,13 @@ def _kernel_args(n, n_basis=2, seed=0):
     return coef, thr, w, basis
 
 
+@pytest.mark.parametrize("history", ["last", "sum"])
 @pytest.mark.parametrize("noise", [NOISE_OFF, NOISE_EXTERNAL, NOISE_INTERNAL])
 @pytest.mark.parametrize("n_clamp", [0, 3])
-def test_kernel_matches_its_plain_twin(noise, n_clamp):
-    """Bit for bit, with the threshold block, the membrane clamp, a shared or per-unit drive and
-    each noise source (internal noise: two streams, units ≥ 4096 drawing from the second)."""
+def test_kernel_matches_its_plain_twin(noise, n_clamp, history):
+    """Bit for bit, with the threshold block, the membrane clamp, each history, and each noise
+    source (internal noise: two streams, units ≥ 4096 drawing from the second); the run is split
+    in two calls (the state, ring slot included, carries over)."""
     n = 4100 if noise == NOISE_INTERNAL else 37
     coef, thr, w, basis = _kernel_args(n)
     u = np.random.default_rng(1).uniform(0, 0.02, (300, n))
@@ -46,17 +49,40 @@ def test_kernel_matches_its_plain_twin(noise, n_clamp):
         v = np.zeros(n)
         lag = np.full(n, basis.shape[1] - 1, np.int64)
         refc = np.zeros(n, np.int64)
+        ring = np.zeros((n, basis.shape[1] - 2 if history == "sum" else 0))
         rng = rng0.copy()
         v_out = np.empty((300, n))
-        if kernel == "numba":
-            steps, idx, k = lif_last(
-                u, coef, thr, w, basis, v, lag, refc, 5, n_clamp, noise, rng, xi, np.zeros(n), v_out,
-                np.empty(4, np.int64), np.empty(4, np.int64),
-            )  # fmt: skip
-            steps, idx = steps[:k], idx[:k]
-        else:
-            steps, idx = lif_last_py(u, coef, thr, w, basis, v, lag, refc, 5, n_clamp, noise, rng, xi, v_out)
-        res.append((steps, idx, v, lag, v_out))
+        pos, parts = 0, []
+        for a, b in ((0, 170), (170, 300)):
+            if kernel == "numba":
+                steps, idx, k, pos = lif_units(
+                    u[a:b], coef, thr, w, basis, v, lag, refc, 5, n_clamp, ring, pos, noise, rng, xi[a:b],
+                    np.zeros(n), v_out[a:b], np.empty(4, np.int64), np.empty(4, np.int64),
+                )  # fmt: skip
+                steps, idx = steps[:k], idx[:k]
+            else:
+                steps, idx, pos = lif_units_py(
+                    u[a:b],
+                    coef,
+                    thr,
+                    w,
+                    basis,
+                    v,
+                    lag,
+                    refc,
+                    5,
+                    n_clamp,
+                    ring,
+                    pos,
+                    noise,
+                    rng,
+                    xi[a:b],
+                    v_out[a:b],
+                )
+            parts.append((steps + a, idx))
+        steps = np.concatenate([p[0] for p in parts])
+        idx = np.concatenate([p[1] for p in parts])
+        res.append((steps, idx, v, lag, ring, v_out))
     assert len(res[0][0]) > 100
     for a, b in zip(res[0], res[1], strict=True):
         np.testing.assert_array_equal(a, b)
@@ -112,11 +138,10 @@ def test_models_give_per_unit_parameters_and_explicit_ones_override():
         ({"models": ["SA1.0", "XX.1"]}, "models", "item 1: 'XX.1' is not an nlif preset"),
         ({"models": ["SA1.0", "PC.1"], "n": 3}, "n", "must be 1 or len(models) = 2"),
         ({"models": ["SA1", "PC.1"]}, "models", "differs between the models"),
-        ({"threshold": 1.5}, "threshold", "needs history: last"),
-        ({"threshold_block_s": 0.001}, "threshold_block_s", "needs history: last"),
-        ({"n": 2, "h_weights": [[0, 1], [1, 0]]}, "h_weights", "needs history: last"),
         ({"n": 2, "history": "last", "h_weights": [[0, 1]]}, "h_weights", "needs 2 lists"),
         ({"history": "last", "integrator": "exp_interp"}, "integrator", "exp_interp has no history: last"),
+        ({"threshold": 1.5, "integrator": "exp_interp"}, "integrator", "exp_interp has no"),
+        ({"threshold": [1.0, -1.0], "n": 2}, "threshold", "must be > 0"),
         ({"history": "last", "threshold": [1.0, 2.0]}, "threshold", "must have 1 or n = 1 values"),
     ],
 )
@@ -147,3 +172,16 @@ def test_conformance_of_the_last_spike_mode(check):
     out = run_offline(NlifLast(**ex.params), x=ex.inputs["x"], rate_hz=FS)
     assert len(out["spikes"]) > 20  # the example does spike, so chunking invariance means something
     check(NlifLast)
+
+
+@pytest.mark.parametrize("integrator", ["exp", "euler"])
+def test_summed_per_unit_path_matches_the_shared_kernel(integrator):
+    """Rager's SA1 and FA1 in one population (``models: [SA1, FA1]``, noise off) fire as the two
+    populations do on the shared-parameter kernel: the same spike steps (the post-spike tables may
+    differ by an ulp, far below any threshold margin here)."""
+    x = 0.6 + 0.54 * np.sin(2 * np.pi * 7 * np.arange(3000) / 1000.0)  # SA1 421, FA1 63 spikes
+    both = run_offline(Nlif(models=["SA1", "FA1"], sigma=0.0, integrator=integrator), x=x)
+    for k, name in enumerate(["SA1", "FA1"]):
+        alone = run_offline(Nlif(preset=f"touch.{name}", sigma=0.0, integrator=integrator), x=x)
+        np.testing.assert_array_equal(both["spikes"].t[both["spikes"].data == k], alone["spikes"].t)
+        assert len(alone["spikes"]) > 50
