@@ -92,7 +92,7 @@ def test_summed_history_misses_touchsims_spikes():
     """The parity test above can fail: nlif's default summed kernel (Rager's) with the same
     parameters misses TouchSim's spikes wherever spikes come closer than the kernel (~38 ms).
     (Without the threshold block the dev set still agrees: its kernels inhibit for longer than
-    1.2 ms; tests/blocks/spiking/test_nlif_last.py checks the block itself.)"""
+    1.2 ms; tests/blocks/spiking/test_nlif_units.py checks the block itself.)"""
     names, models, current, expected = dev_set()
     differ = []
     for k, m in enumerate(models):
