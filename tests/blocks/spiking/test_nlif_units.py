@@ -166,12 +166,23 @@ class NlifLast(Nlif):
         )
 
 
+class NlifSummedUnits(Nlif):
+    """nlif with an example on the per-unit kernel's summed history: Rager's SA1 and FA1 (noisy) in
+    one population, with a threshold block, for the conformance suite."""
+
+    @classmethod
+    def example(cls) -> Example:
+        x = 0.6 + 0.54 * np.sin(2 * np.pi * 7 * np.arange(1500) / 1000.0)
+        return Example(params={"models": ["SA1", "FA1", "SA1"], "threshold_block_s": 0.006}, inputs={"x": x})
+
+
 @pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
-def test_conformance_of_the_last_spike_mode(check):
-    ex = NlifLast.example()
-    out = run_offline(NlifLast(**ex.params), x=ex.inputs["x"], rate_hz=FS)
+@pytest.mark.parametrize("cls", [NlifLast, NlifSummedUnits], ids=["last", "sum"])
+def test_conformance_of_the_per_unit_kernel(cls, check):
+    ex = cls.example()
+    out = run_offline(cls(**ex.params), x=ex.inputs["x"], rate_hz=ex.rate_hz)
     assert len(out["spikes"]) > 20  # the example does spike, so chunking invariance means something
-    check(NlifLast)
+    check(cls)
 
 
 @pytest.mark.parametrize("integrator", ["exp", "euler"])
