@@ -181,6 +181,7 @@ class Config:
                 raise ConfigError(owner, name, "is required but was not given")
         obj = cls(**values)
         object.__setattr__(obj, "owner", owner)
+        object.__setattr__(obj, "given", frozenset(params))  # what was given, as against defaulted
         over = budget_problem(dict(obj.state_bytes()))
         if over:
             field, rule = over

@@ -13,7 +13,8 @@ from flowtact.presets import presets_for
 
 
 def test_the_touch_domain_publishes_its_presets_for_generic_blocks():
-    assert {p for p in presets_for("nlif") if p.startswith("touch.")} == {"touch.SA1", "touch.FA1"}
+    touchsim = {f"touch.{c}.{i}" for c, k in (("SA1", 4), ("RA", 9), ("PC", 4)) for i in range(k)}
+    assert {p for p in presets_for("nlif") if p.startswith("touch.")} == {"touch.SA1", "touch.FA1"} | touchsim
     assert set(presets_for("weighted_sum")) == {"touch.SA1", "touch.FA1"}
     assert set(presets_for("savgol")) == {"touch.rager"}
     assert presets_for("lowpass") == {}
@@ -29,7 +30,7 @@ def test_a_preset_fills_in_parameters_and_given_ones_override_it():
 
 @pytest.mark.parametrize(
     ("given", "hint"),
-    [("SA1", "did you mean 'touch.SA1'?"), ("touch.SA2", "did you mean 'touch.SA1'?"), (3, "touch.")],
+    [("SA1", "did you mean 'touch.SA1'?"), ("touch.SA2", "did you mean 'touch.SA1"), (3, "touch.")],
 )
 def test_an_unknown_or_old_preset_spelling_is_refused_with_a_hint(given, hint):
     with pytest.raises(ConfigError, match=r"'preset' must name a preset of nlif as DOMAIN\.NAME") as e:

@@ -317,6 +317,7 @@ SHIPPED = {
     "braille_open": "scan.position",
     "braille": "scan.position",
     "touchsim_afferents": "current.y",
+    "touchsim_currents": "afferents.spikes",
 }
 
 

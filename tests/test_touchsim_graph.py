@@ -45,3 +45,37 @@ def test_the_graph_holds_the_parameters_of_its_three_models():
                cur.ahead_neg[j], cur.saturation[j], cur.noise_sd[j]]  # fmt: skip
         np.testing.assert_allclose(got, p[:9], rtol=4 * EPS, atol=0)
     assert nodes["prefilter_s"].config.cutoff_hz == pre.cutoff_hz
+
+
+@pytest.mark.oracle
+def test_every_dev_trace_spikes_as_touchsim_from_s_and_d_through_the_whole_chain(tmp_path):
+    """Done means (issue 33): all 68 development traces, from TouchSim's s and d through prefilter,
+    rectified weighting and the afferent (noise off), fire TouchSim's spikes on the same samples —
+    one 68-unit population mixing the 17 models, as the shipped graph wires them."""
+    traces = touchsim_traces()
+    n = len(traces[0][1]["s"])
+    assert all(len(tr["s"]) == n for _, tr in traces)
+    p = np.array([tr["p"] for _, tr in traces])
+    models = [".".join(key.split("|")[1:]) for key, _ in traces]  # STIM|SA1|0 -> SA1.0
+    probe = next(line for line in GRAPH.read_text().splitlines() if line.lstrip().startswith("probe:"))
+    doc = GRAPH.read_text().replace(
+        probe, f"  probe: {{block: touchsim_probe, params: {{n: {len(traces)}}}}}"
+    )
+    params = {
+        "pos1": p[:, 1], "neg1": p[:, 2], "pos2": p[:, 3], "neg2": p[:, 4],
+        "ahead_pos": p[:, 5], "ahead_neg": p[:, 6], "saturation": p[:, 7],
+    }  # fmt: skip
+    overrides = ["current.noise_sd=[0.0]"]
+    overrides += [f"afferents.models={models}"]
+    overrides += [f"prefilter_{x}.cutoff_hz={(10 * p[:, 0]).tolist()}" for x in "sd"]
+    overrides += [f"current.{k}={v.tolist()}" for k, v in params.items()]
+    path = tmp_path / "chain.yaml"
+    path.write_text(doc)
+    t = np.arange(n) / 5000.0
+    s = np.stack([tr["s"] for _, tr in traces], axis=1)
+    d = np.stack([tr["d"] for _, tr in traces], axis=1)
+    out = run_graph(path, overrides=overrides, feed={"probe.s": (t, s), "probe.d": (t, d)})
+    spikes = out["afferents.spikes"]
+    samples = np.rint(spikes.t * 5000.0).astype(np.int64)
+    for j, (key, tr) in enumerate(traces):
+        np.testing.assert_array_equal(samples[spikes.data == j], tr["spk"], err_msg=key)

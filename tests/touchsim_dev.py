@@ -1,19 +1,17 @@
-"""TouchSim's development set (../shared/touchsim) for the tests of its stages, and the error bound
+"""TouchSim's development set (tests/data/touchsim_dev.npz) for the tests of its stages, and the error bound
 of scipy's (b, a) filtering that every comparison with TouchSim's own numbers inherits."""
 
 from pathlib import Path
 
 import numpy as np
-import pytest
 
-DEV = Path("/work/shared/touchsim/touchsim_dev.npz")
+DEV = Path(__file__).parent / "data" / "touchsim_dev.npz"
+"""TouchSim's own development set (68 traces made by TouchSim with noise off; see docs/touchsim.md)."""
 EPS = np.finfo(np.float64).eps
 
 
 def touchsim_traces() -> list[tuple[str, dict[str, np.ndarray]]]:
-    """The 68 traces ``STIM|CLASS|IDX`` -> {s, d, I, p, spk}, sorted; skips when the set is absent."""
-    if not DEV.exists():
-        pytest.skip(f"{DEV} (TouchSim's development set) is not on this machine")
+    """The 68 traces ``STIM|CLASS|IDX`` -> {s, d, I, p, spk}, sorted."""
     z = np.load(DEV)
     keys = sorted({k.rsplit("|", 1)[0] for k in z.files})
     return [(k, {f: z[f"{k}|{f}"] for f in ("s", "d", "I", "p", "spk")}) for k in keys]

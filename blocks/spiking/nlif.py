@@ -10,15 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flowtact.block import (
-    BadDataConfig,
-    Block,
-    Example,
-    Port,
-    SpecError,
-    nonfinite_counter_docs,
-    screen_nonfinite,
-)
+import flowtact.api as ft
 from flowtact.blocks.spiking._lif_kernels import (
     NOISE_FILL,
     NOISE_INTERNAL,
@@ -30,11 +22,9 @@ from flowtact.blocks.spiking._lif_kernels import (
     order_within_steps,
     seed_streams,
 )
+from flowtact.blocks.spiking._lif_unit_kernels import lif_units
 from flowtact.blocks.spiking._spike_history import history_table
-from flowtact.chunk import Chunk, StreamSpec
-from flowtact.finite import all_finite
-from flowtact.limits import NOMINAL_RATE_HZ
-from flowtact.params import param
+from flowtact.blocks.spiking.nlif_models import per_unit_models
 
 __all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig"]
 
@@ -48,8 +38,11 @@ _MODEL = (
     "h_weights",
     "h_peaks_s",
     "h_offset_s",
+    "history",
+    "threshold",
+    "threshold_block_s",
 )
-_PER_NEURON = ("tau_s", "v_leak", "gain", "sigma")
+_PER_NEURON = ("tau_s", "v_leak", "gain", "sigma", "threshold")
 _F64 = np.dtype(np.float64)
 #: Neurons per cache tile in the kernels (noise-free runs; see lif_kernels).
 TILE = 4096
@@ -65,38 +58,47 @@ SPIKE_BUFFER_MIN = 4096
 
 
 @dataclass(frozen=True)
-class NlifConfig(BadDataConfig):
-    """Parameters of :class:`Nlif`; each default is the field's own (:data:`NLIF_DEFAULTS` reads them)."""
+class NlifConfig(ft.BadDataConfig):
+    """Parameters of :class:`Nlif`; each default is the field's own (:data:`NLIF_DEFAULTS` reads
+    them). With ``models``, a model parameter not given explicitly comes from the models."""
 
-    n: int = param(1, doc="number of neurons in the population", ge=1)
-    tau_s: float | tuple[float, ...] = param(
+    n: int = ft.param(1, doc="number of neurons in the population (with models: 1 or len(models))", ge=1)
+    models: tuple[str, ...] | None = ft.param(
+        None,
+        doc="one nlif preset per unit (e.g. [SA1.0, RA.3, PC.1] or touch.SA1.0): per-unit parameters "
+        "from each; explicit parameters override them for every unit",
+        min_len=1,
+    )
+    tau_s: float | tuple[float, ...] = ft.param(
         0.01, doc="membrane time constant in s, one value or one per neuron", gt=0
     )
-    v_leak: float | tuple[float, ...] = param(
+    v_leak: float | tuple[float, ...] = ft.param(
         0.0, doc="leak (resting) potential, threshold = 1, reset = 0; one value or n"
     )
-    gain: float | tuple[float, ...] = param(
+    gain: float | tuple[float, ...] = ft.param(
         1.0, doc="drive gain g: the input adds g·x to the membrane target; one value or n"
     )
-    sigma: float | tuple[float, ...] = param(
+    sigma: float | tuple[float, ...] = ft.param(
         0.0,
         doc="noise intensity σ of σ·dW in 1/sqrt(s): stationary sd σ·sqrt(τ/2); one value or n",
         ge=0,
     )
-    refractory_s: float = param(
+    refractory_s: float = ft.param(
         0.0,
         doc="absolute refractory period in s: held at reset, at most 1/refractory_s spikes/s",
         ge=0,
     )
-    integrator: Literal["exp", "euler", "exp_interp"] = param(
+    integrator: Literal["exp", "euler", "exp_interp"] = ft.param(
         "exp",
         doc="exp: exact for held input; euler: Euler-Maruyama; exp_interp: linear input, "
         "interpolated spike times, one sample of latency",
     )
-    h_weights: tuple[float, ...] = param(
-        (), doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none)"
+    h_weights: tuple[float, ...] | tuple[tuple[float, ...], ...] = ft.param(
+        (),
+        doc="post-spike current: weights of the raised-cosine basis columns ([] or all 0: none), "
+        "or one list per unit",
     )
-    h_peaks_s: tuple[float, ...] = param(
+    h_peaks_s: tuple[float, ...] = ft.param(
         (0.002, 0.05),
         doc="post-spike basis: first and last peak times in s",
         ge=0,
@@ -104,35 +106,95 @@ class NlifConfig(BadDataConfig):
         min_len=2,
         max_len=2,
     )
-    h_offset_s: float = param(
+    h_offset_s: float = ft.param(
         0.005, doc="post-spike basis: log-time offset b in s (small = finer early lags)", gt=0
     )
+    history: Literal["sum", "last"] = ft.param(
+        "sum",
+        doc="post-spike current: sum (every past spike's kernel, Rager) or last (only the most "
+        "recent spike's, TouchSim's renewal model)",
+    )
+    threshold: float | tuple[float, ...] = ft.param(
+        1.0, doc="spike threshold (reset 0), one value or n", gt=0
+    )
+    threshold_block_s: float = ft.param(
+        0.0,
+        doc="threshold blocked after a spike (v keeps integrating, unlike refractory_s): intervals "
+        ">= ceil(x/dt) steps",
+        ge=0,
+    )
+
+    @property
+    def size(self) -> int:
+        """Units in the population: ``len(models)`` when models are given, else ``n``."""
+        return len(self.models) if self.models else self.n
 
     def state_bytes(self) -> dict[str, float]:
         """Per neuron: a dozen rows of coefficients and state, a chunk of ``v`` and the post-spike
         history ring (about 2 × the last basis peak at :data:`NOMINAL_RATE_HZ`)."""
-        weights, peaks = self.h_weights, self.h_peaks_s
-        ring = 2.0 * max(peaks) * NOMINAL_RATE_HZ if any(w != 0 for w in weights) else 0.0
-        return {"n": self.n * 8.0 * (80 + ring)}
+        weights = np.ravel(np.asarray(self.h_weights, dtype=np.float64))
+        ring = 2.0 * max(self.h_peaks_s) * ft.NOMINAL_RATE_HZ if np.any(weights != 0) else 0.0
+        return {"n": self.size * 8.0 * (80 + ring)}
+
+    @classmethod
+    def build(cls, params: Mapping[str, Any] | None = None, owner: str | None = None) -> NlifConfig:
+        """As :meth:`Config.build`, with the ``models``' values written into the parameters not
+        given: the config then holds what runs, and ``to_dict()`` builds the same config back
+        (as a worker's plan and a recording's graph do)."""
+        cfg = super().build(params, owner)
+        if not cfg.models:
+            return cfg
+        explicit = cfg.explicit()
+        given = {key: getattr(cfg, key) if key in explicit else None for key in NLIF_DEFAULTS}
+        unit = per_unit_models(cfg, cfg.models, given)
+        if not unit:
+            return cfg
+        return super().build({**(params or {}), **unit}, owner)
+
+    def explicit(self) -> frozenset[str]:
+        """The parameters given (in the graph or as keywords); a config made directly rather than
+        through ``build`` counts those that differ from their defaults."""
+        given = getattr(self, "given", None)
+        if given is not None:
+            return frozenset(given)
+        return frozenset(f.name for f in fields(self) if getattr(self, f.name) != f.default)
 
     def resolved(self) -> dict[str, Any]:
-        """Every model parameter, typed for the kernels (per-neuron values as arrays)."""
-        out: dict[str, Any] = {key: getattr(self, key) for key in _MODEL}
+        """Every model parameter, defaults filled in (per-neuron values as arrays; with history:
+        last, ``h_weights`` is an (n, columns) array)."""
+        n = self.size
+        explicit = self.explicit()
+        given = {key: getattr(self, key) if key in explicit else None for key in NLIF_DEFAULTS}
+        unit = per_unit_models(self, self.models, given) if self.models else {}
+        out: dict[str, Any] = {}
+        for key, default in NLIF_DEFAULTS.items():
+            value = given[key] if given[key] is not None else unit.get(key)
+            out[key] = default if value is None else value
         for key in _PER_NEURON:
             arr = np.atleast_1d(np.asarray(out[key], dtype=np.float64))
-            out[key] = np.broadcast_to(arr, (self.n,)).copy() if arr.shape[0] == 1 else arr
-        out["h_weights"] = tuple(float(w) for w in out["h_weights"])
+            out[key] = np.broadcast_to(arr, (n,)).copy() if arr.shape[0] == 1 else arr
+        w = out["h_weights"]
+        if w and isinstance(w[0], (tuple, list, np.ndarray)):
+            if len(w) != n or len({len(row) for row in w}) != 1:
+                raise self.error("h_weights", f"one list per unit needs {n} lists of one length")
+            out["h_weights"] = np.array(w, dtype=np.float64).reshape(n, -1)
+        else:
+            out["h_weights"] = tuple(float(x) for x in w)
         out["h_peaks_s"] = tuple(float(p) for p in out["h_peaks_s"])
         out["refractory_s"] = float(out["refractory_s"])
         out["h_offset_s"] = float(out["h_offset_s"])
+        out["threshold_block_s"] = float(out["threshold_block_s"])
         return out
 
     def check(self) -> None:
+        if self.models and self.n not in (1, len(self.models)):
+            raise self.error("n", f"must be 1 or len(models) = {len(self.models)}; got {self.n}")
         for key in _PER_NEURON:
             value = getattr(self, key)
-            if isinstance(value, (tuple, list)) and len(value) not in (1, self.n):
-                raise self.error(key, f"must have 1 or n = {self.n} values; got {len(value)}")
+            if isinstance(value, (tuple, list)) and len(value) not in (1, self.size):
+                raise self.error(key, f"must have 1 or n = {self.size} values; got {len(value)}")
         p = self.resolved()
+        self._check_history(p)
         if not (p["tau_s"] > 0).all():
             raise self.error("tau_s", "must be > 0")
         if not (p["sigma"] >= 0).all():
@@ -146,9 +208,10 @@ class NlifConfig(BadDataConfig):
         for key in ("v_leak", "gain"):
             if not np.isfinite(p[key]).all():
                 raise self.error(key, "must be finite")
-        if len(p["h_weights"]) == 1:
+        cols = p["h_weights"].shape[1] if isinstance(p["h_weights"], np.ndarray) else len(p["h_weights"])
+        if cols == 1:
             raise self.error("h_weights", "needs at least 2 basis weights (or none)")
-        if p["h_weights"]:
+        if cols:
             first, last = p["h_peaks_s"]
             if not 0 <= first < last:
                 raise self.error(
@@ -156,6 +219,33 @@ class NlifConfig(BadDataConfig):
                 )
             if not p["h_offset_s"] > 0:
                 raise self.error("h_offset_s", "must be > 0")
+
+    def per_unit(self, p: dict[str, Any]) -> bool:
+        """Whether the population runs on the per-unit kernel (``_lif_unit_kernels``): the last-spike
+        history, per-unit post-spike weights, a threshold other than 1 or a threshold block. Otherwise
+        the shared-parameter kernels run, as before these options existed."""
+        return (
+            p["history"] == "last"
+            or isinstance(p["h_weights"], np.ndarray)
+            or not (p["threshold"] == 1.0).all()
+            or p["threshold_block_s"] > 0.0
+        )
+
+    def _check_history(self, p: dict[str, Any]) -> None:
+        """The options of the per-unit kernel (grid integrators only)."""
+        if p["history"] not in ("sum", "last"):
+            raise self.error("history", f"must be 'sum' or 'last'; got {p['history']!r}")
+        if self.per_unit(p) and p["integrator"] == "exp_interp":
+            raise self.error(
+                "integrator",
+                "exp_interp has no history: last, per-unit h_weights, threshold or threshold block (use exp or euler)",
+            )
+        if isinstance(p["h_weights"], np.ndarray) and not np.isfinite(p["h_weights"]).all():
+            raise self.error("h_weights", "must be finite")
+        if not (p["threshold"] > 0).all() or not np.isfinite(p["threshold"]).all():
+            raise self.error("threshold", "must be finite and > 0")
+        if not p["threshold_block_s"] >= 0:
+            raise self.error("threshold_block_s", "must be >= 0")
 
 
 def _row_buffer(n_rows: int, n: int, first: int = 0) -> np.ndarray:
@@ -169,7 +259,7 @@ def _row_buffer(n_rows: int, n: int, first: int = 0) -> np.ndarray:
 
 
 #: The arrays of a step without spikes, shared by every such chunk (read-only, as chunks' arrays are).
-_NO_SPIKES = Chunk.empty(dtype="int64").readonly()
+_NO_SPIKES = ft.Chunk.empty(dtype="int64").readonly()
 
 
 def _spike_buffers(cap: int, offsets: bool) -> tuple[np.ndarray, ...]:
@@ -180,14 +270,12 @@ def _spike_buffers(cap: int, offsets: bool) -> tuple[np.ndarray, ...]:
     return np.empty(cap, np.int64), np.empty(cap, np.int64)
 
 
-#: The model parameters' defaults, read from :class:`NlifConfig` (their one source).
 NLIF_DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(NlifConfig) if f.name in _MODEL}
+"""Every model parameter's default: the config fields' own (for bench and tests)."""
 
 
-class Nlif(Block):
+class Nlif(ft.Block):
     """A population of N noisy leaky integrate-and-fire neurons (Rager et al. eq. 5–6): drive → spikes.
-
-    The drive ``x`` is the stimulus I_stim, e.g. the Table I weighted sum of forces and derivatives.
 
     Config
     ------
@@ -237,6 +325,15 @@ class Nlif(Block):
       populations run in cache-sized tiles) — identical whatever the chunking.
     * Presets: ``touch.SA1`` / ``touch.FA1`` (``flowtact.blocks.touch.presets``) are the Rager
       afferents; that module justifies each value (the paper does not print τ, V_leak, σ or h).
+    * ``history: last``: only the most recent spike's post-spike current acts,
+      ``I_hist[n] = h((n − m)·dt)`` after the last spike at step ``m`` (a renewal process,
+      TouchSim's afferents). ``threshold_block_s`` blocks the threshold (not the membrane: v keeps
+      integrating) for the steps starting less than it after the spike's step; ``threshold`` and
+      ``h_weights`` may be given per unit. ``models:`` names one preset per unit (``[SA1.0, RA.3,
+      PC.1]``: TouchSim's 17 models, ``flowtact.blocks.touch.touchsim``; or ``[SA1, FA1]``), filling
+      the per-unit parameters from each. Any of these runs the per-unit kernel
+      (``_lif_unit_kernels``, grid integrators only); without them the shared-parameter kernels run
+      as before, bit for bit. docs/touchsim.md.
 
     Example
     -------
@@ -251,7 +348,7 @@ class Nlif(Block):
 
     config_cls = NlifConfig
     inputs = {
-        "x": Port(
+        "x": ft.Port(
             dtype="float64",
             units="1",
             ndim=(0, 1),
@@ -260,49 +357,51 @@ class Nlif(Block):
         )
     }
     outputs = {
-        "spikes": Port(
+        "spikes": ft.Port(
             dtype="int64",
             shape=(),
             units="1",
             events=True,
-            n_units="n",
-            doc="spike times (s) and neuron indices, sorted by time then index. Chunk.end is the "
-            "watermark: time of the last processed sample + dt (nothing more will come before it)",
+            doc="spike times (s) and neuron indices (n_units: n, or len(models)), sorted by time then "
+            "index. Chunk.end is the watermark: time of the last processed sample + dt (nothing more "
+            "will come before it)",
         ),
-        "v": Port(
+        "v": ft.Port(
             dtype="float64",
-            shape=("n",),
             units="1",
-            doc="the membrane (threshold 1) at each input sample's time t_i (before that sample acts; "
-            "after the reset of the previous step), as Brian2's StateMonitor records it. Computed only "
-            "when v is demanded",
+            doc="the membrane (threshold 1), shape (n,), at each input sample's time t_i (before that "
+            "sample acts; after the reset of the previous step), as Brian2's StateMonitor records it. "
+            "Computed only when v is demanded",
         ),
     }
-    counter_docs = nonfinite_counter_docs("drive samples on 'x'")
+    counter_docs = ft.nonfinite_counter_docs("drive samples on 'x'")
 
     # -- specs -------------------------------------------------------------------------------
-    def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:
-        n = self.config.n
+    def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
+        n = self.config.size
         x = inputs["x"]
         if x.shape not in ((), (n,)):
-            raise SpecError(
+            raise ft.SpecError(
                 "x", f"{self.node}: input 'x' must have shape () or ({n},) for n = {n}; got {x.shape}"
             )
         p = self.config.resolved()
         dt = 1.0 / x.rate_hz
         if p["integrator"] == "euler" and (dt >= 2.0 * p["tau_s"]).any():
-            raise SpecError(
+            raise ft.SpecError(
                 "x",
                 f"{self.node}: euler is unstable for dt >= 2·tau (dt = {dt:g} s, min tau = "
                 f"{p['tau_s'].min():g} s); use integrator: exp",
             )
-        return super().specs(inputs)  # the declared ports: n_units and shape from n, x's rate
+        return {
+            "spikes": ft.StreamSpec(dtype="int64", shape=(), units="1", events=True, n_units=n),
+            "v": ft.StreamSpec(dtype="float64", shape=(n,), units="1", rate_hz=x.rate_hz),
+        }
 
     # -- state -------------------------------------------------------------------------------
     def reset(self) -> None:
         p = self.config.resolved()
         spec = self.input_specs["x"]
-        n = self.config.n
+        n = self.config.size
         self._n = n
         self._m = 1 if spec.shape == () else n
         self._dt = dt = 1.0 / float(spec.rate_hz)  # type: ignore[arg-type]
@@ -328,7 +427,10 @@ class Nlif(Block):
         self._refc = rows[len(coef) + 2].view(np.int64)[:n]
         self._work = rows[len(coef) + 3 :]
         self._xbuf = _row_buffer(1, max(NOISE_FILL, n), len(coef) + 3 + n_work)[0]
-        w = p["h_weights"]
+        self._units = self.config.per_unit(p)
+        if self._units:
+            self._reset_units(p, dt)
+        w = () if self._units else p["h_weights"]
         if w and any(x != 0.0 for x in w):
             self._h = history_table(w, p["h_peaks_s"], p["h_offset_s"], dt)
             self._ring = np.zeros((n, len(self._h) - 1))  # (N, L): see _spike_history
@@ -353,23 +455,48 @@ class Nlif(Block):
         self._want_v = "v" in self.demanded
         self._want_spikes = "spikes" in self.demanded
 
+    def _reset_units(self, p: dict[str, Any], dt: float) -> None:
+        """State of the per-unit kernel: thresholds, the basis columns any unit weights (J, L + 2; the
+        last entry 0, where lags past the kernel are capped), lags since the last spike (capped: the
+        first spike is never blocked), the threshold block in steps, and the summed mode's ring."""
+        n = self._n
+        w = p["h_weights"]
+        if not isinstance(w, np.ndarray):
+            w = np.broadcast_to(np.array(w, dtype=np.float64), (n, len(w)))
+        self._n_block = max(0, math.ceil(p["threshold_block_s"] / dt - 1e-9) - 1)
+        used = [j for j in range(w.shape[1]) if (w[:, j] != 0.0).any()]
+        eye = np.eye(w.shape[1])
+        cols = [history_table(eye[j], p["h_peaks_s"], p["h_offset_s"], dt) for j in used]
+        # the lag cap (last entry) must exceed both the kernel and the threshold block
+        width = max([len(c) + 1 for c in cols] + [self._n_block + 2])
+        self._basis = np.zeros((len(used), width))
+        for r, c in enumerate(cols):
+            self._basis[r, 1 : len(c)] = c[1:]  # lag 0 is never read
+        self._w = np.ascontiguousarray(w[:, used].T)
+        self._thr = p["threshold"].copy()
+        self._lag = np.full(n, width - 1, np.int64)
+        summed = p["history"] == "sum" and len(used) > 0
+        self._unit_ring = np.zeros((n, width - 2 if summed else 0))
+        self._unit_pos = 0
+        self._xi_step = np.zeros(n)
+
     # -- stepping ----------------------------------------------------------------------------
-    def _empty(self) -> dict[str, Chunk]:
+    def _empty(self) -> dict[str, ft.Chunk]:
         out = {}
         if "spikes" in self.demanded:
-            out["spikes"] = Chunk.empty(dtype="int64", end=self._end)
+            out["spikes"] = ft.Chunk.empty(dtype="int64", end=self._end)
         if "v" in self.demanded:
-            out["v"] = Chunk.empty(shape=(self._n,))
+            out["v"] = ft.Chunk.empty(shape=(self._n,))
         return out
 
-    def step(self, x: Chunk) -> dict[str, Chunk]:
+    def step(self, x: ft.Chunk) -> dict[str, ft.Chunk]:
         if x.t.shape[0] == 0:
             return self._empty()
         u = x.data
         if u.dtype is not _F64 or not u.flags.c_contiguous:
             u = np.ascontiguousarray(u, dtype=np.float64)
-        if not all_finite(u):
-            x, self._last = screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
+        if not ft.all_finite(u):
+            x, self._last = ft.screen_nonfinite(self, x, self.config.on_bad_data, "x", self._last)
             if len(x) == 0:
                 return self._empty()
             u = np.ascontiguousarray(x.data, dtype=np.float64)
@@ -398,7 +525,14 @@ class Nlif(Block):
             need = min(SPIKE_RESERVE_MAX, math.ceil(steps_in * self._spike_rate * 1.25))
             if need > self._spk[0].shape[0]:
                 self._spk = _spike_buffers(need, self._interp)
-        if self._interp:
+        if self._units:
+            steps, idx, n, self._unit_pos = lif_units(
+                u, self._coef, self._thr, self._w, self._basis, self._v, self._lag, self._refc, self._n_block,
+                self._n_clamp, self._unit_ring, self._unit_pos, self._noise, self._rng_state, self._no_xi,
+                self._xi_step, v_out, *self._spk,
+            )  # fmt: skip
+            self._spk, offs = (steps, idx), None
+        elif self._interp:
             steps, offs, idx, n, self._pos = lif_interp(
                 u_first, u, self._dt, self._coef, self._v, self._rl, self._ref_s, self._ring, self._pos,
                 self._h, self._noise, self._rng_state, self._no_xi, self._work, self._xbuf, v_out, TILE, *self._spk,
@@ -414,7 +548,7 @@ class Nlif(Block):
             self._spike_rate = n / steps_in
         return steps[:n], None if offs is None else offs[:n], idx[:n]
 
-    def _step_grid(self, t: np.ndarray, u: np.ndarray) -> dict[str, Chunk]:
+    def _step_grid(self, t: np.ndarray, u: np.ndarray) -> dict[str, ft.Chunk]:
         want_v = self._want_v
         v_out = np.empty((t.shape[0], self._n)) if want_v else self._no_v
         steps, _, idx = self.integrate(u, v_out=v_out)
@@ -423,15 +557,15 @@ class Nlif(Block):
         out = {}
         if self._want_spikes:
             out["spikes"] = (
-                Chunk(t[steps], idx.copy(), self._end)
+                ft.Chunk(t[steps], idx.copy(), self._end)
                 if n_spk
-                else Chunk(_NO_SPIKES.t, _NO_SPIKES.data, self._end)
+                else ft.Chunk(_NO_SPIKES.t, _NO_SPIKES.data, self._end)
             )
         if want_v:
-            out["v"] = Chunk(t, v_out)
+            out["v"] = ft.Chunk(t, v_out)
         return out
 
-    def _step_interp(self, t: np.ndarray, u: np.ndarray) -> dict[str, Chunk]:
+    def _step_interp(self, t: np.ndarray, u: np.ndarray) -> dict[str, ft.Chunk]:
         want_v = "v" in self.demanded
         first_v = None
         if self._u_prev is None:
@@ -453,14 +587,14 @@ class Nlif(Block):
         if want_v:
             vt = t if first_v is not None else t_end
             vd = v_out if first_v is None else np.concatenate([first_v[None, :], v_out])
-            out["v"] = Chunk(vt, vd)
+            out["v"] = ft.Chunk(vt, vd)
         return out
 
     def _run_interp(self, u_first: np.ndarray, u: np.ndarray, want_v: bool):  # type: ignore[no-untyped-def]
         v_out = np.empty((len(u), self._n)) if want_v else self._no_v
         return self.integrate(u, u_first, v_out), v_out
 
-    def _spike_chunk(self, steps: np.ndarray, times: np.ndarray, idx: np.ndarray) -> Chunk:
+    def _spike_chunk(self, steps: np.ndarray, times: np.ndarray, idx: np.ndarray) -> ft.Chunk:
         """Interpolated spikes (in step, neuron order) as a chunk sorted by time, then neuron; the
         neurons copied out of the block's buffer."""
         if len(times) > 1:
@@ -468,9 +602,9 @@ class Nlif(Block):
             times, idx = times[order], idx[order]
         else:
             idx = idx.copy()
-        return Chunk(np.asarray(times, np.float64), idx, self._end)
+        return ft.Chunk(np.asarray(times, np.float64), idx, self._end)
 
-    def flush(self) -> dict[str, Chunk]:
+    def flush(self) -> dict[str, ft.Chunk]:
         if self._method != "exp_interp" or self._u_prev is None:
             return {}
         # the last sample's step, integrated with the input held at its value
@@ -482,10 +616,10 @@ class Nlif(Block):
         return {"spikes": self._spike_chunk(s, times, k)} if "spikes" in self.demanded else {}
 
     @classmethod
-    def example(cls) -> Example:
+    def example(cls) -> ft.Example:
         t = np.arange(1500) / 1000.0
         drive = 0.06 + 0.05 * np.sin(2 * np.pi * 3 * t) + 0.08 * (t > 0.7)
-        return Example(
+        return ft.Example(
             params={
                 "n": 8,
                 "tau_s": 0.01,

@@ -49,6 +49,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from flowtact.blocks.touch.touchsim import TOUCHSIM_PRESETS
+
 __all__ = ["NEURON_PRESETS", "PRESETS", "TABLE_I", "table_i_weights"]
 
 #: (w1 … w9) per population: Fx, Fy, Fz, Fx', Fy', Fz', Fx'', Fy'', Fz''.
@@ -104,5 +106,5 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         }
         for pop in TABLE_I
     },
-    "nlif": NEURON_PRESETS,
+    "nlif": {**NEURON_PRESETS, **TOUCHSIM_PRESETS},  # Rager's SA1/FA1, TouchSim's SA1.0 … PC.3
 }
