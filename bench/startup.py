@@ -10,6 +10,7 @@ transport suite does): the steady state. The figure is the 2-hop stream's p99 la
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -19,7 +20,10 @@ from typing import Any
 
 from flowtact.bench.transport import CHAIN, CHAIN_STREAM, parse_summary
 from flowtact.benchmark import Context, Suite
+from flowtact.runtime.forked import NO_FORK_ENV
 
+TOUCH = "touch"
+"""The shipped graph whose start-up is timed, by name (installed with flowtact)."""
 MAX_RATIO = 2.0
 """The first seconds' p99 may be at most this many times the steady state's (set in issue 14)."""
 COMPILED = re.compile(r"(\d+) kernels? compiled in ([\d.]+) s")
@@ -49,7 +53,44 @@ def chain_run(seconds: float, cache: str, from_start: bool, timeout_s: float = 6
     }
 
 
+def touch_startup(fork: bool) -> dict[str, Any]:
+    """launch → graph time 0 of graphs/touch.yaml (warm numba cache), its workers forked or not."""
+    cmd = [sys.executable, "-m", "flowtact.cli", "run", TOUCH, "--duration", "0.2", "--json", "--quiet"]
+    env = {k: v for k, v in os.environ.items() if k != NO_FORK_ENV}
+    if not fork:
+        env[NO_FORK_ENV] = "1"
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    if proc.returncode != 0:
+        raise RuntimeError(f"flowtact run touch.yaml exited with {proc.returncode}:\n{proc.stderr[-2000:]}")
+    s = json.loads(proc.stdout)
+    return {"startup_s": s["startup_s"], "parts": s["startup_parts"]}
+
+
+def start_up_of_touch(ctx: Context) -> None:
+    """Cached start-up of touch.yaml with workers forked from the run against started as their own
+    interpreters (``FLOWTACT_NO_FORK=1``, as before forking), alternated so load moves both alike."""
+    rounds = 3 if ctx.quick else 7
+    touch_startup(True)  # the cache is warm for both from here on
+    forked, own = [], []
+    for i in range(rounds):
+        ctx.step(f"touch.yaml start-up, round {i + 1}/{rounds}: forked workers, then their own interpreters")
+        forked.append(touch_startup(True))
+        own.append(touch_startup(False))
+    key = "touch.yaml launch → graph time 0, workers as their own interpreters (cached)"
+    ctx.figure(key, [r["startup_s"] for r in own], "s", "lower", is_baseline=True, reference=True)
+    ctx.figure(
+        "touch.yaml launch → graph time 0, workers forked from the run (cached)",
+        [r["startup_s"] for r in forked],
+        "s",
+        "lower",
+        baseline=key,
+        paired=True,
+    )
+    ctx.data["touch_startup"] = {"forked": forked, "own_interpreters": own}
+
+
 def run(ctx: Context) -> None:
+    start_up_of_touch(ctx)
     seconds = 3.0 if ctx.quick else 10.0
     rounds = 1 if ctx.quick else 3
     first: list[dict[str, Any]] = []
@@ -102,12 +143,14 @@ def run(ctx: Context) -> None:
 SUITE = Suite(
     name="startup",
     title="Start-up: the first seconds of a first real-time run after a fresh install",
-    measures="p99 latency of bench/graphs/chain.yaml's 2-hop stream at 1 kHz in real time, over the first "
+    measures="launch → graph time 0 of graphs/touch.yaml (cached) with workers forked from the run and as "
+    "their own interpreters; p99 latency of bench/graphs/chain.yaml's 2-hop stream at 1 kHz in real time, over the first "
     "seconds of a run whose numba cache is empty (every kernel compiles, as after an install), and the "
     "kernels compiled and seconds spent compiling before the workers said ready.",
-    baseline="the same graph run right after with the cache warm (the steady state), in the same round",
+    baseline="workers as their own interpreters (FLOWTACT_NO_FORK=1), alternated with forked ones; the chain "
+    "graph run right after with the cache warm (the steady state), in the same round",
     run=run,
-    minutes_quick=0.8,
+    minutes_quick=1.0,
     minutes_full=3.0,
     processes=(1, 1),  # every sample already comes from fresh processes
 )
