@@ -127,3 +127,36 @@ def test_a_shipped_graph_runs_bit_identically_over_the_toy_link():
     _, local = _run(text, "local", 0.5, 0.01, overrides=sets)
     _, toy = _run(text, "toy_copying", 0.5, 0.01, overrides=sets)
     assert local.streams and toy.joined() == local.joined()
+
+
+class CopyingExecutor(InprocExecutor):
+    """A toy executor found by name: the in-process engine over the toy link."""
+
+    @classmethod
+    def for_run(cls, plan, options):
+        return cls(
+            plan, fast=options.fast, tick_s=options.tick_s, recorder=options.recorder, link="toy_copying"
+        )
+
+
+def test_run_plan_finds_its_executor_by_name_in_the_registry():
+    from flowtact.launch import run_plan
+    from flowtact.runtime.executors import EXECUTORS, executor_for, register_executor
+
+    register_executor("toy_copying", CopyingExecutor)
+    try:
+        plan = compile_graph(load_graph("g.yaml", text=LOOP, allow_modules=TEST_BLOCKS))
+        CopyingLink.made.clear()
+        toy, local = Memory(), Memory()
+        run_plan(plan, duration_s=0.5, tick_s=0.01, executor="toy_copying", sink=toy)
+        assert len(CopyingLink.made) == 5  # the run went through the registered executor
+        plan = compile_graph(load_graph("g.yaml", text=LOOP, allow_modules=TEST_BLOCKS))
+        run_plan(plan, duration_s=0.5, tick_s=0.01, inproc=True, sink=local)
+        assert toy.joined() == local.joined() and len(local.joined()["b.y"][0]) == 500 * 8
+        assert executor_for("inproc") is InprocExecutor
+        with pytest.raises(
+            ValueError, match=r"unknown executor 'nope' \(known: inproc, processes, toy_copying\)"
+        ):
+            executor_for("nope")
+    finally:
+        EXECUTORS.pop("toy_copying", None)

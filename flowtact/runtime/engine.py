@@ -25,7 +25,7 @@ from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
 from flowtact.runtime.sealing import sealed
-from flowtact.runtime.step_plan import NodePlan, OutPlan, build_plans, takes_first, tallies
+from flowtact.runtime.step_plan import OutPlan, WiredNode, build_plans, takes_first, tallies
 
 __all__ = ["Engine", "NodeError", "Sink", "check_chunk"]
 
@@ -87,7 +87,7 @@ class Engine:
         """Samples and events per delivered stream, in the order they first delivered."""
         return tallies(self._delivered)
 
-    def step(self, nodes: Iterable[NodePlan], now: float, flush: bool = False) -> None:  # noqa: C901 — the hot loop, inline on purpose (see the docstring)
+    def step(self, nodes: Iterable[WiredNode], now: float, flush: bool = False) -> None:  # noqa: C901 — the hot loop, inline on purpose (see the docstring)
         """Step each node in ``nodes`` on its inboxes (a non-source only when something came), or
         ``flush`` it, and put each demanded output, admitted (:meth:`_admit`), on its links and
         hand it to the recorder.

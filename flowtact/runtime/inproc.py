@@ -16,6 +16,7 @@ from flowtact.block import Block
 from flowtact.compile import Plan
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
 from flowtact.runtime.engine import Engine, NodeError, Sink, check_chunk
+from flowtact.runtime.executors import RunOptions
 from flowtact.runtime.stats import format_factor
 from flowtact.runtime.warm_up import warm_up_here
 
@@ -209,6 +210,13 @@ class InprocExecutor:
             plan.bind(n, block)
         self.engine = Engine(plan, self.blocks, recorder=recorder, link=link)
         self._made = time.perf_counter()  # start-up counts from here: the blocks were just made
+
+    @classmethod
+    def for_run(cls, plan: Plan, options: RunOptions) -> InprocExecutor:
+        """The executor ``flowtact run --inproc`` makes: warmed up as a worker is, so kernel
+        loading is start-up, apart from the running time."""
+        o = options
+        return cls(plan, fast=o.fast, tick_s=o.tick_s, recorder=o.recorder, progress=o.progress, warm_up=True)
 
     def run(self, duration_s: float | None) -> RunSummary:
         """Run until ``duration_s`` of graph time (None: until interrupted; realtime only)."""

@@ -20,7 +20,7 @@ from flowtact.chunk import Chunk, StreamSpec
 from flowtact.compile import Plan
 from flowtact.runtime.links import Link, link_kind
 
-__all__ = ["NodePlan", "OutPlan", "build_plans", "takes_first", "tallies"]
+__all__ = ["OutPlan", "WiredNode", "build_plans", "takes_first", "tallies"]
 
 
 @dataclass(slots=True, eq=False)
@@ -47,8 +47,8 @@ class OutPlan:
 
 
 @dataclass(slots=True, eq=False)
-class NodePlan:
-    """One active node: its block, its inputs and its demanded outputs."""
+class WiredNode:
+    """One active node wired for the engine: its block, its inboxes and its demanded outputs' links."""
 
     name: str
     block: Block
@@ -70,9 +70,9 @@ class NodePlan:
 
 def build_plans(
     plan: Plan, blocks: dict[str, Block], link: str = "local"
-) -> tuple[list[NodePlan], list[Link]]:
+) -> tuple[list[WiredNode], list[Link]]:
     """Node plans in execution order, every edge a link of kind ``link``, and every link made."""
-    nodes: dict[str, NodePlan] = {}
+    nodes: dict[str, WiredNode] = {}
     boxes: dict[tuple[str, str], list[Chunk]] = {}
     kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
 
@@ -90,7 +90,7 @@ def build_plans(
             spec = block.input_specs[p]
             inputs.append((p if p in passed else None, box, Chunk.empty(spec).readonly(), spec))
         in_kind = kind_of(inputs[0][3]) if inputs else None
-        nodes[n] = NodePlan(n, block, isinstance(block, Source), tuple(inputs), in_kind=in_kind)
+        nodes[n] = WiredNode(n, block, isinstance(block, Source), tuple(inputs), in_kind=in_kind)
     make = link_kind(link)
     links: list[Link] = []
     routes: dict[tuple[str, str], list[Link]] = {}

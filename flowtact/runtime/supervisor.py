@@ -48,6 +48,7 @@ from flowtact.errors import FlowtactError
 from flowtact.python_child import python_command
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.compile_notice import CompileNotices
+from flowtact.runtime.executors import RunOptions
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.rundir import make_run_folder
@@ -164,6 +165,21 @@ class ProcessExecutor:
             for n, p in plan.record
             if n in plan.demanded
         }
+
+    @classmethod
+    def for_run(cls, plan: Plan, options: RunOptions) -> ProcessExecutor:
+        """The executor ``flowtact run`` makes by default."""
+        o = options
+        return cls(
+            plan,
+            fast=o.fast,
+            tick_s=o.tick_s,
+            recorder=o.recorder,
+            progress=o.progress,
+            live=o.live,
+            warn=o.warn,
+            startup_s=o.startup_s,
+        )
 
     # -- public -----------------------------------------------------------------------------
     def run(self, duration_s: float | None) -> RunSummary:

@@ -65,7 +65,7 @@ from flowtact.runtime.placement import spec_from_wire
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.warm_up import CompileWatch, settle_heap, warm_up
 from flowtact.runtime.wire import END, recv_message, send_message
-from flowtact.runtime.worker_plan import NO_ORIGINS, NodePlan, OutPort, merge_origins, take
+from flowtact.runtime.worker_plan import NO_ORIGINS, OutPort, WorkerNode, merge_origins, take
 
 __all__ = ["BEAT_S", "ORPHAN_S", "Worker", "main"]
 
@@ -418,7 +418,7 @@ class Worker:
 
     def _plan_nodes(self, plan: dict[str, Any]) -> None:
         """Resolve once what every node's step reads and where each output goes (see worker_plan)."""
-        self.plans = [NodePlan(n, self.blocks[n], self.needed[n], self.src_idx.get(n)) for n in self.order]
+        self.plans = [WorkerNode(n, self.blocks[n], self.needed[n], self.src_idx.get(n)) for n in self.order]
         by_name = {nd.name: nd for nd in self.plans}
         for nd in self.plans:
             for port in sorted(self.demanded[nd.name]):
@@ -649,10 +649,10 @@ class Worker:
             if ob.sent_tick < k:
                 self._send_out(ob, k, ob.empty, {})
 
-    def _step(self, nd: NodePlan, k: int, now: float, avail: float) -> None:
+    def _step(self, nd: WorkerNode, k: int, now: float, avail: float) -> None:
         """Step node ``nd`` on what reached it up to tick ``avail`` (a source: every tick).
 
-        ``step`` is called directly (``NodePlan.call``) with every needed input, an empty chunk
+        ``step`` is called directly (``WorkerNode.call``) with every needed input, an empty chunk
         where nothing came; a node other than a source steps only when something came (data or a
         watermark). A node whose one input is ``step``'s first parameter gets it by position.
         """
@@ -690,7 +690,7 @@ class Worker:
         self._deliver(nd, out, k, origins)
 
     @staticmethod
-    def _gather(nd: NodePlan, avail: float) -> tuple[dict[str, Chunk], dict[int, int], bool, bool]:
+    def _gather(nd: WorkerNode, avail: float) -> tuple[dict[str, Chunk], dict[int, int], bool, bool]:
         """Node ``nd``'s inputs up to tick ``avail`` (see :func:`~flowtact.runtime.worker_plan.take`),
         the oldest origin per source behind their data, whether anything came (data or a
         watermark) and whether samples came."""
@@ -715,7 +715,7 @@ class Worker:
                     origins = o
         return ins, origins, came, samples
 
-    def _deadlines(self, nd: NodePlan, origins: dict[int, int]) -> None:
+    def _deadlines(self, nd: WorkerNode, origins: dict[int, int]) -> None:
         t = time.monotonic_ns()
         for d in nd.deadlines:
             if origins.get(d.src, 0) >= self.warm_ns:
@@ -725,7 +725,7 @@ class Worker:
                     d.violations += 1
                     d.worst_ns = max(d.worst_ns, lat)
 
-    def _deliver(self, nd: NodePlan, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
+    def _deliver(self, nd: WorkerNode, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
         """Hand each demanded output to its local consumers (sealed read-only), its remote streams
         and the recorder, once it has passed the common case of :func:`check_chunk` (the full
         check names a bug)."""
