@@ -9,9 +9,10 @@ import pytest
 from runs import TEST_BLOCKS, flowtact
 
 from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.deployment import Flow
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
-from flowtact.runtime.placement import spec_to_wire
+from flowtact.runtime.protocol import InboundStream
 from flowtact.runtime.supervisor import WorkerFailed
 from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound
 from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
@@ -179,9 +180,9 @@ def test_a_block_in_a_worker_cannot_write_what_it_receives(tmp_path, source, whe
 
 def _inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:
     """A block stream as a worker holds it, having received ``messages`` carrying ``samples``."""
-    d = {"id": 0, "stream": "s.y", "spec": spec_to_wire(spec), "policy": "block", "queue": 1000,
-         "dsts": [], "same_host": True}  # fmt: skip
-    ib = _Inbound(d)
+    ib = _Inbound(
+        InboundStream(id=0, stream="s.y", spec=spec, flow=Flow("block", 1000), dsts=(), same_host=True)
+    )
     ib.messages, ib.samples = messages, samples
     return ib
 

@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import msgpack
 import zmq
 
 from flowtact.compile import Plan
@@ -51,6 +50,7 @@ from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.executors import RunOptions
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
 from flowtact.runtime.placement import Placement, place
+from flowtact.runtime.protocol import Op, decode, encode
 from flowtact.runtime.rundir import make_run_folder
 from flowtact.runtime.stats import LatencyHistogram, format_factor
 from flowtact.runtime.warm_up import warm_shared_kernels
@@ -365,21 +365,20 @@ class ProcessExecutor:
     def _bind_addresses(self, proc: _Proc) -> dict[int, str]:
         """Where each of the group's incoming streams is bound."""
         out = {}
-        for d in self.wplans[proc.name]["inbound"]:
-            sid = d["id"]
+        for d in self.wplans[proc.name].inbound:
+            sid = d.id
             if sid in proc.endpoints:  # a restart binds where the producers already connect
                 out[sid] = proc.endpoints[sid]
-            elif d["same_host"] and proc.host is None:
+            elif d.same_host and proc.host is None:
                 out[sid] = f"ipc://{self.rundir}/s{sid}-{proc.name}"
             else:
                 host = proc.host or self.plan.graph.deployment.network.listen
                 out[sid] = f"tcp://{host}:0"
         return out
 
-    def _send(self, proc: _Proc, op: str, **kw: Any) -> None:
-        kw["op"] = op
+    def _send(self, proc: _Proc, op: Op, **kw: Any) -> None:
         with contextlib.suppress(zmq.ZMQError):  # the worker is gone; its process watch reports it
-            proc.sock.send_multipart([proc.ident, msgpack.packb(kw)])  # type: ignore[union-attr]
+            proc.sock.send_multipart([proc.ident, encode(op, **kw)])  # type: ignore[union-attr]
 
     def _start_all(self) -> bool:
         """Handshake: hello -> plan -> ready -> wire -> wired -> start; False if interrupted first."""
@@ -399,7 +398,7 @@ class ProcessExecutor:
                 self._pump(50)
             except _Failure as f:
                 self._failed(f)  # under restart: on-failure the group starts again
-            if all(p.endpoints or not self.wplans[p.name]["inbound"] for p in self.procs.values()) and all(
+            if all(p.endpoints or not self.wplans[p.name].inbound for p in self.procs.values()) and all(
                 p.state in ("ready", "wiring", "wired") for p in self.procs.values()
             ):
                 for p in self.procs.values():
@@ -410,7 +409,7 @@ class ProcessExecutor:
         self.go_ns = t0 if not self.fast else t0 - 20_000_000  # --fast workers start at once
         self.t_run = time.monotonic()
         for p in self.procs.values():
-            self._send(p, "start", t0_ns=t0, k0=0, resume=False)
+            self._send(p, Op.START, t0_ns=t0, k0=0, resume=False)
             self._running(p)
         return True
 
@@ -461,11 +460,11 @@ class ProcessExecutor:
 
     def _wire(self, proc: _Proc) -> None:
         connect: dict[int, dict[str, str]] = {}
-        for d in self.wplans[proc.name]["outbound"]:
-            connect.setdefault(d["id"], {})[d["group"]] = self.procs[d["group"]].endpoints[d["id"]]
+        for d in self.wplans[proc.name].outbound:
+            connect.setdefault(d.id, {})[d.group] = self.procs[d.group].endpoints[d.id]
         remote = proc.host is not None
         record = self.tcp_rec if remote else f"ipc://{self.rundir}/rec"
-        self._send(proc, "wire", connect=connect, record=record)
+        self._send(proc, Op.WIRE, connect=connect, record=record)
         proc.state = "wiring"
 
     # -- the pump: every phase runs it ------------------------------------------------------
@@ -481,7 +480,7 @@ class ProcessExecutor:
             self.next_ping = now + PING_S
             for p in self.procs.values():
                 if p.ident is not None:
-                    self._send(p, "ping")
+                    self._send(p, Op.PING)
             if self.t0_ns:
                 self._check_overload()
                 if self.live is not None:
@@ -496,7 +495,7 @@ class ProcessExecutor:
             if sock is self.ctl or sock is self.ctl_tcp:
                 while sock.getsockopt(_EVENTS) & _POLLIN:  # not zmq.Again: an exception per wake-up
                     ident, raw = sock.recv_multipart(zmq.NOBLOCK)
-                    self._on_control(sock, ident, msgpack.unpackb(raw, strict_map_key=False))
+                    self._on_control(sock, ident, decode(raw))
             else:
                 self._drain_records(sock)
 
@@ -516,12 +515,12 @@ class ProcessExecutor:
 
     def _on_control(self, sock: zmq.Socket, ident: bytes, msg: dict[str, Any]) -> None:
         op = msg["op"]
-        if op == "beat":  # from the worker's heartbeat thread (a socket of its own)
+        if op is Op.BEAT:  # from the worker's heartbeat thread (a socket of its own)
             proc = self.procs.get(msg["process"])
             if proc is not None and msg["pid"] == proc.pid:
                 self._on_beat(proc, msg)
             return
-        if op == "hello":
+        if op is Op.HELLO:
             proc = self.procs.get(msg["process"])
             if proc is None:
                 return
@@ -530,38 +529,38 @@ class ProcessExecutor:
             proc.ident, proc.sock, proc.pid = ident, sock, msg["pid"]
             proc.progress_at, proc.phase = time.monotonic(), "waiting for its plan"
             self.by_ident[ident] = proc
-            self._send(proc, "plan", plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
+            self._send(proc, Op.PLAN, plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
             proc.state = "planned"
             return
         proc = self.by_ident.get(ident)
         if proc is None:
             return
         proc.progress_at = time.monotonic()  # every message before the start is start-up progress
-        if op == "ready":
+        if op is Op.READY:
             self.compiles.on_ready(proc.describe(), msg)
             proc.endpoints = {int(k): v for k, v in msg["endpoints"].items()}
             proc.state = "ready"
             if proc.restarts and self.t0_ns:  # a restart after the start rejoins the running graph
                 self._wire(proc)
-        elif op == "wired":
+        elif op is Op.WIRED:
             proc.wired = True
             if proc.restarts and self.t0_ns:
-                self._send(proc, "start", t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
+                self._send(proc, Op.START, t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
                 self._running(proc)
                 if self.stopped:
-                    self._send(proc, "stop", k=self.stop_k)
+                    self._send(proc, Op.STOP, k=self.stop_k)
             else:
                 proc.state = "wired"
-        elif op == "stats":
+        elif op is Op.STATS:
             self._on_stats(proc, msg)
-        elif op == "done":
+        elif op is Op.DONE:
             self._on_stats(proc, msg)
             proc.counters = msg.get("counters", {})
             proc.summaries = msg.get("summaries", {})
             proc.done = True
             self.last_done_ns = time.monotonic_ns()
             proc.state = "done"
-        elif op == "error":
+        elif op is Op.ERROR:
             raise _Failure(proc, msg)
 
     def _on_beat(self, proc: _Proc, beat: dict[str, Any]) -> None:
@@ -733,7 +732,7 @@ class ProcessExecutor:
         self.stop_k = k
         for p in self.procs.values():
             if p.ident is not None:
-                self._send(p, "stop", k=k)
+                self._send(p, Op.STOP, k=k)
 
     def _draining(self) -> str:
         left = [p for p in self.procs.values() if not p.done]
@@ -778,7 +777,7 @@ class ProcessExecutor:
 
     def _drain_until_records_end(self) -> None:
         """Write what is still in flight: every recording worker ends its records with a marker."""
-        expected = sum(1 for g in self.procs if self.wplans[g]["record"])
+        expected = sum(1 for g in self.procs if self.wplans[g].record)
         deadline = time.monotonic() + 5.0
         while self.rec_ends < expected and time.monotonic() < deadline:
             self.poller.poll(50)
@@ -791,7 +790,7 @@ class ProcessExecutor:
             self.shared_warm.join()  # a compile under way ends before the interpreter does
         for p in self.procs.values():
             if p.ident is not None:
-                self._send(p, "abort" if failed else "exit")
+                self._send(p, Op.ABORT if failed else Op.EXIT)
         deadline = time.monotonic() + 2.0
         for p in self.procs.values():
             if p.popen is None:
@@ -880,7 +879,7 @@ class ProcessExecutor:
                 sid = int(sid)
                 name = self.placement.stream_name(sid)
                 key = name if len(self.placement.consumers(sid)) == 1 else f"{name}@{p.name}"
-                policy, _queue = self.placement.crossings[(sid, p.name)]
+                policy = self.placement.crossings[(sid, p.name)].policy
                 out[key] = {
                     "to": p.name,
                     "policy": policy,

@@ -19,7 +19,7 @@ made it, so latency is transport, not the source's own work. In ``--fast`` runs 
 sources that already holds ticks ``k+1..K`` on every input steps once at ``K`` when
 :func:`~flowtact.runtime.worker_plan.ticks_mergeable` says no result can depend on it.
 
-Lifecycle, driven by the supervisor over the control socket (msgpack dicts): hello -> plan ->
+Lifecycle, driven by the supervisor over the control socket (typed messages, :mod:`flowtact.runtime.protocol`): hello -> plan ->
 ready (bound endpoints) -> wire (connect) -> wired -> start -> stats -> done -> exit. A stop
 names the tick every worker ends on (``stop`` with ``k``), so a loop through several processes
 ends on the same tick everywhere and drains like the end of a timed run.
@@ -53,15 +53,23 @@ import traceback
 from collections import deque
 from typing import Any
 
-import msgpack
 import numpy as np
 import zmq
 
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.deployment import Flow
 from flowtact.registry import load_block
 from flowtact.runtime.inproc import block_summaries, check_chunk
-from flowtact.runtime.placement import spec_from_wire
+from flowtact.runtime.protocol import (
+    DeadlinePlan,
+    InboundStream,
+    Op,
+    OutboundStream,
+    WorkerPlan,
+    decode,
+    encode,
+)
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.warm_up import CompileWatch, settle_heap, warm_up
 from flowtact.runtime.wire import END, recv_message, send_message
@@ -120,14 +128,13 @@ class Stop(Exception):
 class _Inbound:
     """A stream arriving from another process: its socket, what was received, its statistics."""
 
-    def __init__(self, d: dict[str, Any]) -> None:
-        self.id: int = d["id"]
-        self.name: str = d["stream"]
-        self.spec: StreamSpec = spec_from_wire(d["spec"])
-        self.policy: str = d["policy"]
-        self.queue: int = d["queue"]
-        self.dsts: list[tuple[str, str, bool]] = [tuple(x) for x in d["dsts"]]  # type: ignore[misc]
-        self.same_host: bool = d["same_host"]
+    def __init__(self, d: InboundStream) -> None:
+        self.id = d.id
+        self.name = d.stream
+        self.spec: StreamSpec = d.spec
+        self.flow: Flow = d.flow
+        self.dsts = d.dsts
+        self.same_host = d.same_host
         self.sock: zmq.Socket | None = None
         self.targets: list[tuple[deque[Any], bool]] = []  # input queues it feeds (queue, delayed)
         self.upto = 0  # highest tick received
@@ -146,13 +153,12 @@ class _Inbound:
 class _Outbound:
     """A stream leaving for another process."""
 
-    def __init__(self, d: dict[str, Any]) -> None:
-        self.id: int = d["id"]
-        self.node: str = d["node"]
-        self.port: str = d["port"]
-        self.group: str = d["group"]
-        self.policy: str = d["policy"]
-        self.queue: int = d["queue"]
+    def __init__(self, d: OutboundStream) -> None:
+        self.id = d.id
+        self.node = d.node
+        self.port = d.port
+        self.group = d.group
+        self.flow: Flow = d.flow
         self.sock: zmq.Socket | None = None
         self.seq = 0
         self.sent_tick = 0
@@ -161,11 +167,11 @@ class _Outbound:
 
 
 class _Deadline:
-    def __init__(self, d: dict[str, Any]) -> None:
-        self.name: str = d["name"]
-        self.src: int = d["src_idx"]
-        self.dst: str = d["dst"]
-        self.budget_ns = int(d["budget_s"] * 1e9)
+    def __init__(self, d: DeadlinePlan) -> None:
+        self.name = d.name
+        self.src = d.src_idx
+        self.dst = d.dst
+        self.budget_ns = int(d.budget_s * 1e9)
         self.hist = LatencyHistogram()
         self.violations = 0
         self.worst_ns = 0
@@ -225,29 +231,28 @@ class Worker:
         self.heart = _Heartbeat(self, control)
 
     # -- control ----------------------------------------------------------------------------
-    def _send(self, op: str, **kw: Any) -> None:
-        kw["op"] = op
-        self.ctl.send(msgpack.packb(kw, default=_plain))
+    def _send(self, op: Op, **kw: Any) -> None:
+        self.ctl.send(encode(op, **kw))
 
     def _recv_ctl(self, timeout_ms: int) -> dict[str, Any] | None:
         if not self.ctl.poll(timeout_ms):
             return None
-        msg = msgpack.unpackb(self.ctl.recv(), strict_map_key=False)
+        msg = decode(self.ctl.recv())
         self.last_ping = time.monotonic()
         return msg
 
-    def _expect(self, op: str) -> dict[str, Any]:
+    def _expect(self, op: Op) -> dict[str, Any]:
         """Wait for control message ``op`` for as long as the supervisor lives (it keeps time)."""
         while True:
             msg = self._recv_ctl(POLL_MS)
             if msg is None:
                 self._check_orphan()
                 continue
-            if msg["op"] == op:
+            if msg["op"] is op:
                 return msg
-            if msg["op"] in ("abort", "exit"):
+            if msg["op"] in (Op.ABORT, Op.EXIT):
                 raise Stop
-            if msg["op"] == "stop":
+            if msg["op"] is Op.STOP:
                 self.stop_k = min(self.stop_k, int(msg["k"]))
 
     def _check_orphan(self) -> None:
@@ -260,7 +265,7 @@ class Worker:
     def _service(self) -> None:
         """Handle pending control messages (pings, stop, abort) without blocking; send statistics."""
         while self.ctl.getsockopt(_EVENTS) & _POLLIN:
-            self._control(msgpack.unpackb(self.ctl.recv(), strict_map_key=False))
+            self._control(decode(self.ctl.recv()))
             self.last_ping = time.monotonic()
         self._check_orphan()
         now_ns = time.monotonic_ns()
@@ -270,7 +275,7 @@ class Worker:
         now = now_ns / 1e9
         if now >= self.next_beat:
             self.next_beat = now + HEARTBEAT_S
-            self._send("stats", **self._stats())
+            self._send(Op.STATS, **self._stats())
 
     def _flush_records(self) -> None:
         """Send every recorded stream's coalesced chunks to the recorder (one message each)."""
@@ -300,30 +305,30 @@ class Worker:
 
     def serve(self) -> int:
         """Run the whole lifecycle; returns the process exit status."""
-        self._send("hello", process=self.process, pid=os.getpid(), host=socket.gethostname())
+        self._send(Op.HELLO, process=self.process, pid=os.getpid(), host=socket.gethostname())
         self.heart.start()
         try:
             self._phase("waiting for the plan")
-            msg = self._expect("plan")
+            msg = self._expect(Op.PLAN)
             self._build(msg["plan"])
             self._warm_up()
             self._phase("binding its inputs")
             self._bind(msg["bind"])
             self._send(
-                "ready",
+                Op.READY,
                 endpoints={i.id: i.sock.last_endpoint.decode() for i in self.inbound.values()},
                 compiled=self.warm_report.total_compiled,
                 compile_s=self.compiles.seconds,
             )
             self._phase("waiting for the other processes")
-            wire = self._expect("wire")
+            wire = self._expect(Op.WIRE)
             self._phase("connecting its outputs")
             self._connect(wire["connect"], wire["record"])
             try:
                 self._open()  # devices, cameras, weights: before the clock starts, not on its time
-                self._send("wired")
+                self._send(Op.WIRED)
                 self._phase("waiting for the start")
-                start = self._expect("start")
+                start = self._expect(Op.START)
                 self.t0_ns = start["t0_ns"] or time.monotonic_ns()
                 self.warm_ns = self.t0_ns + int(_latency_from_s() * 1e9)
                 self.k = int(start.get("k0", 0))
@@ -331,19 +336,19 @@ class Worker:
                 self._finish()  # steps and flushes the blocks once more: before they are closed
             finally:
                 self._close_blocks()
-            self._expect("exit")
+            self._expect(Op.EXIT)
             return 0
         except Stop:
             self._salvage_records()
             return 0
         except _NodeFailure as f:
             self._salvage_records()
-            self._send("error", **f.report)
+            self._send(Op.ERROR, **f.report)
             return 1
         except Exception as e:  # noqa: BLE001 — any framework failure is reported to the supervisor, not lost
             self._salvage_records()
             self._send(
-                "error",
+                Op.ERROR,
                 node=None,
                 block=None,
                 now=None,
@@ -357,10 +362,10 @@ class Worker:
                 self.auth.stop()
             self.ctx.destroy()  # each socket's own linger: the control socket's last words get out
 
-    def _build(self, plan: dict[str, Any]) -> None:
-        self.fast: bool = plan["fast"]
-        self.tick_s: float = plan["tick_s"]
-        self.duration_s: float | None = plan["duration_s"]
+    def _build(self, plan: WorkerPlan) -> None:
+        self.fast = plan.fast
+        self.tick_s = plan.tick_s
+        self.duration_s = plan.duration_s
         self.n_ticks = (
             math.ceil(self.duration_s / self.tick_s - 1e-9) if self.duration_s is not None else None
         )
@@ -370,45 +375,41 @@ class Worker:
         self.needed: dict[str, list[str]] = {}
         self.demanded: dict[str, frozenset[str]] = {}
         self.out_specs: dict[str, dict[str, StreamSpec]] = {}
-        for nd in plan["nodes"]:
-            self.busy = nd["name"]
-            self._phase(f"building node '{nd['name']}' ({nd['block']})")
-            allow = plan["allow_modules"] if self.allow_modules is None else self.allow_modules
-            cls = load_block(nd["block"], allow)
-            block = cls(cls.config_cls.build(nd["params"], owner=nd["name"]), node=nd["name"])
-            specs = block.bind(
-                {p: spec_from_wire(s) for p, s in nd["inputs"].items()},
-                seed=nd["seed"],
-                demanded=frozenset(nd["demanded"]),
-            )
-            name = nd["name"]
+        for nd in plan.nodes:
+            self.busy = nd.name
+            self._phase(f"building node '{nd.name}' ({nd.block})")
+            allow = plan.allow_modules if self.allow_modules is None else self.allow_modules
+            cls = load_block(nd.block, allow)
+            block = cls(cls.config_cls.build(nd.params, owner=nd.name), node=nd.name)
+            specs = block.bind(dict(nd.inputs), seed=nd.seed, demanded=frozenset(nd.demanded))
+            name = nd.name
             self.order.append(name)
             self.blocks[name] = block
-            self.needed[name] = nd["needed"]
-            self.demanded[name] = frozenset(nd["demanded"])
+            self.needed[name] = list(nd.needed)
+            self.demanded[name] = frozenset(nd.demanded)
             self.out_specs[name] = specs
-            if nd["src_idx"] is not None:
-                self.src_idx[name] = nd["src_idx"]
+            if nd.src_idx is not None:
+                self.src_idx[name] = nd.src_idx
         self.busy = None
         self.max_lag_s = 0.0
         self.merged_ticks = 0  # real-time ticks taken together to catch up with the clock
         self.sources = [n for n in self.order if isinstance(self.blocks[n], Source)]
-        self.inbound = {d["id"]: _Inbound(d) for d in plan["inbound"]}
+        self.inbound = {d.id: _Inbound(d) for d in plan.inbound}
         self.remote_inputs: dict[str, list[tuple[_Inbound, bool]]] = {n: [] for n in self.order}
         for ib in self.inbound.values():
             for dst, _port, delayed in ib.dsts:
                 if (ib, delayed) not in self.remote_inputs[dst]:
                     self.remote_inputs[dst].append((ib, delayed))
-        self.outbound = [_Outbound(d) for d in plan["outbound"]]
-        self.recorded = {(n, p): sid for n, p, sid in plan["record"]}
+        self.outbound = [_Outbound(d) for d in plan.outbound]
+        self.recorded = {(r.node, r.port): r.id for r in plan.record}
         self.deadlines = {}
-        for d in plan["deadlines"]:
-            self.deadlines.setdefault(d["dst"], []).append(_Deadline(d))
+        for d in plan.deadlines:
+            self.deadlines.setdefault(d.dst, []).append(_Deadline(d))
         self._plan_nodes(plan)
-        self.block_inputs = [ib for ib in self.inbound.values() if ib.policy == "block"]
-        self.latest_inputs = [ib for ib in self.inbound.values() if ib.policy == "latest"]
+        self.block_inputs = [ib for ib in self.inbound.values() if ib.flow.policy == "block"]
+        self.latest_inputs = [ib for ib in self.inbound.values() if ib.flow.policy == "latest"]
         # --fast, no sources here, a graph where merging cannot change a result (ticks_mergeable)
-        self.merge = bool(plan.get("merge_ticks")) and not self.sources and not self.latest_inputs
+        self.merge = plan.merge_ticks and not self.sources and not self.latest_inputs
         self.now = 0.0
         self.next_beat = 0.0
         self.next_service = 0
@@ -416,7 +417,7 @@ class Worker:
         self.warm_ns = 0  # data that left its source before this is start-up, not transport
         self.ends_seen = 0  # END markers received (of any input)
 
-    def _plan_nodes(self, plan: dict[str, Any]) -> None:
+    def _plan_nodes(self, plan: WorkerPlan) -> None:
         """Resolve once what every node's step reads and where each output goes (see worker_plan)."""
         self.plans = [WorkerNode(n, self.blocks[n], self.needed[n], self.src_idx.get(n)) for n in self.order]
         by_name = {nd.name: nd for nd in self.plans}
@@ -426,7 +427,9 @@ class Worker:
             nd.deadlines = self.deadlines.get(nd.name, [])
             nd.remote = self.remote_inputs[nd.name]
         queue = {(nd.name, ip.name): ip.queue for nd in self.plans for ip in nd.inputs}
-        for src, sport, dst, dport, delayed in plan["edges"]:
+        for src, sport, dst, dport, delayed in (
+            (e.src, e.src_port, e.dst, e.dst_port, e.delayed) for e in plan.edges
+        ):
             if sport in by_name[src].outputs:  # an output nobody demands is never delivered
                 by_name[src].outputs[sport].local.append((queue[(dst, dport)], delayed))
         for ib in self.inbound.values():
@@ -437,7 +440,7 @@ class Worker:
         for (n, p), sid in self.recorded.items():
             by_name[n].outputs[p].record = sid
         self.recorded_ports = [o for nd in self.plans for o in nd.outputs.values() if o.record is not None]
-        self.lossless_out = [ob for ob in self.outbound if ob.policy == "block"]
+        self.lossless_out = [ob for ob in self.outbound if ob.flow.policy == "block"]
 
     def _warm_up(self) -> None:
         """Load or compile every kernel the run will call, before the worker says ready (warm_up.py)."""
@@ -469,7 +472,7 @@ class Worker:
     def _bind(self, bind: dict[int, str]) -> None:
         for ib in self.inbound.values():
             endpoint = bind[ib.id]
-            ib.sock = self._socket(zmq.PULL, endpoint, ib.queue)
+            ib.sock = self._socket(zmq.PULL, endpoint, ib.flow.queue)
             ib.sock.setsockopt(zmq.RCVTIMEO, POLL_MS)  # _fetch's blocking recv hears control meanwhile
             if endpoint.startswith("tcp://") and endpoint.endswith(":0"):
                 ib.sock.bind_to_random_port(endpoint.rsplit(":", 1)[0])
@@ -481,7 +484,7 @@ class Worker:
         for ib in self.latest_inputs:
             self._latest_poller.register(ib.sock, zmq.POLLIN)
         for ob in self.outbound:
-            ob.sock = self._socket(zmq.PUSH, connect[ob.id][ob.group], ob.queue)
+            ob.sock = self._socket(zmq.PUSH, connect[ob.id][ob.group], ob.flow.queue)
             ob.sock.connect(connect[ob.id][ob.group])
         if record is not None and self.recorded:
             self.rec = self._socket(zmq.PUSH, record, 1000)
@@ -605,7 +608,7 @@ class Worker:
     def _drain(self, ib: _Inbound) -> None:
         """Accept what block stream ``ib`` holds (at most its queue bound), without waiting."""
         sock = ib.sock
-        budget = ib.queue
+        budget = ib.flow.queue
         while budget and not ib.ended and sock.getsockopt(_EVENTS) & _POLLIN:  # type: ignore[union-attr]
             m = recv_message(sock, zmq.NOBLOCK)  # type: ignore[arg-type]
             self._accept(ib, m, m.tick)
@@ -626,9 +629,9 @@ class Worker:
                 time.sleep(remaining)
 
     def _control(self, msg: dict[str, Any]) -> None:
-        if msg["op"] == "stop":
+        if msg["op"] is Op.STOP:
             self.stop_k = min(self.stop_k, int(msg["k"]))
-        elif msg["op"] in ("abort", "exit"):
+        elif msg["op"] in (Op.ABORT, Op.EXIT):
             raise Stop
 
     def _wait_latest(self) -> bool:
@@ -767,11 +770,11 @@ class Worker:
 
     def _send_out(self, ob: _Outbound, k: int, chunk: Chunk, origins: dict[int, int]) -> None:
         """Send a chunk; ``latest`` streams skip empty chunks and drop what the queue cannot hold."""
-        if not chunk.t.shape[0] and chunk.end is None and (ob.policy == "latest" or ob.sent_tick == k):
+        if not chunk.t.shape[0] and chunk.end is None and (ob.flow.policy == "latest" or ob.sent_tick == k):
             return
         if send_message(ob.sock, ob.id, ob.seq, k, chunk, origins, nowait=True):  # type: ignore[arg-type]
             ob.seq += 1
-        elif ob.policy == "block":  # the consumer's queue is full: wait for room
+        elif ob.flow.policy == "block":  # the consumer's queue is full: wait for room
             self._send_lossless(ob.sock, ob.id, ob.seq, k, chunk, origins)  # type: ignore[arg-type]
             ob.seq += 1
         else:
@@ -791,7 +794,7 @@ class Worker:
         """
         if ib.ended:
             return
-        if ib.policy == "latest":
+        if ib.flow.policy == "latest":
             self._fetch_latest(ib)
             return
         sock = ib.sock
@@ -810,7 +813,7 @@ class Worker:
         a full queue holds the *oldest* backlog. While a drain fills the queue, wait
         :data:`LATEST_DRAIN_MS` and drain again: the backlog is read through to its newest end.
         """
-        got: deque[Any] = deque(maxlen=ib.queue)
+        got: deque[Any] = deque(maxlen=ib.flow.queue)
         received = 0
         sock = ib.sock
         while True:
@@ -819,7 +822,7 @@ class Worker:
                 got.append(recv_message(sock, zmq.NOBLOCK))  # type: ignore[arg-type]
                 batch += 1
             received += batch
-            if batch < ib.queue or not sock.poll(LATEST_DRAIN_MS):  # type: ignore[union-attr]
+            if batch < ib.flow.queue or not sock.poll(LATEST_DRAIN_MS):  # type: ignore[union-attr]
                 break
         ib.dropped += received - len(got)
         for m in got:
@@ -876,7 +879,7 @@ class Worker:
             self._flush_records()
             self._send_lossless(self.rec, -1, 0, k, Chunk.empty(), flags=END)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
-        self._send("done", **self._stats(), counters=counters, summaries=block_summaries(self.blocks))
+        self._send(Op.DONE, **self._stats(), counters=counters, summaries=block_summaries(self.blocks))
 
     # -- statistics -------------------------------------------------------------------------
     def _stats(self) -> dict[str, Any]:
@@ -944,7 +947,6 @@ class _Heartbeat:
         try:
             while not self.stopped.wait(BEAT_S):
                 beat = {
-                    "op": "beat",
                     "process": w.process,
                     "pid": pid,
                     "k": w.k,
@@ -960,7 +962,7 @@ class _Heartbeat:
                     "sent_ns": time.monotonic_ns(),  # rates from the sender's clock, not arrivals
                 }
                 with contextlib.suppress(zmq.Again):
-                    sock.send(msgpack.packb(beat), zmq.NOBLOCK)
+                    sock.send(encode(Op.BEAT, **beat), zmq.NOBLOCK)
         finally:
             sock.close(linger=0)
 
@@ -982,12 +984,6 @@ def _latency_from_s() -> float:
     with contextlib.suppress(KeyError, ValueError):
         return max(float(os.environ["FLOWTACT_LATENCY_FROM_S"]), 0.0)
     return LATENCY_WARMUP_S
-
-
-def _plain(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"cannot send {type(obj).__name__}")
 
 
 def _die_with_parent() -> None:
