@@ -12,9 +12,10 @@ from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.deployment import Flow
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.runtime.links.zeromq.streams import MERGE_MAX_BYTES, ZmqInbound
 from flowtact.runtime.protocol import InboundStream
 from flowtact.runtime.supervisor import WorkerFailed
-from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound
+from flowtact.runtime.worker import FOREVER, Worker
 from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
 
 pytestmark = pytest.mark.slow
@@ -178,9 +179,9 @@ def test_a_block_in_a_worker_cannot_write_what_it_receives(tmp_path, source, whe
         run_plan(load_plan(path, allow_modules=TEST_BLOCKS), duration_s=0.05, fast=True)
 
 
-def _inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:
+def _inbound(spec: StreamSpec, messages: int, samples: int) -> ZmqInbound:
     """A block stream as a worker holds it, having received ``messages`` carrying ``samples``."""
-    ib = _Inbound(
+    ib = ZmqInbound(
         InboundStream(id=0, stream="s.y", spec=spec, flow=Flow("block", 1000), dsts=(), same_host=True)
     )
     ib.messages, ib.samples = messages, samples

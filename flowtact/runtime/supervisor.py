@@ -49,12 +49,13 @@ from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.executors import RunOptions
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
+from flowtact.runtime.links.zeromq.streams import bind_address
+from flowtact.runtime.links.zeromq.wire import recv_message
 from flowtact.runtime.placement import Placement, place
 from flowtact.runtime.protocol import Op, decode, encode
 from flowtact.runtime.rundir import make_run_folder
 from flowtact.runtime.stats import LatencyHistogram, format_factor
 from flowtact.runtime.warm_up import warm_shared_kernels
-from flowtact.runtime.wire import recv_message
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
 
@@ -303,7 +304,12 @@ class ProcessExecutor:
         self.poller.register(self.rec, zmq.POLLIN)
         self.tcp_ctl = self.tcp_rec = None
         if remote:
-            from flowtact.runtime.security import Authenticator, HandshakeWatch, load_keys, secure_server
+            from flowtact.runtime.links.zeromq.security import (
+                Authenticator,
+                HandshakeWatch,
+                load_keys,
+                secure_server,
+            )
 
             net = self.plan.graph.deployment.network
             keys = net.keys
@@ -369,11 +375,10 @@ class ProcessExecutor:
             sid = d.id
             if sid in proc.endpoints:  # a restart binds where the producers already connect
                 out[sid] = proc.endpoints[sid]
-            elif d.same_host and proc.host is None:
-                out[sid] = f"ipc://{self.rundir}/s{sid}-{proc.name}"
             else:
-                host = proc.host or self.plan.graph.deployment.network.listen
-                out[sid] = f"tcp://{host}:0"
+                out[sid] = bind_address(
+                    str(self.rundir), d, proc.name, proc.host, self.plan.graph.deployment.network.listen
+                )
         return out
 
     def _send(self, proc: _Proc, op: Op, **kw: Any) -> None:
@@ -445,7 +450,7 @@ class ProcessExecutor:
 
     def _report_refusals(self) -> None:
         """Say so when a host tries to join with another key (ZAP refusal or a failed handshake)."""
-        from flowtact.runtime.security import SecurityError
+        from flowtact.runtime.links.zeromq.security import SecurityError
 
         seen = self.refused_seen
         for refused in self.auth.refused[seen:]:  # type: ignore[union-attr]

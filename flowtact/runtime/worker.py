@@ -50,29 +50,31 @@ import sys
 import threading
 import time
 import traceback
-from collections import deque
 from typing import Any
 
-import numpy as np
 import zmq
 
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.deployment import Flow
 from flowtact.registry import load_block
 from flowtact.runtime.inproc import block_summaries, check_chunk
+from flowtact.runtime.links.zeromq.streams import (
+    POLL_MS,
+    ZmqInbound,
+    ZmqOutbound,
+    record_socket,
+    send_lossless,
+)
+from flowtact.runtime.links.zeromq.wire import END, send_message
 from flowtact.runtime.protocol import (
     DeadlinePlan,
-    InboundStream,
     Op,
-    OutboundStream,
     WorkerPlan,
     decode,
     encode,
 )
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.warm_up import CompileWatch, settle_heap, warm_up
-from flowtact.runtime.wire import END, recv_message, send_message
 from flowtact.runtime.worker_plan import NO_ORIGINS, OutPort, WorkerNode, merge_origins, take
 
 __all__ = ["BEAT_S", "ORPHAN_S", "Worker", "main"]
@@ -86,24 +88,15 @@ HEARTBEAT_S = 0.25
 LATENCY_WARMUP_S = 1.0
 """Latencies count for data that left its source this long after the start: loading JIT-compiled
 kernels and first allocations are start-up, not transport."""
-POLL_MS = 100
-"""Longest wait on a socket before the worker hears its supervisor (control, heartbeat)."""
 _EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
 """As plain ints: ``getsockopt(_EVENTS) & _POLLIN`` is an int ``&``, where ``get(zmq.EVENTS) &
 zmq.POLLIN`` builds enum members for the operands too. pyzmq still makes one for the option it
-reads, so an events check is never free: the tick path does without it (see ``_fetch``)."""
-LATEST_DRAIN_MS = 1
-"""A ``latest`` input whose receive queue was full is drained again after waiting this long for
-what ZeroMQ still moves in from the kernel: what reaches the consumer is the newest, not the oldest."""
+reads, so an events check is never free (the control socket is read every :data:`CONTROL_NS`)."""
 MERGE_MAX_S = 0.1
 """A worker behind the wall clock merges at most this much graph time into one tick."""
 STOP_MERGE_MAX_S = 1.0
 """... and this much once a stop is asked: a run far behind real time (an overloaded machine) then
 drains its backlog to the stop tick in a tenth of the ticks, within ``stop_grace_s``."""
-MERGE_MAX_BYTES = 1 << 20
-"""--fast: one merged step takes at most about this much data per input. Merging saves per-message
-costs; past a MiB it only builds arrays that leave the cache (frames merged 1 000 at a time ran
-at 0.85x the rate of frames merged 64 at a time)."""
 COALESCE_TICKS = 32
 COALESCE_S = 0.0005
 """--fast: a merging worker whose inputs hold fewer than COALESCE_TICKS ticks (or a merge's worth of
@@ -123,47 +116,6 @@ FOREVER = 2**62
 
 class Stop(Exception):
     """The supervisor asked this worker to abort at once."""
-
-
-class _Inbound:
-    """A stream arriving from another process: its socket, what was received, its statistics."""
-
-    def __init__(self, d: InboundStream) -> None:
-        self.id = d.id
-        self.name = d.stream
-        self.spec: StreamSpec = d.spec
-        self.flow: Flow = d.flow
-        self.dsts = d.dsts
-        self.same_host = d.same_host
-        self.sock: zmq.Socket | None = None
-        self.targets: list[tuple[deque[Any], bool]] = []  # input queues it feeds (queue, delayed)
-        self.upto = 0  # highest tick received
-        self.ended = False
-        self.messages = self.samples = self.dropped = self.gaps = 0
-        self.next_seq = 0
-        self.hist = LatencyHistogram()
-        self.sample_bytes = np.dtype(self.spec.dtype).itemsize * self.spec.size
-
-    def merge_cap(self) -> int:
-        """Ticks of this stream one merged step may take: about MERGE_MAX_BYTES of data."""
-        per_tick = self.sample_bytes * self.samples / max(self.messages, 1)
-        return max(1, int(MERGE_MAX_BYTES // max(per_tick, 1.0)))
-
-
-class _Outbound:
-    """A stream leaving for another process."""
-
-    def __init__(self, d: OutboundStream) -> None:
-        self.id = d.id
-        self.node = d.node
-        self.port = d.port
-        self.group = d.group
-        self.flow: Flow = d.flow
-        self.sock: zmq.Socket | None = None
-        self.seq = 0
-        self.sent_tick = 0
-        self.dropped = 0
-        self.empty: Chunk | None = None  # the empty chunk that closes a tick with nothing in it
 
 
 class _Deadline:
@@ -199,12 +151,12 @@ class Worker:
         self.ctl.setsockopt(zmq.LINGER, 2000)
         self.auth = None
         if control.startswith("tcp://") or keys_dir:  # a graph across hosts: CURVE on every tcp socket
-            from flowtact.runtime.security import Authenticator, load_keys
+            from flowtact.runtime.links.zeromq.security import Authenticator, load_keys
 
             self.keys = load_keys(keys_dir)
             self.auth = Authenticator(self.ctx, self.keys).start()
         if control.startswith("tcp://"):
-            from flowtact.runtime.security import HandshakeWatch, secure_client
+            from flowtact.runtime.links.zeromq.security import HandshakeWatch, secure_client
 
             secure_client(self.ctl, self.keys)
             watch = HandshakeWatch(self.ctl)
@@ -313,10 +265,10 @@ class Worker:
             self._build(msg["plan"])
             self._warm_up()
             self._phase("binding its inputs")
-            self._bind(msg["bind"])
+            endpoints = self._bind(msg["bind"])
             self._send(
                 Op.READY,
-                endpoints={i.id: i.sock.last_endpoint.decode() for i in self.inbound.values()},
+                endpoints=endpoints,
                 compiled=self.warm_report.total_compiled,
                 compile_s=self.compiles.seconds,
             )
@@ -394,13 +346,13 @@ class Worker:
         self.max_lag_s = 0.0
         self.merged_ticks = 0  # real-time ticks taken together to catch up with the clock
         self.sources = [n for n in self.order if isinstance(self.blocks[n], Source)]
-        self.inbound = {d.id: _Inbound(d) for d in plan.inbound}
-        self.remote_inputs: dict[str, list[tuple[_Inbound, bool]]] = {n: [] for n in self.order}
+        self.inbound = {d.id: ZmqInbound(d) for d in plan.inbound}
+        self.remote_inputs: dict[str, list[tuple[ZmqInbound, bool]]] = {n: [] for n in self.order}
         for ib in self.inbound.values():
             for dst, _port, delayed in ib.dsts:
                 if (ib, delayed) not in self.remote_inputs[dst]:
                     self.remote_inputs[dst].append((ib, delayed))
-        self.outbound = [_Outbound(d) for d in plan.outbound]
+        self.outbound = [ZmqOutbound(d) for d in plan.outbound]
         self.recorded = {(r.node, r.port): r.id for r in plan.record}
         self.deadlines = {}
         for d in plan.deadlines:
@@ -459,37 +411,18 @@ class Worker:
         self.busy = None
         settle_heap()
 
-    def _socket(self, kind: int, endpoint: str, hwm: int) -> zmq.Socket:
-        s = self.ctx.socket(kind)
-        s.setsockopt(zmq.SNDHWM if kind == zmq.PUSH else zmq.RCVHWM, hwm)
-        s.setsockopt(zmq.LINGER, 0)
-        if endpoint.startswith("tcp://") and self.keys is not None:
-            from flowtact.runtime.security import secure_client, secure_server
-
-            (secure_client if kind == zmq.PUSH else secure_server)(s, self.keys)
-        return s
-
-    def _bind(self, bind: dict[int, str]) -> None:
-        for ib in self.inbound.values():
-            endpoint = bind[ib.id]
-            ib.sock = self._socket(zmq.PULL, endpoint, ib.flow.queue)
-            ib.sock.setsockopt(zmq.RCVTIMEO, POLL_MS)  # _fetch's blocking recv hears control meanwhile
-            if endpoint.startswith("tcp://") and endpoint.endswith(":0"):
-                ib.sock.bind_to_random_port(endpoint.rsplit(":", 1)[0])
-            else:
-                ib.sock.bind(endpoint)
+    def _bind(self, bind: dict[int, str]) -> dict[int, str]:
+        """Bind every incoming stream where the supervisor says; the addresses bound, by stream id."""
+        return {ib.id: ib.bind(self.ctx, bind[ib.id], self.keys) for ib in self.inbound.values()}
 
     def _connect(self, connect: dict[int, dict[str, str]], record: str | None) -> None:
         self._latest_poller = zmq.Poller()
         for ib in self.latest_inputs:
             self._latest_poller.register(ib.sock, zmq.POLLIN)
         for ob in self.outbound:
-            ob.sock = self._socket(zmq.PUSH, connect[ob.id][ob.group], ob.flow.queue)
-            ob.sock.connect(connect[ob.id][ob.group])
+            ob.connect(self.ctx, connect[ob.id][ob.group], self.keys)
         if record is not None and self.recorded:
-            self.rec = self._socket(zmq.PUSH, record, 1000)
-            self.rec.setsockopt(zmq.LINGER, 500)
-            self.rec.connect(record)
+            self.rec = record_socket(self.ctx, record, self.keys)
 
     def _open(self) -> None:
         self.opened: list[Block] = []
@@ -568,7 +501,7 @@ class Worker:
         self.k = k
         for ob in self.lossless_out:
             if ob.sent_tick < k - 1:
-                self._send_out(ob, k - 1, ob.empty, {})
+                ob.send(k - 1, ob.empty, {}, self._service)  # type: ignore[arg-type]
 
     def _merge_ahead(self) -> None:
         """--fast: take every tick all block inputs already hold in this one (see ticks_mergeable).
@@ -598,21 +531,16 @@ class Worker:
                 upto, self.k - 1 + cap, self.stop_k, self.n_ticks if self.n_ticks is not None else FOREVER
             )
 
-    def _consumed(self, ib: _Inbound) -> bool:
+    def _consumed(self, ib: ZmqInbound) -> bool:
         """Has block stream ``ib`` ended, and have the ticks it carried all been stepped?
 
         A drain may read a stream's END ahead of the ticks queued before it: those still run.
         """
         return ib.ended and ib.upto <= self.k
 
-    def _drain(self, ib: _Inbound) -> None:
+    def _drain(self, ib: ZmqInbound) -> None:
         """Accept what block stream ``ib`` holds (at most its queue bound), without waiting."""
-        sock = ib.sock
-        budget = ib.flow.queue
-        while budget and not ib.ended and sock.getsockopt(_EVENTS) & _POLLIN:  # type: ignore[union-attr]
-            m = recv_message(sock, zmq.NOBLOCK)  # type: ignore[arg-type]
-            self._accept(ib, m, m.tick)
-            budget -= 1
+        ib.drain(self._accept)
 
     def _wait_clock(self, now: float) -> None:
         target = self.t0_ns + int(now * 1e9)
@@ -646,11 +574,11 @@ class Worker:
     def _tick(self, k: int, now: float) -> None:
         for nd in self.plans:
             for ib, delayed in nd.remote:
-                self._fetch(ib, k - 1 if delayed else k)
+                ib.fetch(k - 1 if delayed else k, self._accept, self._service)
             self._step(nd, k, now, k)
         for ob in self.lossless_out:  # a block stream carries every tick, empty or not
             if ob.sent_tick < k:
-                self._send_out(ob, k, ob.empty, {})
+                ob.send(k, ob.empty, {}, self._service)  # type: ignore[arg-type]
 
     def _step(self, nd: WorkerNode, k: int, now: float, avail: float) -> None:
         """Step node ``nd`` on what reached it up to tick ``avail`` (a source: every tick).
@@ -756,7 +684,7 @@ class Worker:
                 for q, delayed in o.local:
                     q.append((k + 1 if delayed else k, chunk, origins))
             for ob in o.outbound:
-                self._send_out(ob, k, chunk, origins)
+                ob.send(k, chunk, origins, self._service)
             if o.record is not None and (n or chunk.end is not None):
                 o.keep_record(chunk)
                 if len(o.rec_buf) >= RECORD_MAX_CHUNKS:
@@ -764,71 +692,9 @@ class Worker:
 
     def _send_lossless(self, sock: zmq.Socket, *args: Any, **kw: Any) -> None:
         """Send, waiting while the consumer's queue is full, and still hear the supervisor meanwhile."""
-        while not send_message(sock, *args, nowait=True, **kw):
-            sock.poll(POLL_MS, zmq.POLLOUT)
-            self._service()
+        send_lossless(sock, self._service, *args, **kw)
 
-    def _send_out(self, ob: _Outbound, k: int, chunk: Chunk, origins: dict[int, int]) -> None:
-        """Send a chunk; ``latest`` streams skip empty chunks and drop what the queue cannot hold."""
-        if not chunk.t.shape[0] and chunk.end is None and (ob.flow.policy == "latest" or ob.sent_tick == k):
-            return
-        if send_message(ob.sock, ob.id, ob.seq, k, chunk, origins, nowait=True):  # type: ignore[arg-type]
-            ob.seq += 1
-        elif ob.flow.policy == "block":  # the consumer's queue is full: wait for room
-            self._send_lossless(ob.sock, ob.id, ob.seq, k, chunk, origins)  # type: ignore[arg-type]
-            ob.seq += 1
-        else:
-            ob.dropped += 1
-        ob.sent_tick = k
-
-    def _fetch(self, ib: _Inbound, tick: int) -> None:
-        """Receive what stream ``ib`` holds for ticks up to ``tick`` (block) or what is there (latest).
-
-        A block stream waits as raw pyzmq does, in a blocking ``recv`` (its socket's receive
-        timeout is :data:`POLL_MS`, so ``zmq.Again`` is raised only by a stream idle that long, to
-        hear the supervisor), one message per ``recv`` until the tick is here. A message already
-        queued is one ``recv`` that returns at once; asking the socket whether more are queued
-        (``getsockopt(EVENTS)``, as ``_drain`` does for ``--fast`` merging: pyzmq builds an enum
-        member for every option it reads) costs several times that, every tick, and in real time
-        there is rarely more.
-        """
-        if ib.ended:
-            return
-        if ib.flow.policy == "latest":
-            self._fetch_latest(ib)
-            return
-        sock = ib.sock
-        while ib.upto < tick and not ib.ended:
-            try:
-                m = recv_message(sock)  # type: ignore[arg-type]
-            except zmq.Again:
-                self._service()
-                continue
-            self._accept(ib, m, m.tick)
-
-    def _fetch_latest(self, ib: _Inbound) -> None:
-        """Take the newest ``queue`` messages of a ``latest`` stream; count the older ones as dropped.
-
-        ZeroMQ moves messages from the kernel into the receive queue only as the queue empties, so
-        a full queue holds the *oldest* backlog. While a drain fills the queue, wait
-        :data:`LATEST_DRAIN_MS` and drain again: the backlog is read through to its newest end.
-        """
-        got: deque[Any] = deque(maxlen=ib.flow.queue)
-        received = 0
-        sock = ib.sock
-        while True:
-            batch = 0
-            while sock.getsockopt(_EVENTS) & _POLLIN:  # type: ignore[union-attr]
-                got.append(recv_message(sock, zmq.NOBLOCK))  # type: ignore[arg-type]
-                batch += 1
-            received += batch
-            if batch < ib.flow.queue or not sock.poll(LATEST_DRAIN_MS):  # type: ignore[union-attr]
-                break
-        ib.dropped += received - len(got)
-        for m in got:
-            self._accept(ib, m, -INF)
-
-    def _accept(self, ib: _Inbound, m: Any, tick: float) -> None:
+    def _accept(self, ib: ZmqInbound, m: Any, tick: float) -> None:
         if m.seq != ib.next_seq and not m.flags & END:
             ib.gaps += 1
         ib.next_seq = m.seq + 1
@@ -859,14 +725,14 @@ class Worker:
         that leaves this process and comes back would otherwise wait for its own END.
         """
         k = self.k + 1
-        ends: dict[str, list[_Outbound]] = {}
+        ends: dict[str, list[ZmqOutbound]] = {}
         for ob in self.outbound:
             ends.setdefault(ob.node, []).append(ob)
         for nd in self.plans:
             n, block = nd.name, nd.block
             if not nd.source:
                 for ib, delayed in nd.remote:
-                    self._fetch(ib, self.k if delayed else FOREVER)
+                    ib.fetch(self.k if delayed else FOREVER, self._accept, self._service)
                 self._step(nd, k, self.now, INF)
             try:
                 out = block.flush()
@@ -939,7 +805,7 @@ class _Heartbeat:
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.SNDHWM, 8)
         if self.control.startswith("tcp://"):
-            from flowtact.runtime.security import secure_client
+            from flowtact.runtime.links.zeromq.security import secure_client
 
             secure_client(sock, w.keys)
         sock.connect(self.control)
@@ -1011,7 +877,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the supervisor coordinates a Ctrl-C
     if args.child and sys.platform.startswith("linux"):
         _die_with_parent()
-    from flowtact.runtime.security import SecurityError
+    from flowtact.runtime.links.zeromq.security import SecurityError
 
     try:
         allow = None if args.child else tuple(args.allow_modules)  # on another host: this host's own word
