@@ -15,8 +15,9 @@ from flowtact.record import read_recording
 from flowtact.runtime.links.zeromq.streams import MERGE_MAX_BYTES, ZmqInbound
 from flowtact.runtime.protocol import InboundStream
 from flowtact.runtime.supervisor import WorkerFailed
-from flowtact.runtime.worker import FOREVER, Worker
+from flowtact.runtime.worker import Worker
 from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
+from flowtact.runtime.worker_ticks import FOREVER
 
 pytestmark = pytest.mark.slow
 
@@ -220,7 +221,7 @@ def test_a_fast_consumer_that_keeps_pace_waits_for_a_batch(monkeypatch):
     """--fast: with fewer than COALESCE_TICKS ticks queued the worker waits once, then takes all
     that came (one step, one message downstream); with a batch queued, or its producer ended, it
     steps at once."""
-    from flowtact.runtime import worker
+    from flowtact.runtime import worker_ticks as worker
 
     waits: list[float] = []
     monkeypatch.setattr(worker.time, "sleep", waits.append)
