@@ -115,18 +115,30 @@ def test_a_registered_toy_link_carries_a_graph_with_a_loop_and_a_fan_in_bit_iden
     assert [ln.delayed for ln in CopyingLink.made].count(True) == 1
 
 
+@pytest.mark.parametrize("link", ["toy_copying", "zmq"])
+def test_a_graph_with_a_loop_runs_bit_identically_over_every_link_kind(link):
+    _, local = _run(LOOP, "local", 0.5, 0.007)
+    ex, other = _run(LOOP, link, 0.5, 0.007)
+    assert other.joined() == local.joined() and len(local.joined()["b.y"][0]) == 500 * 8
+    assert ex.blocks["a"].got_feedback == 500  # the delay held and released through the link
+    assert {type(ln).__name__ for ln in ex.engine.links} == {
+        "CopyingLink" if link == "toy_copying" else "ZmqLink"
+    }
+
+
 def test_an_unknown_link_kind_is_refused_with_the_known_ones():
     with pytest.raises(ValueError, match=r"unknown link kind 'nope' \(known: .*local"):
         link_kind("nope")
 
 
-def test_a_shipped_graph_runs_bit_identically_over_the_toy_link():
+@pytest.mark.parametrize("link", ["toy_copying", "zmq"])
+def test_a_shipped_graph_runs_bit_identically_over_the_toy_and_zeromq_links(link):
     graph = ROOT / "graphs" / "teleop.yaml"
     text = graph.read_text()
     sets = ["exo.port=sim"]
     _, local = _run(text, "local", 0.5, 0.01, overrides=sets)
-    _, toy = _run(text, "toy_copying", 0.5, 0.01, overrides=sets)
-    assert local.streams and toy.joined() == local.joined()
+    _, other = _run(text, link, 0.5, 0.01, overrides=sets)
+    assert local.streams and other.joined() == local.joined()
 
 
 class CopyingExecutor(InprocExecutor):

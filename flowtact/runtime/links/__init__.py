@@ -10,8 +10,9 @@ engine takes that input's due chunks from, and offers:
 - ``end()``: the stream ends (the final flush): from now on what it is given is due at once;
 - ``drop()``: the run was interrupted: what it holds never arrives.
 
-Kinds are found by name in :data:`LINKS` (as Brian2 finds its devices): the built-in ``local``
-(an in-process list) is named here and imported on first use; another kind (shared memory, LSL,
+Kinds are found by name in :data:`LINKS` (as Brian2 finds its devices): the built-ins ``local``
+(an in-process list) and ``zmq`` (a ZeroMQ socket pair, wire framing) are named here and
+imported on first use; another kind (shared memory, LSL,
 a browser feed) is one module that subclasses :class:`Link` with :func:`register_link`.
 """
 
@@ -51,7 +52,7 @@ class Link:
 LINKS: dict[str, type[Link]] = {}
 """Link kinds by name, filled by :func:`register_link` (built-ins on first use, see :func:`link_kind`)."""
 
-_BUILT_IN = {"local": "flowtact.runtime.links.local"}
+_BUILT_IN = {"local": "flowtact.runtime.links.local", "zmq": "flowtact.runtime.links.zeromq.link"}
 
 
 def register_link(name: str) -> Callable[[type[Link]], type[Link]]:
