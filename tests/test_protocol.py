@@ -78,3 +78,28 @@ def test_control_messages_carry_an_op_and_an_unknown_one_is_refused():
     }  # plain msgpack on the wire
     with pytest.raises(ValueError, match="'launch' is not a valid Op"):
         decode(msgpack.packb({"op": "launch"}))
+
+
+def test_the_flow_in_a_worker_plan_is_the_high_water_mark_of_both_socket_ends(tmp_path):
+    import zmq
+
+    from flowtact.runtime.links.zeromq.streams import ZmqInbound, ZmqOutbound, bind_address
+
+    _, placement = _placed(fast=False)
+    b, a = (placement.worker_plan(g, fast=False, tick_s=0.01, duration_s=2.0) for g in ("b", "a"))
+    inbound = ZmqInbound(decode(encode(Op.PLAN, plan=b))["plan"].inbound[0])
+    outbound = ZmqOutbound(
+        next(s for s in decode(encode(Op.PLAN, plan=a))["plan"].outbound if s.group == "b")
+    )
+    ctx = zmq.Context()
+    try:
+        where = bind_address(str(tmp_path), b.inbound[0], "b", None, "127.0.0.1")
+        assert where == f"ipc://{tmp_path}/s{b.inbound[0].id}-b"  # same host: ipc in the run folder
+        bound = inbound.bind(ctx, where)
+        outbound.connect(ctx, bound)
+        assert inbound.sock.getsockopt(zmq.RCVHWM) == outbound.sock.getsockopt(zmq.SNDHWM) == 7
+    finally:
+        for s in (inbound.sock, outbound.sock):
+            if s is not None:
+                s.close(linger=0)
+        ctx.term()
