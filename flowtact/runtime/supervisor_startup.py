@@ -16,6 +16,7 @@ from pathlib import Path
 import zmq
 
 from flowtact.python_child import python_command
+from flowtact.runtime.links.zeromq.control import supervisor_sockets, supervisor_tcp_sockets
 from flowtact.runtime.links.zeromq.streams import bind_address
 from flowtact.runtime.protocol import Op
 from flowtact.runtime.supervisor_liveness import proc_stat
@@ -50,24 +51,13 @@ class SupervisorStartup:
 
     def _open_sockets(self) -> None:
         remote = self.plan.graph.deployment.remote
-        self.ctl = self.ctx.socket(zmq.ROUTER)
-        self.ctl.setsockopt(zmq.LINGER, 0)
-        self.ctl.setsockopt(zmq.ROUTER_MANDATORY, 1)
-        self.ctl.bind(f"ipc://{self.rundir}/ctl")
-        self.rec = self.ctx.socket(zmq.PULL)
-        self.rec.setsockopt(zmq.LINGER, 0)
-        self.rec.bind(f"ipc://{self.rundir}/rec")
+        self.ctl, self.rec = supervisor_sockets(self.ctx, str(self.rundir))
         self.poller = zmq.Poller()
         self.poller.register(self.ctl, zmq.POLLIN)
         self.poller.register(self.rec, zmq.POLLIN)
         self.tcp_ctl = self.tcp_rec = None
         if remote:
-            from flowtact.runtime.links.zeromq.security import (
-                Authenticator,
-                HandshakeWatch,
-                load_keys,
-                secure_server,
-            )
+            from flowtact.runtime.links.zeromq.security import Authenticator, load_keys
 
             net = self.plan.graph.deployment.network
             keys = net.keys
@@ -80,17 +70,9 @@ class SupervisorStartup:
             self.keys = load_keys(Path(keys).expanduser() if keys else None)
             self.keys_dir = str(Path(keys).expanduser()) if keys else os.environ["FLOWTACT_KEYS"]
             self.auth = Authenticator(self.ctx, self.keys).start()
-            self.ctl_tcp = self.ctx.socket(zmq.ROUTER)
-            self.ctl_tcp.setsockopt(zmq.LINGER, 0)
-            secure_server(self.ctl_tcp, self.keys)
-            self.ctl_watch = HandshakeWatch(self.ctl_tcp)
-            self.ctl_tcp.bind(f"tcp://{net.listen}:{net.port}")
-            self.tcp_ctl = self.ctl_tcp.last_endpoint.decode()
-            self.rec_tcp = self.ctx.socket(zmq.PULL)
-            self.rec_tcp.setsockopt(zmq.LINGER, 0)
-            secure_server(self.rec_tcp, self.keys)
-            port = self.rec_tcp.bind_to_random_port(f"tcp://{net.listen}")
-            self.tcp_rec = f"tcp://{net.listen}:{port}"
+            self.ctl_tcp, self.ctl_watch, self.tcp_ctl, self.rec_tcp, self.tcp_rec = supervisor_tcp_sockets(
+                self.ctx, net.listen, net.port, self.keys
+            )
             self.poller.register(self.ctl_tcp, zmq.POLLIN)
             self.poller.register(self.rec_tcp, zmq.POLLIN)
 

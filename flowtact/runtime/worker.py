@@ -52,6 +52,7 @@ import traceback
 
 import zmq
 
+from flowtact.runtime.links.zeromq.control import heartbeat_socket, worker_control_socket
 from flowtact.runtime.protocol import Op, encode
 from flowtact.runtime.warm_up import CompileWatch
 from flowtact.runtime.worker_control import ORPHAN_S, NodeFailure, Stop, WorkerControl
@@ -86,26 +87,13 @@ class Worker(WorkerControl, WorkerSetup, WorkerTicks):
         supervisor) takes the user's list from the plan; a worker on another host has its own."""
         self.ctx = zmq.Context()
         self.keys = None
-        self.ctl = self.ctx.socket(zmq.DEALER)
-        self.ctl.setsockopt(zmq.LINGER, 2000)
         self.auth = None
         if control.startswith("tcp://") or keys_dir:  # a graph across hosts: CURVE on every tcp socket
             from flowtact.runtime.links.zeromq.security import Authenticator, load_keys
 
             self.keys = load_keys(keys_dir)
             self.auth = Authenticator(self.ctx, self.keys).start()
-        if control.startswith("tcp://"):
-            from flowtact.runtime.links.zeromq.security import HandshakeWatch, secure_client
-
-            secure_client(self.ctl, self.keys)
-            watch = HandshakeWatch(self.ctl)
-            self.ctl.connect(control)
-            try:
-                watch.wait(10.0, endpoint=control)
-            finally:
-                watch.close()
-        else:
-            self.ctl.connect(control)
+        self.ctl = worker_control_socket(self.ctx, control, self.keys)
         self.last_ping = time.monotonic()
         self.parent = os.getppid() if child else None
         self.stop_k = FOREVER
@@ -204,14 +192,7 @@ class _Heartbeat:
 
     def _run(self) -> None:
         w = self.worker
-        sock = w.ctx.socket(zmq.DEALER)
-        sock.setsockopt(zmq.LINGER, 0)
-        sock.setsockopt(zmq.SNDHWM, 8)
-        if self.control.startswith("tcp://"):
-            from flowtact.runtime.links.zeromq.security import secure_client
-
-            secure_client(sock, w.keys)
-        sock.connect(self.control)
+        sock = heartbeat_socket(w.ctx, self.control, w.keys)
         pid = os.getpid()
         try:
             while not self.stopped.wait(BEAT_S):
