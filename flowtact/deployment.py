@@ -29,6 +29,7 @@ from flowtact.params import did_you_mean
 __all__ = [
     "Deadline",
     "Deployment",
+    "Flow",
     "Network",
     "ProcessDef",
     "deadline_path_errors",
@@ -42,6 +43,18 @@ DEADLINE_KEYS = ("from", "to", "budget")
 RESTARTS = ("never", "on-failure")
 POLICIES = ("block", "latest")
 DEFAULT_QUEUE = 64
+
+
+@dataclass(frozen=True)
+class Flow:
+    """How an edge's stream flows across processes: its policy (``block``: lossless, back-pressure;
+    ``latest``: keep the newest ``queue`` messages) and its queue bound, in messages. One value
+    from the graph's edge (:attr:`flowtact.graph.Edge.flow`) to the socket's high-water mark."""
+
+    policy: str = "block"
+    queue: int = DEFAULT_QUEUE
+
+
 _UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 
 

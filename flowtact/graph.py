@@ -19,7 +19,14 @@ from typing import Any
 import yaml
 
 from flowtact.block import Block
-from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, deadline_path_errors, parse_deployment
+from flowtact.deployment import (
+    DEFAULT_QUEUE,
+    POLICIES,
+    Deployment,
+    Flow,
+    deadline_path_errors,
+    parse_deployment,
+)
 from flowtact.limits import (
     MAX_DURATION_S,
     MAX_QUEUE,
@@ -101,6 +108,11 @@ class Edge:
     """Across processes: ``block`` (lossless, back-pressure) or ``latest`` (drop the oldest)."""
     queue: int = DEFAULT_QUEUE
     """Bound of the edge's queue, in messages, when it crosses processes."""
+
+    @property
+    def flow(self) -> Flow:
+        """Its policy and queue bound as one value: what a stream crossing processes carries to its socket."""
+        return Flow(self.policy, self.queue)
 
     def __str__(self) -> str:
         return f"{self.src}.{self.src_port} -> {self.dst}.{self.dst_port}"

@@ -22,7 +22,8 @@ from flowtact.errors import UsageError
 from flowtact.graph import load_graph, resolve_graph_path
 from flowtact.limits import run_ticks_problem
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
-from flowtact.runtime.inproc import InprocExecutor, RunSummary
+from flowtact.runtime.executors import DEFAULT_EXECUTOR, Executor, RunOptions, executor_for
+from flowtact.runtime.inproc import RunSummary
 from flowtact.source_ends import EndWatch, default_duration
 
 __all__ = ["load_plan", "provenance", "resolved_graph", "run_plan", "versions"]
@@ -198,14 +199,17 @@ def run_plan(
     argv: list[str] | None = None,
     sink: Any = None,
     startup_s: float | None = None,
+    executor: str | None = None,
     launched_at: float | None = None,
 ) -> RunSummary:
     """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
     ``record:`` streams to ``record``. A failing worker raises
     :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed. Without
     ``record``, an ``inproc`` run may hand its recorded streams to ``sink`` in memory (sweeps).
-    ``startup_s`` (``--startup-s``) replaces every process group's start-up window; a
-    multi-process run counts its start-up from ``launched_at`` (monotonic) when given."""
+    ``startup_s`` (``--startup-s``) replaces every process group's start-up window. ``executor``
+    names the executor (:data:`~flowtact.runtime.executors.EXECUTORS`); ``inproc`` is short for
+    ``executor="inproc"``. A multi-process run counts its start-up from ``launched_at``
+    (monotonic) when given."""
     duration = default_duration(
         plan, duration_s
     )  # --duration, else the replayed files' end, else the graph's
@@ -214,15 +218,11 @@ def run_plan(
     ends = EndWatch(plan, duration, warn)
     progress = ends.progress(progress)
 
-    def executor(recorder: Any) -> Any:
-        if inproc:
-            return InprocExecutor(
-                plan, fast=fast, tick_s=tick_s, recorder=recorder, progress=progress, warm_up=True
-            )  # warmed up as a worker is: kernel loading is start-up, apart from the running time
-        from flowtact.runtime.supervisor import ProcessExecutor
+    name = executor or ("inproc" if inproc else DEFAULT_EXECUTOR)
+    make = executor_for(name)
 
-        return ProcessExecutor(
-            plan,
+    def executor_with(recorder: Any) -> Executor:
+        options = RunOptions(
             fast=fast,
             tick_s=tick_s,
             recorder=recorder,
@@ -232,9 +232,10 @@ def run_plan(
             startup_s=startup_s,
             launched_at=launched_at,
         )
+        return make.for_run(plan, options)
 
     if record is None:
-        summary = executor(sink).run(duration)
+        summary = executor_with(sink).run(duration)
         ends.finish(summary)
         return summary
     from flowtact.record import Recorder
@@ -242,7 +243,7 @@ def run_plan(
     streams = {f"{n}.{p}": plan.specs[(n, p)] for n, p in plan.record}
     with Recorder(record, streams, provenance(plan, argv)) as recorder:
         try:
-            summary = executor(recorder).run(duration)
+            summary = executor_with(recorder).run(duration)
         except Exception as e:
             partial = getattr(e, "summary", None)
             recorder.close({**(partial.to_dict() if partial else {}), "error": str(e)})

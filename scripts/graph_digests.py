@@ -3,9 +3,12 @@
 Each graph in graphs/ runs as ``flowtact run GRAPH --fast --inproc --duration S --record …`` (a
 serial device in its graph-time ``sim`` mode, so nothing depends on the wall clock); every
 recorded stream's time stamps and data are hashed (SHA-256 of the raw bytes, dtype and shape).
+With ``--processes`` each graph runs across processes instead (no ``--inproc``: one worker per
+process group, joined by ZeroMQ), which ``--fast`` makes deterministic too.
 
     python scripts/graph_digests.py > before.json        # at the commit before a change
     python scripts/graph_digests.py --compare before.json  # after it: exit 1 on any difference
+    python scripts/graph_digests.py --processes --compare before-processes.json
 """
 
 from __future__ import annotations
@@ -40,12 +43,14 @@ def _digest(*arrays) -> str:
     return h.hexdigest()
 
 
-def digests(graph: Path, duration_s: float = DURATION_S) -> dict[str, str]:
-    """Stream name -> digest of what ``graph`` records in a ``--fast --inproc`` run."""
+def digests(graph: Path, duration_s: float = DURATION_S, *, processes: bool = False) -> dict[str, str]:
+    """Stream name -> digest of what ``graph`` records in a ``--fast --inproc`` run (``processes``:
+    a ``--fast`` run across processes)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run.h5"
         sets = [a for o in _overrides(graph) for a in ("--set", o)]
-        cmd = [sys.executable, "-m", "flowtact.cli", "run", str(graph), "--fast", "--inproc", "--quiet"]
+        mode = [] if processes else ["--inproc"]
+        cmd = [sys.executable, "-m", "flowtact.cli", "run", str(graph), "--fast", *mode, "--quiet"]
         cmd += ["--duration", str(duration_s), "--record", str(out), *sets]
         subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
         rec = read_recording(out)
@@ -56,8 +61,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--compare", metavar="JSON", help="digests from before; exit 1 where they differ")
     ap.add_argument("--duration", type=float, default=DURATION_S, help="graph seconds per run")
+    ap.add_argument("--processes", action="store_true", help="run across processes, not --inproc")
     args = ap.parse_args(argv)
-    got = {g.stem: digests(g, args.duration) for g in sorted((ROOT / "graphs").glob("*.yaml"))}
+    got = {
+        g.stem: digests(g, args.duration, processes=args.processes)
+        for g in sorted((ROOT / "graphs").glob("*.yaml"))
+    }
     if not args.compare:
         json.dump(got, sys.stdout, indent=1, sort_keys=True)
         print()
@@ -72,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     for line in bad:
         print(f"differs: {line}")
     n = sum(len(v) for v in got.values())
-    print(f"{n - len(bad)} of {n} recorded streams identical across {len(got)} graphs")
+    mode = "across processes" if args.processes else "in-process"
+    print(f"{n - len(bad)} of {n} recorded streams identical across {len(got)} graphs ({mode})")
     return 1 if bad else 0
 
 

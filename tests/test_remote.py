@@ -19,7 +19,7 @@ import pytest
 
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
-from flowtact.runtime.security import generate_keys
+from flowtact.runtime.links.zeromq.security import generate_keys
 
 ROOT = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.slow

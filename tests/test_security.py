@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import zmq
 
-from flowtact.runtime.security import (
+from flowtact.runtime.links.zeromq.security import (
     ENV_VAR,
     PUBLIC_FILE,
     SECRET_FILE,

@@ -355,7 +355,7 @@ def test_the_readme_training_set_command_exits_0(tmp_path):
 def test_a_stop_tick_is_not_pushed_ahead_by_heartbeats_that_arrive_together():
     """On a loaded machine beats queue and are read back to back: the rate comes from the times the
     worker stamped, so 50 ticks in 0.25 s is 200 ticks/s however close together the beats arrive."""
-    from flowtact.runtime.supervisor import _tick_rate
+    from flowtact.runtime.supervisor_liveness import tick_rate as _tick_rate
 
     old = {"k": 100, "sent_ns": 1_000_000_000}
     beat = {"k": 150, "sent_ns": 1_250_000_000}

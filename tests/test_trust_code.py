@@ -227,7 +227,7 @@ def test_a_worker_on_another_host_imports_only_what_its_own_command_line_allows(
     """The supervisor's --allow-module does not reach a worker started by hand on another host."""
     import socket
 
-    from flowtact.runtime.security import generate_keys
+    from flowtact.runtime.links.zeromq.security import generate_keys
 
     generate_keys(tmp_path / "keys")
     with socket.socket() as s:

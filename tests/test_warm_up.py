@@ -24,8 +24,8 @@ from warmblocks import JitScale, SlowWarmUp, scale_kernel
 from flowtact.block import Source
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.registry import block_names, load_block
+from flowtact.runtime.links.zeromq.wire import recv_message, send_message
 from flowtact.runtime.warm_up import CompileWatch, _unaligned, synthetic_inputs, warm_up
-from flowtact.runtime.wire import recv_message, send_message
 from flowtact.testing import example_of, infer_specs, run_offline, run_source
 
 SPEC = StreamSpec(dtype="float64", shape=(3,), rate_hz=1000.0)

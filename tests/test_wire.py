@@ -9,7 +9,7 @@ import pytest
 import zmq
 
 from flowtact.chunk import Chunk
-from flowtact.runtime.wire import COPY_THRESHOLD, END, WireError, recv_message, send_message
+from flowtact.runtime.links.zeromq.wire import COPY_THRESHOLD, END, WireError, recv_message, send_message
 
 
 @pytest.fixture

@@ -9,12 +9,15 @@ import pytest
 from runs import TEST_BLOCKS, flowtact
 
 from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.deployment import Flow
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
-from flowtact.runtime.placement import spec_to_wire
+from flowtact.runtime.links.zeromq.streams import MERGE_MAX_BYTES, ZmqInbound
+from flowtact.runtime.protocol import InboundStream
 from flowtact.runtime.supervisor import WorkerFailed
-from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound
+from flowtact.runtime.worker import Worker
 from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
+from flowtact.runtime.worker_ticks import FOREVER
 
 pytestmark = pytest.mark.slow
 
@@ -177,11 +180,11 @@ def test_a_block_in_a_worker_cannot_write_what_it_receives(tmp_path, source, whe
         run_plan(load_plan(path, allow_modules=TEST_BLOCKS), duration_s=0.05, fast=True)
 
 
-def _inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:
+def _inbound(spec: StreamSpec, messages: int, samples: int) -> ZmqInbound:
     """A block stream as a worker holds it, having received ``messages`` carrying ``samples``."""
-    d = {"id": 0, "stream": "s.y", "spec": spec_to_wire(spec), "policy": "block", "queue": 1000,
-         "dsts": [], "same_host": True}  # fmt: skip
-    ib = _Inbound(d)
+    ib = ZmqInbound(
+        InboundStream(id=0, stream="s.y", spec=spec, flow=Flow("block", 1000), dsts=(), same_host=True)
+    )
     ib.messages, ib.samples = messages, samples
     return ib
 
@@ -218,7 +221,7 @@ def test_a_fast_consumer_that_keeps_pace_waits_for_a_batch(monkeypatch):
     """--fast: with fewer than COALESCE_TICKS ticks queued the worker waits once, then takes all
     that came (one step, one message downstream); with a batch queued, or its producer ended, it
     steps at once."""
-    from flowtact.runtime import worker
+    from flowtact.runtime import worker_ticks as worker
 
     waits: list[float] = []
     monkeypatch.setattr(worker.time, "sleep", waits.append)

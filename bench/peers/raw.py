@@ -1,8 +1,8 @@
 """The raw baseline: plain pyzmq with flowtact's framing, source -> stage -> sink in 3 processes.
 
 Each hop is a PUSH/PULL pair over ipc:// with a high-water mark of 1000 and blocking sends
-(lossless backpressure); messages are framed by ``flowtact.runtime.wire`` (a fixed binary header + raw
-buffers, zero-copy above 64 KiB), exactly as flowtact's runtime frames them, so the difference
+(lossless backpressure); messages are framed by ``flowtact.runtime.links.zeromq.wire`` (a fixed
+binary header + raw buffers, zero-copy above 64 KiB), exactly as flowtact's runtime frames them, so the difference
 between this and flowtact is the runtime's own cost. The source stamps ``monotonic_ns()`` just
 before each send in the message's ``origins`` ({0: ns}); the stage computes ``2 x`` (small) or
 ``255 - x`` (image) into a new array and forwards the origins; the sink records the arrival.
@@ -28,7 +28,7 @@ import zmq
 
 from flowtact.bench.peers.measure import CLK_TCK, STEADY_WINDOW, CpuSampler, Pacer, summarize
 from flowtact.chunk import Chunk
-from flowtact.runtime.wire import END, recv_message, send_message
+from flowtact.runtime.links.zeromq.wire import END, recv_message, send_message
 
 __all__ = ["CLK_TCK", "PAYLOADS", "make_payload", "run_pipeline"]
 

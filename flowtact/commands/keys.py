@@ -15,7 +15,7 @@ def add_arguments(keys: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flowtact.runtime.security import generate_keys
+    from flowtact.runtime.links.zeromq.security import generate_keys
 
     folder = generate_keys(args.folder, force=args.force)
     print(f"wrote {folder}/flowtact.key and flowtact.key_secret: copy the folder to every host of the rig")

@@ -1,49 +1,34 @@
-"""The in-process executor: every active node of a plan in one loop, deterministic.
+"""The in-process executor: the engine with local links, every active node in one loop, deterministic.
 
-Each tick, sources are stepped with the graph time ``now`` and every other node, in topological
-order, receives what its upstream produced during the tick (or, through a delay port, during the
-previous tick). Only demanded outputs travel; recorded streams go to the recorder. At the end
-every node is flushed in order so held-back samples (a centred filter's tail) reach the sinks.
+The tick schedule is :class:`~flowtact.runtime.engine.Engine`'s; this module adds what a run needs
+around it (opening and closing blocks, warming up, the clock, progress) and the run's summary.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
-
-import numpy as np
+from typing import Any
 
 from flowtact.block import Block
-from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.compile import Plan
-from flowtact.errors import FlowtactError
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
-from flowtact.runtime.sealing import sealed
+from flowtact.runtime.engine import Engine, NodeError, Sink, check_chunk
+from flowtact.runtime.executors import RunOptions
 from flowtact.runtime.stats import format_factor
-from flowtact.runtime.step_plan import NodePlan, OutPlan, build_plans, takes_first, tallies
 from flowtact.runtime.warm_up import warm_up_here
 
-__all__ = ["InprocExecutor", "NodeError", "RunSummary", "block_summaries", "check_chunk", "explain_counters"]
-
-
-class Sink(Protocol):
-    """What the executor writes recorded streams to (a :class:`flowtact.record.Recorder`)."""
-
-    def write(self, stream: str, chunk: Chunk) -> None: ...
-
-    def maybe_flush(self) -> None: ...
-
-
-class NodeError(FlowtactError, RuntimeError):
-    """A block raised while stepping: names the node, its block and the graph time."""
-
-    def __init__(self, node: str, block: str, now: float, cause: BaseException) -> None:
-        self.node, self.block, self.now, self.cause = node, block, now, cause
-        super().__init__(f"node '{node}' ({block}) failed at t={now:.3f} s: {type(cause).__name__}: {cause}")
+__all__ = [
+    "InprocExecutor",
+    "NodeError",
+    "RunSummary",
+    "Sink",
+    "block_summaries",
+    "check_chunk",
+    "explain_counters",
+]
 
 
 @dataclass
@@ -218,7 +203,9 @@ class InprocExecutor:
         recorder: Sink | None = None,
         progress: Callable[[float, float | None], None] | None = None,
         warm_up: bool | None = None,
+        link: str = "local",
     ) -> None:
+        """``link``: the kind of link joining the nodes (:func:`~flowtact.runtime.links.link_kind`)."""
         self.plan = plan
         self.fast = fast
         self.warm_up = not fast if warm_up is None else warm_up
@@ -231,91 +218,15 @@ class InprocExecutor:
         self.blocks: dict[str, Block] = {n: plan.graph.nodes[n].make() for n in plan.order}
         for n, block in self.blocks.items():
             plan.bind(n, block)
-        self.nodes, self._delay_ports = build_plans(plan, self.blocks)
-        self._delivered: list[OutPlan] = []  # outputs counted in the summary, by first delivery
+        self.engine = Engine(plan, self.blocks, recorder=recorder, link=link)
         self._made = time.perf_counter()  # start-up counts from here: the blocks were just made
 
-    def _step(self, nodes: Iterable[NodePlan], now: float, at_end: bool, flush: bool = False) -> None:  # noqa: C901 — the hot loop, inline on purpose (see the docstring)
-        """Step each node in ``nodes`` on its inboxes (a non-source only when something came), or
-        ``flush`` it, and hand each demanded output, admitted (:meth:`_admit`), to its consumers
-        and recorder (``at_end``: delayed outputs go straight to their consumers).
-
-        Inputs reach ``step`` as they left their producer (read-only, see :meth:`_admit`), an inbox
-        holding several chunks joined. ``step`` is called directly (the block is bound), with the
-        node's own keyword dict refilled every time: every needed port is set, and Python hands the
-        callee its own copy of the keywords, so reusing the dict is safe. A node with one input
-        that is its ``step``'s first parameter gets it positionally (the same binding, cheaper).
-        One call per tick, the delivery inline, the demanded outputs looked up rather than what the
-        block returned walked: each call or dict walk costs a tenth of the 1 µs per node-step the
-        executor is allowed here (``flowtact bench executor``).
-        """
-        recorder, delivered = self.recorder, self._delivered
-        for nd in nodes:
-            given = None  # the one input, handed to ``step`` by position
-            try:
-                if flush:
-                    out = nd.block.flush()
-                elif nd.solo:  # the common filter: one input, ``step``'s first parameter
-                    _, box, empty, spec = nd.inputs[0]
-                    given = box.pop() if len(box) == 1 else _take(box, empty, spec)
-                    if not (len(given.t) or given.end is not None):
-                        continue
-                    out = nd.call(given)
-                else:
-                    kw = nd.kw
-                    live = nd.source
-                    for port, box, empty, spec in nd.inputs:
-                        c = box.pop() if len(box) == 1 else _take(box, empty, spec)
-                        if port is not None:
-                            kw[port] = c
-                        if not live and (len(c.t) or c.end is not None):
-                            live = True
-                    if not live:
-                        continue
-                    out = nd.call(now, **kw) if nd.source else nd.call(**kw)
-            except Exception as e:
-                raise NodeError(nd.name, nd.block.name, now, e) from e
-            for o in nd.outs:
-                chunk = out.get(o.port)
-                if chunk is None:
-                    continue  # not produced this time
-                if chunk is not given or o.kind is not nd.in_kind:
-                    chunk = self._admit(nd.name, chunk, o, now)
-                for box in o.now:
-                    box.append(chunk)
-                if o.later:
-                    for box in o.delayed_into if at_end else o.later:
-                        box.append(chunk)
-                if o.tally is not None:
-                    if not o.seen:
-                        o.seen = True
-                        delivered.append(o)
-                    o.count += len(chunk.t)
-                    if o.record is not None and recorder is not None:
-                        recorder.write(o.record, chunk)
-
-    def _admit(self, node: str, chunk: Chunk, o: OutPlan, now: float) -> Chunk:
-        """Check a produced chunk against its stream and seal it read-only.
-
-        The check is the common case of :func:`check_chunk` (1-D ``t``, one data row per time
-        stamp, the declared sample shape and dtype); anything else goes to the full check, which
-        names the bug. Sealing (:func:`~flowtact.runtime.sealing.sealed`) lets every consumer get
-        the same object: none can change what another receives. A block that hands on the one
-        input it was given, to a stream of the same kind, skips both (see :meth:`_step`); a chunk
-        admitted again (a gate handing on one of several inputs) passes the check and is already
-        sealed.
-        """
-        t, d = chunk.t, chunk.data
-        shape = d.shape
-        if (
-            t.ndim != 1
-            or not shape
-            or shape[0] != len(t)
-            or shape[1:] != o.tail
-            or (d.dtype is not o.dtype and d.dtype != o.dtype)
-        ):
-            check_chunk(node, o.port, chunk, o.spec, now)
-        return sealed(chunk, t, d)
+    @classmethod
+    def for_run(cls, plan: Plan, options: RunOptions) -> InprocExecutor:
+        """The executor ``flowtact run --inproc`` makes: warmed up as a worker is, so kernel
+        loading is start-up, apart from the running time."""
+        o = options
+        return cls(plan, fast=o.fast, tick_s=o.tick_s, recorder=o.recorder, progress=o.progress, warm_up=True)
 
     def run(self, duration_s: float | None) -> RunSummary:
         """Run until ``duration_s`` of graph time (None: until interrupted; realtime only)."""
@@ -325,10 +236,8 @@ class InprocExecutor:
         opened: list[Block] = []
         stopped_by = "duration"
         now, k, lag = 0.0, 0, 0.0
-        nodes, step, delay_ports, fast = self.nodes, self._step, self._delay_ports, self.fast
-        for nd in nodes:
-            nd.call = nd.block.step  # looked up per run, so a test may replace it
-            nd.solo = takes_first(nd.call, nd.inputs)
+        engine, fast = self.engine, self.fast
+        engine.bind_steps()
         try:
             for block in self.blocks.values():
                 block.open()
@@ -344,27 +253,22 @@ class InprocExecutor:
                     now = k * self.tick_s if n_ticks is None or k < n_ticks else float(duration_s)  # type: ignore[arg-type]
                     if not fast:
                         lag = max(lag, clock.wait_until(now))
-                    step(nodes, now, False)
-                    for box, later in delay_ports:  # what went through a delay port arrives next tick
-                        if later:
-                            box.extend(later)
-                            later.clear()
+                    engine.tick(now)
                     if self.recorder is not None:
                         self.recorder.maybe_flush()  # a quiet spell must not hold data back
                     if self.progress is not None:
                         self.progress(now, duration_s)
             except KeyboardInterrupt:
                 stopped_by = "interrupted"
-                for _, later in delay_ports:  # the interrupted tick's delayed outputs never arrive
-                    later.clear()
+                engine.interrupt()  # the interrupted tick's delayed outputs never arrive
             running_s = clock.elapsed()
-            self._flush_all(now)
+            engine.finish(now)
             said = block_summaries(self.blocks)
         finally:
             for block in reversed(opened):
                 block.close()
         counters = {n: dict(b.counters) for n, b in self.blocks.items() if b.counters}
-        samples, events = tallies(self._delivered)
+        samples, events = engine.tallies()
         return RunSummary(
             graph=self.plan.graph.name,
             duration_s=now,
@@ -388,22 +292,6 @@ class InprocExecutor:
             max_lag_s=lag,
             block_summaries=said,
         )
-
-    def _flush_all(self, now: float) -> None:
-        """End of stream: feed what is pending, then flush each node in order."""
-        for nd in self.nodes:
-            if not nd.source:
-                self._step((nd,), now, True)
-            self._step((nd,), now, True, flush=True)
-
-
-def _take(box: list[Chunk], empty: Chunk, spec: StreamSpec) -> Chunk:
-    """What an inbox holding other than one chunk gives: its empty chunk, or its chunks joined."""
-    if not box:
-        return empty
-    c = concat(box, spec).readonly()
-    box.clear()
-    return c
 
 
 SUMMARY_MAX_CHARS = 240
@@ -435,19 +323,3 @@ def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> d
         if known := {k: docs[k] for k in cs if k in docs}:
             out[node] = known
     return out
-
-
-@functools.cache
-def _dtype(name: str) -> np.dtype:
-    return np.dtype(name)
-
-
-def check_chunk(node: str, port: str, chunk: Chunk, spec: StreamSpec, now: float) -> None:
-    """Guard the stream contract: a block's output must match its declared spec."""
-    n = chunk.t.shape[0]
-    shape = chunk.data.shape
-    if shape[0:1] != (n,) or shape[1:] != spec.shape or chunk.data.dtype != _dtype(spec.dtype):
-        raise RuntimeError(
-            f"node '{node}' produced {chunk.data.dtype}{list(chunk.data.shape)} with {n} timestamps on "
-            f"'{port}' at t={now:.3f} s, but the stream is {spec.describe()} (a bug in the block)"
-        )

@@ -2,65 +2,37 @@
 
 Placement: a node runs in the group its ``process:`` names; a node without one runs with the
 producer of its first input (so a chain follows its source), and a source without one in the
-group ``main``. Streams that cross groups become ZeroMQ edges with the policy and queue bound of
-their graph edges. A worker plan is plain data (msgpack-able): blocks are re-created from their
+group ``main``. Streams that cross groups become ZeroMQ edges with the flow (policy and queue
+bound) of their graph edges. A worker plan is a typed :class:`~flowtact.runtime.protocol.WorkerPlan`
+(encoded in one place, :mod:`flowtact.runtime.protocol`): blocks are re-created from their
 registry name, parameters and seed, so blocks are the same objects in every mode.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from flowtact.block import Source
-from flowtact.chunk import StreamSpec
 from flowtact.compile import Plan
-from flowtact.deployment import ProcessDef
+from flowtact.deployment import Flow, ProcessDef
 from flowtact.graph import GraphError, GraphErrors
+from flowtact.runtime.protocol import (
+    DeadlinePlan,
+    InboundStream,
+    LocalEdge,
+    NodeBuild,
+    OutboundStream,
+    RecordedStream,
+    WorkerPlan,
+)
 from flowtact.runtime.worker_plan import ticks_mergeable
 
-__all__ = [
-    "DEFAULT_GROUP",
-    "MAX_LOCAL_PROCESSES",
-    "Placement",
-    "default_groups",
-    "place",
-    "spec_from_wire",
-    "spec_to_wire",
-]
+__all__ = ["DEFAULT_GROUP", "MAX_LOCAL_PROCESSES", "Placement", "default_groups", "place"]
 
 DEFAULT_GROUP = "main"
 MAX_LOCAL_PROCESSES = 64
 """Process groups one host runs at most: each is a Python interpreter with numpy, numba and ZeroMQ
 (≈ 60–100 MB and ≈ 1 s of CPU to start), and one supervisor serves them all."""
-
-
-def spec_to_wire(spec: StreamSpec) -> dict[str, Any]:
-    """A stream spec as plain data."""
-    return {
-        "dtype": spec.dtype,
-        "shape": list(spec.shape),
-        "units": spec.units,
-        "rate_hz": spec.rate_hz,
-        "events": spec.events,
-        "n_units": spec.n_units,
-        "labels": list(spec.labels) if spec.labels is not None else None,
-        "categories": list(spec.categories) if spec.categories is not None else None,
-    }
-
-
-def spec_from_wire(d: dict[str, Any]) -> StreamSpec:
-    """Inverse of :func:`spec_to_wire`."""
-    return StreamSpec(
-        dtype=d["dtype"],
-        shape=tuple(d["shape"]),
-        units=d["units"],
-        rate_hz=d["rate_hz"],
-        events=d["events"],
-        n_units=d["n_units"],
-        labels=tuple(d["labels"]) if d["labels"] is not None else None,
-        categories=tuple(d["categories"]) if d.get("categories") is not None else None,
-    )
 
 
 @dataclass
@@ -72,8 +44,8 @@ class Placement:
     groups: dict[str, list[str]]
     processes: dict[str, ProcessDef]
     stream_ids: dict[tuple[str, str], int]
-    #: (stream id, consumer group) -> (policy, queue) for every stream that crosses groups
-    crossings: dict[tuple[int, str], tuple[str, int]] = field(default_factory=dict)
+    #: (stream id, consumer group) -> its flow (policy, queue) for every stream that crosses groups
+    crossings: dict[tuple[int, str], Flow] = field(default_factory=dict)
 
     def stream_name(self, sid: int) -> str:
         return self._names[sid]
@@ -85,88 +57,72 @@ class Placement:
         """Groups that receive stream ``sid`` over the network."""
         return sorted({g for (s, g) in self.crossings if s == sid})
 
-    def worker_plan(
-        self, group: str, *, fast: bool, tick_s: float, duration_s: float | None
-    ) -> dict[str, Any]:
-        """Everything worker ``group`` needs, as plain data."""
+    def worker_plan(self, group: str, *, fast: bool, tick_s: float, duration_s: float | None) -> WorkerPlan:
+        """Everything worker ``group`` needs."""
         plan, graph = self.plan, self.plan.graph
         mine = self.groups[group]
         src_index = {
             n: i for i, n in enumerate(n for n in plan.order if issubclass(graph.nodes[n].cls, Source))
         }
         host = self.processes[group].host
-        nodes = []
-        for n in mine:
-            node = graph.nodes[n]
-            nodes.append(
-                {
-                    "name": n,
-                    "block": node.block,
-                    "params": node.config.to_dict(),
-                    "seed": plan.seeds[n],
-                    "inputs": {p: spec_to_wire(s) for p, s in plan.input_specs(n).items()},
-                    "demanded": sorted(plan.demanded[n]),
-                    "needed": sorted(plan.needed[n]),
-                    "src_idx": src_index.get(n),
-                }
+        nodes = tuple(
+            NodeBuild(
+                name=n,
+                block=graph.nodes[n].block,
+                params=graph.nodes[n].config.to_dict(),
+                seed=plan.seeds[n],
+                inputs=dict(plan.input_specs(n)),
+                demanded=tuple(sorted(plan.demanded[n])),
+                needed=tuple(sorted(plan.needed[n])),
+                src_idx=src_index.get(n),
             )
-        edges, inbound = [], {}
+            for n in mine
+        )
+        edges: list[LocalEdge] = []
+        inbound: dict[int, tuple[str, str, list[tuple[str, str, bool]]]] = {}
         for e in plan.active_edges:
             if e.dst not in mine:
                 continue
             delayed = graph.nodes[e.dst].cls.inputs[e.dst_port].delay
             if e.src in mine:
-                edges.append([e.src, e.src_port, e.dst, e.dst_port, delayed])
+                edges.append(LocalEdge(e.src, e.src_port, e.dst, e.dst_port, delayed))
                 continue
             sid = self.stream_ids[(e.src, e.src_port)]
-            policy, queue = self.crossings[(sid, group)]
-            entry = inbound.setdefault(
-                sid,
-                {
-                    "id": sid,
-                    "stream": f"{e.src}.{e.src_port}",
-                    "spec": spec_to_wire(plan.specs[(e.src, e.src_port)]),
-                    "policy": policy,
-                    "queue": queue,
-                    "dsts": [],
-                    "same_host": self.processes[self.group_of[e.src]].host == host,
-                },
-            )
-            entry["dsts"].append([e.dst, e.dst_port, delayed])
-        outbound = [
-            {
-                "id": sid,
-                "node": n,
-                "port": p,
-                "group": g,
-                "policy": self.crossings[(sid, g)][0],
-                "queue": self.crossings[(sid, g)][1],
-            }
-            for (n, p), sid in self.stream_ids.items()
-            if n in mine
-            for g in self.consumers(sid)
-        ]
-        record = [[n, p, self.stream_ids[(n, p)]] for n, p in plan.record if n in mine]
-        deadlines = [
-            {"name": d.name, "src_idx": src_index[d.src], "dst": d.dst, "budget_s": d.budget_s}
-            for d in graph.deployment.deadlines
-            if d.dst in mine and d.src in src_index
-        ]
-        return {
-            "process": group,
-            "graph": graph.name,
-            "allow_modules": list(graph.allow_modules),  # the user's --allow-module, for module:Class
-            "fast": fast,
-            "merge_ticks": fast and ticks_mergeable(plan),
-            "tick_s": tick_s,
-            "duration_s": duration_s,
-            "nodes": nodes,
-            "edges": edges,
-            "inbound": list(inbound.values()),
-            "outbound": outbound,
-            "record": record,
-            "deadlines": deadlines,
-        }
+            inbound.setdefault(sid, (e.src, e.src_port, []))[2].append((e.dst, e.dst_port, delayed))
+        return WorkerPlan(
+            process=group,
+            graph=graph.name,
+            allow_modules=tuple(graph.allow_modules),
+            fast=fast,
+            merge_ticks=fast and ticks_mergeable(plan),
+            tick_s=tick_s,
+            duration_s=duration_s,
+            nodes=nodes,
+            edges=tuple(edges),
+            inbound=tuple(
+                InboundStream(
+                    id=sid,
+                    stream=f"{src}.{port}",
+                    spec=plan.specs[(src, port)],
+                    flow=self.crossings[(sid, group)],
+                    dsts=tuple(dsts),
+                    same_host=self.processes[self.group_of[src]].host == host,
+                )
+                for sid, (src, port, dsts) in inbound.items()
+            ),
+            outbound=tuple(
+                OutboundStream(id=sid, node=n, port=p, group=g, flow=self.crossings[(sid, g)])
+                for (n, p), sid in self.stream_ids.items()
+                if n in mine
+                for g in self.consumers(sid)
+            ),
+            record=tuple(RecordedStream(n, p, self.stream_ids[(n, p)]) for n, p in plan.record if n in mine),
+            deadlines=tuple(
+                DeadlinePlan(d.name, src_index[d.src], d.dst, d.budget_s)
+                for d in graph.deployment.deadlines
+                if d.dst in mine and d.src in src_index
+            ),
+        )
 
 
 def default_groups(plan: Plan) -> dict[str, str]:
@@ -216,14 +172,14 @@ def place(plan: Plan, *, fast: bool) -> Placement:
     stream_ids = {
         (n, p): i for i, (n, p) in enumerate((n, p) for n in plan.order for p in sorted(plan.demanded[n]))
     }
-    crossings: dict[tuple[int, str], tuple[str, int]] = {}
+    crossings: dict[tuple[int, str], Flow] = {}
     errors = []
     for e in plan.active_edges:
         g_src, g_dst = group_of[e.src], group_of[e.dst]
         if g_src == g_dst:
             continue
         key = (stream_ids[(e.src, e.src_port)], g_dst)
-        flow = ("block" if fast else e.policy, e.queue)
+        flow = Flow("block", e.queue) if fast else e.flow
         if key in crossings and crossings[key] != flow:
             errors.append(
                 GraphError(

@@ -1,8 +1,9 @@
 """Per-node step plans of the in-process executor: every lookup a tick needs, resolved once.
 
-A tick then touches only lists and slots: each input port owns an inbox (a list its producer
-appends to), each demanded output knows its consumers' inboxes, its checked dtype and sample
-shape, and whether it is recorded; no per-tick dicts keyed by (node, port), no spec lookups.
+A tick then touches only lists and slots: each input port owns an inbox (a list its link fills),
+each demanded output knows the links to its consumers (:mod:`flowtact.runtime.links`), its checked
+dtype and sample shape, and whether it is recorded; no per-tick dicts keyed by (node, port), no
+spec lookups.
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ import numpy as np
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.compile import Plan
+from flowtact.runtime.links import Link, link_kind
 
-__all__ = ["NodePlan", "OutPlan", "build_plans", "takes_first", "tallies"]
+__all__ = ["OutPlan", "WiredNode", "build_plans", "takes_first", "tallies"]
 
 
 @dataclass(slots=True, eq=False)
@@ -33,12 +35,8 @@ class OutPlan:
     kind: tuple[np.dtype, tuple[int, ...]]
     """(dtype, tail), one shared object per distinct kind in the plan (inputs' streams included):
     what a chunk admitted to one stream is known to fit (compared by identity)."""
-    now: tuple[list[Chunk], ...]
-    """Inboxes of the consumers that get it this tick."""
-    later: tuple[list[Chunk], ...]
-    """Next-tick inboxes of consumers reading it through a delay port (moved in at the tick's end)."""
-    delayed_into: tuple[list[Chunk], ...]
-    """Those consumers' own inboxes: where it goes directly at the end of the run (the flush)."""
+    links: tuple[Link, ...]
+    """The links to its consumers' inboxes (a delay port's link holds it until the tick ends)."""
     record: str | None
     """Stream name given to the recorder, or None when not recorded."""
     tally: str | None
@@ -49,8 +47,8 @@ class OutPlan:
 
 
 @dataclass(slots=True, eq=False)
-class NodePlan:
-    """One active node: its block, its inputs and its demanded outputs."""
+class WiredNode:
+    """One active node wired for the engine: its block, its inboxes and its demanded outputs' links."""
 
     name: str
     block: Block
@@ -71,10 +69,10 @@ class NodePlan:
 
 
 def build_plans(
-    plan: Plan, blocks: dict[str, Block]
-) -> tuple[list[NodePlan], list[tuple[list[Chunk], list[Chunk]]]]:
-    """Node plans in execution order, and the (inbox, next-tick inbox) pairs of delay ports."""
-    nodes: dict[str, NodePlan] = {}
+    plan: Plan, blocks: dict[str, Block], link: str = "local"
+) -> tuple[list[WiredNode], list[Link]]:
+    """Node plans in execution order, every edge a link of kind ``link``, and every link made."""
+    nodes: dict[str, WiredNode] = {}
     boxes: dict[tuple[str, str], list[Chunk]] = {}
     kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
 
@@ -92,14 +90,18 @@ def build_plans(
             spec = block.input_specs[p]
             inputs.append((p if p in passed else None, box, Chunk.empty(spec).readonly(), spec))
         in_kind = kind_of(inputs[0][3]) if inputs else None
-        nodes[n] = NodePlan(n, block, isinstance(block, Source), tuple(inputs), in_kind=in_kind)
-    later: dict[tuple[str, str], list[Chunk]] = {}
-    routes: dict[tuple[str, str], list[tuple[str, str, bool]]] = {}
+        nodes[n] = WiredNode(n, block, isinstance(block, Source), tuple(inputs), in_kind=in_kind)
+    make = link_kind(link)
+    links: list[Link] = []
+    routes: dict[tuple[str, str], list[Link]] = {}
     for e in plan.active_edges:
+        inbox = boxes.get((e.dst, e.dst_port))
+        if inbox is None:  # the consumer neither steps on nor drains this input
+            continue
         delayed = plan.graph.nodes[e.dst].cls.inputs[e.dst_port].delay
-        routes.setdefault((e.src, e.src_port), []).append((e.dst, e.dst_port, delayed))
-        if delayed:
-            later.setdefault((e.dst, e.dst_port), [])
+        made = make(plan.specs[(e.src, e.src_port)], inbox, delayed=delayed)
+        routes.setdefault((e.src, e.src_port), []).append(made)
+        links.append(made)
     recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in blocks}
     for n, nd in nodes.items():
         outs = []
@@ -115,16 +117,14 @@ def build_plans(
                     dtype=kind[0],
                     tail=kind[1],
                     kind=kind,
-                    now=tuple(boxes[(d, dp)] for d, dp, delayed in dst if not delayed),
-                    later=tuple(later[(d, dp)] for d, dp, delayed in dst if delayed),
-                    delayed_into=tuple(boxes[(d, dp)] for d, dp, delayed in dst if delayed),
+                    links=tuple(dst),
                     record=name,
                     tally=name if name is not None else (f"{n}.{p}" if spec.events else None),
                     events=spec.events,
                 )
             )
         nd.outs = tuple(outs)
-    return list(nodes.values()), [(boxes[k], v) for k, v in later.items()]
+    return list(nodes.values()), links
 
 
 def tallies(delivered: list[OutPlan]) -> tuple[dict[str, int], dict[str, int]]:

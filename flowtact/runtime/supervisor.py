@@ -29,117 +29,50 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import signal
 import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-import msgpack
 import zmq
 
 from flowtact.compile import Plan
-from flowtact.errors import FlowtactError
-from flowtact.python_child import python_command
-from flowtact.runtime.clock import LAG_WARN_S, tick_for
+from flowtact.runtime.clock import tick_for
 from flowtact.runtime.compile_notice import CompileNotices
-from flowtact.runtime.forked import ForkedWorker, can_fork, fork_worker
-from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
+from flowtact.runtime.executors import RunOptions
+from flowtact.runtime.inproc import RunSummary, Sink
+from flowtact.runtime.links.zeromq.wire import recv_message
 from flowtact.runtime.placement import Placement, place
+from flowtact.runtime.protocol import Op, decode, encode
 from flowtact.runtime.rundir import make_run_folder
-from flowtact.runtime.stats import LatencyHistogram, format_factor
-from flowtact.runtime.warm_up import load_shared_kernels, warm_shared_kernels
-from flowtact.runtime.wire import recv_message
+from flowtact.runtime.supervisor_liveness import SupervisorLiveness
+from flowtact.runtime.supervisor_procs import (
+    PING_S,
+    STOP_MARGIN_S,
+    WATCH_S,
+    Failure,
+    Proc,
+    WorkerFailed,
+    describe_failure,
+)
+from flowtact.runtime.supervisor_startup import SupervisorStartup
+from flowtact.runtime.supervisor_stats import SupervisorStats
 
 __all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
 
-PING_S = 0.25
-WATCH_S = 0.02
-"""Exits and stalls of workers are looked for this often (the pump also wakes for every message)."""
 _EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
-WARMUP_S = 1.0
-"""CPU is reported over the running phase after this warm-up (JIT compilation, first allocations)."""
-STOP_MARGIN_S = 0.25
-"""A stop ends on the tick this far (in wall time) ahead of the furthest worker: it reaches them first."""
-DEADLINE_WARN_EVERY_S = 5.0
-"""Deadline misses are told at the first one, then at most this often (with their count)."""
-WAITING_EVERY_S = 15.0
-"""How often the run repeats that it is waiting for a worker on another host."""
-LAST_WORDS_S = 0.2
-"""After a worker exits, how long its last control messages (an error report) may take to arrive."""
-SILENT_PROBE_S = 0.3
-"""How long a worker without progress has its CPU time watched, to tell a hung process from a busy one."""
-IDLE_CPU = 0.05
-"""A worker without progress that uses less than this share of a core is not working: it has stalled."""
 
 
-class WorkerFailed(FlowtactError, RuntimeError):
-    """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause.
+class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
+    """Runs a :class:`~flowtact.compile.Plan` across worker processes joined by ZeroMQ.
 
-    ``traceback`` is the failing block's Python traceback as the worker formatted it (None when
-    no Python exception caused the failure: a death, a stall); ``flowtact --debug`` prints it.
+    Start-up (:mod:`~flowtact.runtime.supervisor_startup`), liveness
+    (:mod:`~flowtact.runtime.supervisor_liveness`) and statistics
+    (:mod:`~flowtact.runtime.supervisor_stats`) are its parts; the run, the pump and the stop are here.
     """
-
-    def __init__(self, message: str, traceback: str | None = None) -> None:
-        super().__init__(message)
-        self.traceback = traceback
-
-
-@dataclass
-class _Proc:
-    name: str
-    nodes: list[str]
-    host: str | None
-    restart: str
-    max_restarts: int
-    stall_s: float
-    startup_s: float
-    stop_grace_s: float
-    popen: subprocess.Popen[bytes] | ForkedWorker | None = None
-    spawned_at: float = 0.0  # when its process was started (monotonic)
-    hello_at: float = 0.0  # when its first message arrived
-    ready_at: float = 0.0  # when it said ready (warm, inputs bound)
-    setup: dict[str, float] = field(default_factory=dict)  # its own start-up parts (s): build, warm_up
-    ident: bytes | None = None
-    sock: zmq.Socket | None = None
-    pid: int | None = None
-    state: str = "starting"
-    restarts: int = 0
-    endpoints: dict[int, str] = field(default_factory=dict)
-    stats: dict[str, Any] = field(default_factory=dict)
-    warm: tuple[float, int] | None = None  # (cpu_s, wall_ns) at the end of the warm-up
-    cpu_pct: float | None = None
-    done: bool = False
-    rec_done: bool = False
-    counters: dict[str, dict[str, int]] = field(default_factory=dict)
-    summaries: dict[str, str] = field(default_factory=dict)
-    """What its blocks said of the run (``Block.summary``), per node, sent with ``done``."""
-    wired: bool = False
-    last_k: int = 0
-    violations: dict[str, int] = field(default_factory=dict)
-    since: float = 0.0  # when it was (re)started or started running: the clock of its windows
-    beat_at: float = 0.0  # when its last heartbeat arrived
-    beat: dict[str, Any] = field(default_factory=dict)
-    busy_since: float = 0.0  # since when its current step (same node, same step count) runs
-    next_waiting: float = math.inf  # when to repeat that the run waits for it (another host)
-    tick_rate: float = 0.0  # ticks per second lately (from heartbeats)
-    silent_mark: tuple[float, float] | None = None  # (when, CPU seconds) as its heartbeats fell silent
-    progress_at: float = 0.0  # when it last showed start-up progress
-    progress: Any = None  # its last start-up progress report (or CPU seconds before its first message)
-    phase: str = "starting its interpreter"  # its last reported start-up phase
-
-    def describe(self) -> str:
-        where = f" on {self.host}" if self.host else ""
-        return f"process '{self.name}'{where} (nodes {', '.join(self.nodes)})"
-
-
-class ProcessExecutor:
-    """Runs a :class:`~flowtact.compile.Plan` across worker processes joined by ZeroMQ."""
 
     def __init__(
         self,
@@ -155,9 +88,9 @@ class ProcessExecutor:
         launched_at: float | None = None,
     ) -> None:
         self.plan = plan
-        self.launched_at = launched_at
-        """When the command started (monotonic), if known: start-up is counted from there."""
         self.startup_s = startup_s
+        self.launched_at = launched_at
+        """When the command started (monotonic), if known: start-up and wall time count from there."""
         """``--startup-s``: every group's start-up window (None: each group's own ``startup_s``)."""
         self.fast = fast
         self.tick_s = tick_for(fast, tick_s)
@@ -173,17 +106,36 @@ class ProcessExecutor:
             if n in plan.demanded
         }
 
-    # -- public -----------------------------------------------------------------------------
+    @classmethod
+    def for_run(cls, plan: Plan, options: RunOptions) -> ProcessExecutor:
+        """The executor ``flowtact run`` makes by default."""
+        o = options
+        return cls(
+            plan,
+            fast=o.fast,
+            tick_s=o.tick_s,
+            recorder=o.recorder,
+            progress=o.progress,
+            live=o.live,
+            warn=o.warn,
+            startup_s=o.startup_s,
+            launched_at=o.launched_at,
+        )
+
     def run(self, duration_s: float | None) -> RunSummary:
         """Run until ``duration_s`` of graph time (None: until interrupted; real time only)."""
         if duration_s is None and self.fast:
             raise ValueError("a --fast run needs a duration (--duration or the graph's duration_s)")
         self.duration_s = duration_s
+        self.ctx: zmq.Context | None = None  # made after local workers are forked (flowtact.runtime.forked)
+        self.ctl = self.rec = None
+        self.parts: dict[str, float] = {}
+        """Start-up parts measured here (s): ``kernels`` (numba set up before forking workers)."""
         self.run_folder = make_run_folder("run")  # ipc sockets; also sweeps folders of killed runs
         self.rundir = self.run_folder.path
-        self.procs: dict[str, _Proc] = {}
+        self.procs: dict[str, Proc] = {}
         self.auth = None
-        self.by_ident: dict[bytes, _Proc] = {}
+        self.by_ident: dict[bytes, Proc] = {}
         self.samples: dict[str, int] = {}
         self.rec_ends = 0
         self.stopped = False
@@ -197,10 +149,6 @@ class ProcessExecutor:
         """The supervisor's own CPU seconds and monotonic time when the first worker was warm."""
         self.late: list[str] = []  # the busiest nodes when the run fell behind real time
         self.ctl_tcp = self.rec_tcp = self.ctl_watch = None
-        self.ctx: zmq.Context | None = None
-        self.ctl = self.rec = None
-        self.parts: dict[str, float] = {}
-        """Start-up parts measured here (s): ``kernels`` (numba set up before forking workers)."""
         self.shared_warm: threading.Thread | None = None
         self.t_run = self.next_ping = time.monotonic()
         self.next_watch = 0.0
@@ -221,7 +169,7 @@ class ProcessExecutor:
         try:
             for g, nodes in self.placement.groups.items():
                 pdef = self.placement.processes[g]
-                self.procs[g] = _Proc(
+                self.procs[g] = Proc(
                     g,
                     nodes,
                     pdef.host,
@@ -254,36 +202,6 @@ class ProcessExecutor:
             raise err
         return summary
 
-    def _fork_local(self) -> bool:
-        """Start every local group as a fork of this process, with numba set up and the kernel
-        every worker calls loaded here once; False (nothing started) where forking is not safe
-        or the graph spans hosts (its workers get CURVE keys as their own interpreters do)."""
-        local = [p for p in self.procs.values() if p.host is None]
-        if not local or self.plan.graph.deployment.remote or not can_fork():
-            return False
-        t0 = time.monotonic()
-        specs = [spec for (node, _port), spec in self.plan.specs.items() if node in self.plan.demanded]
-        load_shared_kernels(specs)
-        self.parts["kernels"] = time.monotonic() - t0
-        for proc in local:
-            self._started(proc, fork_worker(f"ipc://{self.rundir}/ctl", proc.name))
-        return True
-
-    def _warm_shared(self) -> None:
-        """Compile once, here, the kernels every local worker calls (the bad-data screen's), so
-        that the workers load them from numba's cache rather than each compile them at once.
-
-        In a thread, while the workers start their interpreters and import (seconds): done before
-        spawning, it delayed every worker by its compile time (4 s at load 9 for touch.yaml)."""
-        self.shared_warm = None
-        if sum(1 for p in self.procs.values() if p.host is None) < 2:
-            return
-        specs = [spec for (node, _port), spec in self.plan.specs.items() if node in self.plan.demanded]
-        self.shared_warm = threading.Thread(
-            target=warm_shared_kernels, args=(specs, self.warn), name="flowtact-shared-kernels", daemon=True
-        )
-        self.shared_warm.start()
-
     def _catch_signals(self) -> Callable[[], None]:
         """Ctrl-C and SIGTERM become a flag the pump reads: no exception lands mid-write."""
         if threading.current_thread() is not threading.main_thread():
@@ -300,192 +218,10 @@ class ProcessExecutor:
 
         return restore
 
-    # -- set-up -----------------------------------------------------------------------------
-    def _open_sockets(self) -> None:
-        remote = self.plan.graph.deployment.remote
-        self.ctl = self.ctx.socket(zmq.ROUTER)
-        self.ctl.setsockopt(zmq.LINGER, 0)
-        self.ctl.setsockopt(zmq.ROUTER_MANDATORY, 1)
-        self.ctl.bind(f"ipc://{self.rundir}/ctl")
-        self.rec = self.ctx.socket(zmq.PULL)
-        self.rec.setsockopt(zmq.LINGER, 0)
-        self.rec.bind(f"ipc://{self.rundir}/rec")
-        self.poller = zmq.Poller()
-        self.poller.register(self.ctl, zmq.POLLIN)
-        self.poller.register(self.rec, zmq.POLLIN)
-        self.tcp_ctl = self.tcp_rec = None
-        if remote:
-            from flowtact.runtime.security import Authenticator, HandshakeWatch, load_keys, secure_server
-
-            net = self.plan.graph.deployment.network
-            keys = net.keys
-            if (
-                keys is not None
-                and not Path(keys).expanduser().is_absolute()
-                and Path(self.plan.graph.path).is_file()
-            ):
-                keys = str(Path(self.plan.graph.path).parent / keys)  # relative to the graph file
-            self.keys = load_keys(Path(keys).expanduser() if keys else None)
-            self.keys_dir = str(Path(keys).expanduser()) if keys else os.environ["FLOWTACT_KEYS"]
-            self.auth = Authenticator(self.ctx, self.keys).start()
-            self.ctl_tcp = self.ctx.socket(zmq.ROUTER)
-            self.ctl_tcp.setsockopt(zmq.LINGER, 0)
-            secure_server(self.ctl_tcp, self.keys)
-            self.ctl_watch = HandshakeWatch(self.ctl_tcp)
-            self.ctl_tcp.bind(f"tcp://{net.listen}:{net.port}")
-            self.tcp_ctl = self.ctl_tcp.last_endpoint.decode()
-            self.rec_tcp = self.ctx.socket(zmq.PULL)
-            self.rec_tcp.setsockopt(zmq.LINGER, 0)
-            secure_server(self.rec_tcp, self.keys)
-            port = self.rec_tcp.bind_to_random_port(f"tcp://{net.listen}")
-            self.tcp_rec = f"tcp://{net.listen}:{port}"
-            self.poller.register(self.ctl_tcp, zmq.POLLIN)
-            self.poller.register(self.rec_tcp, zmq.POLLIN)
-
-    def _spawn(self, proc: _Proc) -> None:
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)  # `module:Class` blocks resolve alike
-        env.setdefault("NUMBA_NUM_THREADS", "1")
-        cmd = python_command(
-            "-m", "flowtact.runtime.worker", f"ipc://{self.rundir}/ctl", "--process", proc.name, "--child"
-        )
-        if self.auth is not None:
-            cmd += ["--keys", self.keys_dir]
-        self._started(proc, subprocess.Popen(cmd, env=env, start_new_session=True))
-
-    def _started(self, proc: _Proc, popen: subprocess.Popen[bytes] | ForkedWorker) -> None:
-        """Watch a newly started worker process of group ``proc`` from its start-up on."""
-        proc.popen = popen
-        proc.pid = popen.pid
-        proc.spawned_at = time.monotonic()
-        proc.state = "starting"
-        proc.ident = None
-        proc.beat = {}
-        proc.since = proc.progress_at = time.monotonic()
-        proc.progress, proc.phase = None, "starting its interpreter"
-        proc.done = proc.rec_done = proc.wired = False
-
-    def _say_waiting(self, proc: _Proc) -> None:
-        waited = time.monotonic() - proc.since
-        if waited < 1.0:
-            allow = "".join(f" --allow-module {m}" for m in self.plan.graph.allow_modules)  # that host's say
-            self.warn(
-                f"waiting for process '{proc.name}' on {proc.host} (up to {proc.startup_s:g} s, its "
-                f"startup_s): start it there with `flowtact worker {self.tcp_ctl} --process {proc.name}{allow}`"
-            )
-        else:
-            self.warn(
-                f"still waiting for process '{proc.name}' on {proc.host} ({waited:.0f} of {proc.startup_s:g} s)"
-            )
-        proc.next_waiting = time.monotonic() + WAITING_EVERY_S
-
-    def _bind_addresses(self, proc: _Proc) -> dict[int, str]:
-        """Where each of the group's incoming streams is bound."""
-        out = {}
-        for d in self.wplans[proc.name]["inbound"]:
-            sid = d["id"]
-            if sid in proc.endpoints:  # a restart binds where the producers already connect
-                out[sid] = proc.endpoints[sid]
-            elif d["same_host"] and proc.host is None:
-                out[sid] = f"ipc://{self.rundir}/s{sid}-{proc.name}"
-            else:
-                host = proc.host or self.plan.graph.deployment.network.listen
-                out[sid] = f"tcp://{host}:0"
-        return out
-
-    def _send(self, proc: _Proc, op: str, **kw: Any) -> None:
-        kw["op"] = op
+    def _send(self, proc: Proc, op: Op, **kw: Any) -> None:
         with contextlib.suppress(zmq.ZMQError):  # the worker is gone; its process watch reports it
-            proc.sock.send_multipart([proc.ident, msgpack.packb(kw)])  # type: ignore[union-attr]
+            proc.sock.send_multipart([proc.ident, encode(op, **kw)])  # type: ignore[union-attr]
 
-    def _start_all(self) -> bool:
-        """Handshake: hello -> plan -> ready -> wire -> wired -> start; False if interrupted first."""
-        while not all(p.wired for p in self.procs.values()):
-            if self.interrupts:
-                return False
-            if self.auth is not None:
-                self._report_refusals()
-            now = time.monotonic()
-            for p in self.procs.values():
-                if p.wired:
-                    continue
-                self._check_startup(p, now)
-                if p.host and p.ident is None and now >= p.next_waiting:
-                    self._say_waiting(p)
-            try:
-                self._pump(50)
-            except _Failure as f:
-                self._failed(f)  # under restart: on-failure the group starts again
-            if all(p.endpoints or not self.wplans[p.name]["inbound"] for p in self.procs.values()) and all(
-                p.state in ("ready", "wiring", "wired") for p in self.procs.values()
-            ):
-                for p in self.procs.values():
-                    if p.state == "ready":
-                        self._wire(p)
-        t0 = time.monotonic_ns() + 20_000_000
-        self.t0_ns = t0
-        self.go_ns = t0 if not self.fast else t0 - 20_000_000  # --fast workers start at once
-        self.t_run = time.monotonic()
-        for p in self.procs.values():
-            self._send(p, "start", t0_ns=t0, k0=0, resume=False)
-            self._running(p)
-        return True
-
-    def _check_startup(self, p: _Proc, now: float) -> None:
-        """A worker that shows no start-up progress for its window did not join: name its last phase
-        and how to widen the window. One that waits for the others (ready, wired) has no window."""
-        if p.state in ("ready", "wired"):
-            p.progress_at = now
-            return
-        if p.ident is None and p.host is None and p.pid is not None:  # before its first message
-            seen = _proc_stat(p.pid)
-            if seen is not None and seen[1] != p.progress:  # the interpreter starts, imports
-                p.progress, p.progress_at = seen[1], now
-        quiet = now - max(p.since, p.progress_at)
-        if quiet <= p.startup_s:
-            return
-        if p.host and p.ident is None:
-            raise WorkerFailed(
-                f"{p.describe()} did not join within {p.startup_s:g} s: start it with `flowtact worker` "
-                f"there, or give it longer with --startup-s S or startup_s under processes: {p.name}: in the graph"
-            )
-        if p.popen is not None and p.popen.poll() is None:
-            p.popen.kill()  # hung: it cannot take part in an orderly end
-        raise WorkerFailed(
-            f"{p.describe()} did not join: no start-up progress for {quiet:.0f} s (its start-up window, "
-            f"{p.startup_s:g} s) while {p.phase}; if it needs longer, widen the window with "
-            f"--startup-s S or startup_s under processes: {p.name}: in the graph"
-        )
-
-    def _running(self, proc: _Proc) -> None:
-        proc.state = "running"
-        proc.since = proc.beat_at = proc.busy_since = time.monotonic()
-
-    def _report_refusals(self) -> None:
-        """Say so when a host tries to join with another key (ZAP refusal or a failed handshake)."""
-        from flowtact.runtime.security import SecurityError
-
-        seen = self.refused_seen
-        for refused in self.auth.refused[seen:]:  # type: ignore[union-attr]
-            self.warn(f"refused a connection: {refused}")
-        self.refused_seen = len(self.auth.refused)  # type: ignore[union-attr]
-        while True:
-            try:
-                self.ctl_watch.check()
-                return
-            except SecurityError as e:
-                self.warn(f"refused a connection: {e}")
-
-    def _wire(self, proc: _Proc) -> None:
-        connect: dict[int, dict[str, str]] = {}
-        for d in self.wplans[proc.name]["outbound"]:
-            connect.setdefault(d["id"], {})[d["group"]] = self.procs[d["group"]].endpoints[d["id"]]
-        remote = proc.host is not None
-        record = self.tcp_rec if remote else f"ipc://{self.rundir}/rec"
-        self._send(proc, "wire", connect=connect, record=record)
-        proc.state = "wiring"
-
-    # -- the pump: every phase runs it ------------------------------------------------------
     def _pump(self, timeout_ms: int) -> None:
         """Receive control messages and records, notice exits and stalls, ping, show progress."""
         self._poll(timeout_ms)
@@ -498,7 +234,7 @@ class ProcessExecutor:
             self.next_ping = now + PING_S
             for p in self.procs.values():
                 if p.ident is not None:
-                    self._send(p, "ping")
+                    self._send(p, Op.PING)
             if self.t0_ns:
                 self._check_overload()
                 if self.live is not None:
@@ -513,7 +249,7 @@ class ProcessExecutor:
             if sock is self.ctl or sock is self.ctl_tcp:
                 while sock.getsockopt(_EVENTS) & _POLLIN:  # not zmq.Again: an exception per wake-up
                     ident, raw = sock.recv_multipart(zmq.NOBLOCK)
-                    self._on_control(sock, ident, msgpack.unpackb(raw, strict_map_key=False))
+                    self._on_control(sock, ident, decode(raw))
             else:
                 self._drain_records(sock)
 
@@ -533,12 +269,12 @@ class ProcessExecutor:
 
     def _on_control(self, sock: zmq.Socket, ident: bytes, msg: dict[str, Any]) -> None:
         op = msg["op"]
-        if op == "beat":  # from the worker's heartbeat thread (a socket of its own)
+        if op is Op.BEAT:  # from the worker's heartbeat thread (a socket of its own)
             proc = self.procs.get(msg["process"])
             if proc is not None and msg["pid"] == proc.pid:
                 self._on_beat(proc, msg)
             return
-        if op == "hello":
+        if op is Op.HELLO:
             proc = self.procs.get(msg["process"])
             if proc is None:
                 return
@@ -548,177 +284,41 @@ class ProcessExecutor:
             proc.hello_at = time.monotonic()
             proc.progress_at, proc.phase = time.monotonic(), "waiting for its plan"
             self.by_ident[ident] = proc
-            self._send(proc, "plan", plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
+            self._send(proc, Op.PLAN, plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
             proc.state = "planned"
             return
         proc = self.by_ident.get(ident)
         if proc is None:
             return
         proc.progress_at = time.monotonic()  # every message before the start is start-up progress
-        if op == "ready":
+        if op is Op.READY:
             self.compiles.on_ready(proc.describe(), msg)
             proc.ready_at, proc.setup = time.monotonic(), msg.get("setup") or {}
             proc.endpoints = {int(k): v for k, v in msg["endpoints"].items()}
             proc.state = "ready"
             if proc.restarts and self.t0_ns:  # a restart after the start rejoins the running graph
                 self._wire(proc)
-        elif op == "wired":
+        elif op is Op.WIRED:
             proc.wired = True
             if proc.restarts and self.t0_ns:
-                self._send(proc, "start", t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
+                self._send(proc, Op.START, t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
                 self._running(proc)
                 if self.stopped:
-                    self._send(proc, "stop", k=self.stop_k)
+                    self._send(proc, Op.STOP, k=self.stop_k)
             else:
                 proc.state = "wired"
-        elif op == "stats":
+        elif op is Op.STATS:
             self._on_stats(proc, msg)
-        elif op == "done":
+        elif op is Op.DONE:
             self._on_stats(proc, msg)
             proc.counters = msg.get("counters", {})
             proc.summaries = msg.get("summaries", {})
             proc.done = True
             self.last_done_ns = time.monotonic_ns()
             proc.state = "done"
-        elif op == "error":
-            raise _Failure(proc, msg)
+        elif op is Op.ERROR:
+            raise Failure(proc, msg)
 
-    def _on_beat(self, proc: _Proc, beat: dict[str, Any]) -> None:
-        now = time.monotonic()
-        old = proc.beat
-        if beat["node"] is None or beat["node"] != old.get("node") or beat["steps"] != old.get("steps"):
-            proc.busy_since = now  # waiting, or a new step: progress
-            proc.silent_mark = None
-        if old:  # ticks per second, for where a stop can reach it
-            proc.tick_rate = max(_tick_rate(old, beat), 0.5 * proc.tick_rate)  # slow to forget a fast spell
-        proc.beat, proc.beat_at = beat, now
-        if proc.state != "running":
-            proc.phase = beat.get("phase") or proc.phase
-            if beat.get("progress") != proc.progress:  # start-up advances: its window restarts
-                proc.progress, proc.progress_at = beat.get("progress"), now
-        self.compiles.on_beat(proc.name, proc.describe(), proc.state == "running", beat)
-        proc.last_k = max(proc.last_k, beat["k"])
-
-    def _on_stats(self, proc: _Proc, msg: dict[str, Any]) -> None:
-        proc.stats = msg
-        proc.last_k = max(proc.last_k, msg["k"])
-        wall = msg["wall_ns"]
-        if proc.warm is None and time.monotonic() - self.t_run >= WARMUP_S:
-            proc.warm = (msg["cpu_s"], wall)
-            if self.self_warm is None:
-                self.self_warm = (time.process_time(), time.monotonic())
-        if proc.warm is not None and wall > proc.warm[1]:
-            proc.cpu_pct = 100.0 * (msg["cpu_s"] - proc.warm[0]) / ((wall - proc.warm[1]) / 1e9)
-        self.max_lag_s = max(self.max_lag_s, msg.get("max_lag_s", 0.0))
-        if self.fast:  # deadlines are wall-clock budgets: a virtual clock cannot miss them
-            return
-        now = time.monotonic()
-        for name, p in msg["paths"].items():
-            seen = proc.violations.get(name, 0)
-            if p["violations"] > seen and now >= self.deadline_quiet.get(name, 0.0):
-                budget = next(d.budget_s for d in self.plan.graph.deployment.deadlines if d.name == name)
-                self.warn(
-                    f"deadline {name} ({budget * 1e3:g} ms) missed {p['violations'] - seen}x "
-                    f"(worst {p['worst_ns'] / 1e6:.2f} ms so far)"
-                )
-                proc.violations[name] = p["violations"]
-                self.deadline_quiet[name] = now + DEADLINE_WARN_EVERY_S
-
-    # -- liveness -----------------------------------------------------------------------------
-    def _watch(self) -> None:
-        """Notice a worker process that exited without saying done (after its last words)."""
-        for p in self.procs.values():
-            if p.popen is None or p.done:
-                continue
-            code = p.popen.poll()
-            if code is None:
-                continue
-            deadline = time.monotonic() + LAST_WORDS_S  # an error report may still be in flight
-            while not p.done and time.monotonic() < deadline:
-                self._poll(20)
-            if p.done:
-                continue
-            cause = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exited with status {code}"
-            raise _Failure(p, {"node": None, "message": cause})
-
-    def _check_liveness(self) -> None:
-        """A running worker that shows no progress for ``stall_s`` has stalled.
-
-        No progress: its heartbeats stopped, or the node it steps has not returned. A worker on
-        this host is then asked of the kernel: stopped (``kill -STOP``) or idle (blocked in a call)
-        is a stall; burning CPU (a long computation, or kernels loading while they hold the
-        interpreter so the heartbeat thread cannot run) is given the start-up window first. A worker
-        on another host is judged by its heartbeats alone.
-        """
-        now = time.monotonic()
-        for p in self.procs.values():
-            if p.state != "running" or p.done:
-                continue
-            window = p.startup_s if p.beat.get("first", True) else p.stall_s
-            node = p.beat.get("node")
-            quiet = now - p.beat_at
-            stuck = now - p.busy_since if node else 0.0
-            if max(quiet, stuck) <= window:
-                continue
-            why = self._why_stalled(p, now, max(quiet, stuck))
-            if why is None:
-                continue
-            what = (
-                f"no heartbeat for {quiet:.1f} s" + (f" inside node '{node}'" if node else "")
-                if quiet > window
-                else f"node '{node}' has not returned from its step for {stuck:.1f} s"
-            )
-            raise _Failure(
-                p,
-                {
-                    "node": None,
-                    "message": f"stalled at tick {p.last_k} (t={p.last_k * self.tick_s:.3f} s): {what}, {why} "
-                    f"(stall_s {window:g} s)",
-                    "stalled": True,
-                },
-            )
-
-    def _why_stalled(self, p: _Proc, now: float, idle_for: float) -> str | None:
-        """Why a worker without progress counts as stalled now, or None while it may be working."""
-        seen = _proc_stat(p.pid) if p.host is None and p.pid is not None else None
-        if seen is None:  # another host, or no /proc
-            return "stopped, hung or starved"
-        state, cpu_s = seen
-        if state == "T":
-            return "its process is stopped (SIGSTOP)"
-        if p.silent_mark is None:
-            p.silent_mark = (now, cpu_s)
-            return None
-        t_mark, cpu_mark = p.silent_mark
-        if now - t_mark < SILENT_PROBE_S:
-            return None
-        if (cpu_s - cpu_mark) / (now - t_mark) < IDLE_CPU:
-            return "and its process is idle (blocked in a call, or waiting on something that never comes)"
-        if idle_for > p.startup_s:
-            return f"while computing (longer than startup_s, {p.startup_s:g} s)"
-        return None
-
-    def _check_overload(self) -> None:
-        """Warn once when a real-time run falls behind its clock, naming the busiest nodes."""
-        if self.fast or self.late:
-            return
-        lagging = [p for p in self.procs.values() if p.stats.get("max_lag_s", 0.0) > LAG_WARN_S]
-        if not lagging:
-            return
-        worst = max(lagging, key=lambda p: p.stats["max_lag_s"])
-        wall = max((worst.stats["wall_ns"] - self.t0_ns) / 1e9, 1e-9)
-        share = {
-            n: ns / 1e9 / wall for p in self.procs.values() for n, ns in p.stats.get("node_ns", {}).items()
-        }
-        self.late = sorted(share, key=share.get, reverse=True)[:3]  # type: ignore[arg-type]
-        busiest = ", ".join(f"{n} {100 * share[n]:.0f} %" for n in self.late)
-        self.warn(
-            f"falling behind real time: {worst.describe()} ran {worst.stats['max_lag_s']:.2f} s late by "
-            f"t={worst.stats['now']:.2f} s (real-time factor {format_factor(worst.stats['now'] / wall)}); "
-            f"busiest nodes (share of wall time in their steps): {busiest}"
-        )
-
-    # -- running ----------------------------------------------------------------------------
     def _supervise(self) -> str:
         while not all(p.done for p in self.procs.values()):
             if self.interrupts and not self.stopped:
@@ -729,7 +329,7 @@ class ProcessExecutor:
                 self._check_grace()
             try:
                 self._pump(20)
-            except _Failure as f:
+            except Failure as f:
                 self._failed(f)
         self._drain_until_records_end()
         return "interrupted" if self.stopped else "duration"
@@ -752,7 +352,7 @@ class ProcessExecutor:
         self.stop_k = k
         for p in self.procs.values():
             if p.ident is not None:
-                self._send(p, "stop", k=k)
+                self._send(p, Op.STOP, k=k)
 
     def _draining(self) -> str:
         left = [p for p in self.procs.values() if not p.done]
@@ -769,7 +369,7 @@ class ProcessExecutor:
                 "the recording holds what arrived until then"
             )
 
-    def _failed(self, f: _Failure) -> None:
+    def _failed(self, f: Failure) -> None:
         """Restart the worker when its group asks for it and may; otherwise end the run."""
         proc, text = f.proc, describe_failure(f.proc, f.report)
         if f.report.get("stalled") and proc.popen is not None and proc.popen.poll() is None:
@@ -797,7 +397,7 @@ class ProcessExecutor:
 
     def _drain_until_records_end(self) -> None:
         """Write what is still in flight: every recording worker ends its records with a marker."""
-        expected = sum(1 for g in self.procs if self.wplans[g]["record"])
+        expected = sum(1 for g in self.procs if self.wplans[g].record)
         deadline = time.monotonic() + 5.0
         while self.rec_ends < expected and time.monotonic() < deadline:
             self.poller.poll(50)
@@ -810,7 +410,7 @@ class ProcessExecutor:
             self.shared_warm.join()  # a compile under way ends before the interpreter does
         for p in self.procs.values():
             if p.ident is not None:
-                self._send(p, "abort" if failed else "exit")
+                self._send(p, Op.ABORT if failed else Op.EXIT)
         deadline = time.monotonic() + 2.0
         for p in self.procs.values():
             if p.popen is None:
@@ -830,201 +430,3 @@ class ProcessExecutor:
         if self.ctx is not None:
             self.ctx.destroy(linger=0)
         self.run_folder.close()
-
-    # -- reporting --------------------------------------------------------------------------
-    def snapshot(self) -> dict[str, Any]:
-        """The live view's data: processes, streams, deadline paths."""
-        streams, paths = self._stream_stats(), self._path_stats()
-        return {
-            "graph": self.plan.graph.name,
-            "mode": "fast" if self.fast else "realtime",
-            "now": self._graph_now(),
-            "duration": self.duration_s,
-            "wall": time.monotonic() - (self.launched_at or self.t_start),
-            "running": max(time.monotonic_ns() - self.go_ns, 0) / 1e9 if self.t0_ns else None,
-            "startup": self.go_ns / 1e9 - (self.launched_at or self.t_start) if self.t0_ns else None,
-            "processes": self._process_table(),
-            "streams": {
-                name: {
-                    "rate_hz": s["messages"] / max(self._graph_now(), 1e-9),
-                    "samples_hz": s["samples"] / max(self._graph_now(), 1e-9),
-                    "p50_us": s["latency_us"]["p50"],
-                    "p99_us": s["latency_us"]["p99"],
-                    "dropped": s["dropped"],
-                    "policy": s["policy"],
-                }
-                for name, s in streams.items()
-            },
-            "paths": {
-                name: {
-                    "p50_us": p["p50_us"],
-                    "p99_us": p["p99_us"],
-                    "budget_us": p["budget_us"],
-                    "violations": p["violations"],
-                }
-                for name, p in paths.items()
-                if not self.fast  # wall-clock budgets: nothing to show on a virtual clock
-            },
-        }
-
-    def _own_cpu_pct(self) -> float | None:
-        """The supervisor's CPU (its every thread: control, recording, live view) in % of one core,
-        over the workers' window (after the warm-up), so the two add up; None before any warm-up."""
-        if self.self_warm is None:
-            return None
-        cpu0, t0 = self.self_warm
-        wall = time.monotonic() - t0
-        return 100.0 * (time.process_time() - cpu0) / wall if wall > 0 else None
-
-    def _process_table(self) -> dict[str, dict[str, Any]]:
-        return {
-            p.name: {
-                "pid": p.pid,
-                "host": p.host or "local",
-                "nodes": p.nodes,
-                "cpu_pct": p.cpu_pct,
-                "restarts": p.restarts,
-                "state": p.state,
-            }
-            for p in self.procs.values()
-        }
-
-    def _stream_stats(self) -> dict[str, dict[str, Any]]:
-        out: dict[str, dict[str, Any]] = {}
-        sent_dropped: dict[int, int] = {}  # drops at the sending end ('latest' queue full)
-        for q in self.procs.values():
-            for sid, n in q.stats.get("sent_dropped", {}).items():
-                sent_dropped[int(sid)] = sent_dropped.get(int(sid), 0) + n
-        for p in self.procs.values():
-            for sid, s in p.stats.get("inbound", {}).items():
-                sid = int(sid)
-                name = self.placement.stream_name(sid)
-                key = name if len(self.placement.consumers(sid)) == 1 else f"{name}@{p.name}"
-                policy, _queue = self.placement.crossings[(sid, p.name)]
-                out[key] = {
-                    "to": p.name,
-                    "policy": policy,
-                    "messages": s["messages"],
-                    "samples": s["samples"],
-                    "dropped": s["dropped"] + sent_dropped.get(sid, 0),
-                    "gaps": s["gaps"],
-                    "latency_us": LatencyHistogram.from_wire(s["lat"]).summary(),
-                }
-        return out
-
-    def _path_stats(self) -> dict[str, dict[str, Any]]:
-        out = {}
-        for d in self.plan.graph.deployment.deadlines:
-            h = LatencyHistogram()
-            violations = 0
-            for p in self.procs.values():
-                ps = p.stats.get("paths", {}).get(d.name)
-                if ps:
-                    h.merge(LatencyHistogram.from_wire(ps["lat"]))
-                    violations += ps["violations"]
-            s = h.summary()
-            out[d.name] = {
-                "p50_us": s["p50"],
-                "p99_us": s["p99"],
-                "max_us": s["max"],
-                "n": s["n"],
-                "budget_us": d.budget_s * 1e6,
-                "violations": violations,
-            }
-        return out
-
-    def _startup_parts(self) -> dict[str, float]:
-        """Where the start-up went (see :attr:`RunSummary.startup_parts`)."""
-        go = self.go_ns / 1e9
-        began = self.launched_at or self.t_start
-        parts: dict[str, float] = {}
-        if self.launched_at is not None:
-            parts["launch"] = self.t_start - self.launched_at
-        if "kernels" in self.parts:
-            parts["kernels"] = self.parts["kernels"]
-        ready = [p for p in self.procs.values() if 0 < p.ready_at <= go and p.spawned_at]
-        if ready:
-            last = max(ready, key=lambda p: p.ready_at)
-            parts["start"] = last.hello_at - last.spawned_at
-            parts |= {k: float(last.setup[k]) for k in ("build", "warm_up", "bind") if k in last.setup}
-            parts["wiring"] = go - last.ready_at
-        parts["other"] = max(go - began - sum(parts.values()), 0.0)
-        return parts
-
-    def _summary(self, stopped_by: str) -> RunSummary:
-        plan = self.plan
-        events: dict[str, int] = {}
-        samples: dict[str, int] = {}
-        for n, p in plan.record:
-            name = f"{n}.{p}"
-            if n in plan.demanded:
-                (events if plan.specs[(n, p)].events else samples)[name] = self.samples.get(name, 0)
-        for proc in self.procs.values():
-            for name, count in proc.stats.get("counts", {}).items():
-                n, p = name.split(".", 1)
-                if plan.specs[(n, p)].events and name not in events:
-                    events[name] = count
-        now = max((p.stats.get("now", 0.0) for p in self.procs.values()), default=0.0)
-        counters = {n: c for p in self.procs.values() for n, c in p.counters.items()}
-        return RunSummary(
-            graph=plan.graph.name,
-            duration_s=now,
-            wall_s=time.monotonic() - (self.launched_at or self.t_start),
-            running_s=(self.last_done_ns - self.go_ns) / 1e9 if self.t0_ns and self.last_done_ns else None,
-            startup_s=self.go_ns / 1e9 - (self.launched_at or self.t_start) if self.t0_ns else None,
-            startup_parts=self._startup_parts() if self.t0_ns else {},
-            stopped_by=stopped_by,
-            samples=samples,
-            events=events,
-            event_units={k: plan.specs[tuple(k.split(".", 1))].n_units or 1 for k in events},  # type: ignore[index]
-            counters=counters,
-            pruned=list(plan.pruned),
-            ticks=max((p.last_k for p in self.procs.values()), default=0),
-            processes=self._process_table(),
-            supervisor_cpu_pct=self._own_cpu_pct(),
-            streams=self._stream_stats(),
-            paths=self._path_stats(),
-            counter_docs=explain_counters(plan, counters),
-            realtime=None if self.fast else self.max_lag_s < LAG_WARN_S,
-            max_lag_s=self.max_lag_s,
-            late_nodes=list(self.late),
-            block_summaries={
-                n: t for n in plan.order for p in self.procs.values() if (t := p.summaries.get(n))
-            },
-        )
-
-
-def _proc_stat(pid: int) -> tuple[str, float] | None:
-    """Linux: a process' state letter and CPU seconds (user + system), or None where unknown."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except (OSError, IndexError):
-        return None
-    return fields[0], (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-class _Failure(Exception):
-    """Internal: a worker reported an error or died."""
-
-    def __init__(self, proc: _Proc, report: dict[str, Any]) -> None:
-        self.proc, self.report = proc, report
-        super().__init__(report.get("message", ""))
-
-
-def _tick_rate(old: dict[str, Any], beat: dict[str, Any]) -> float:
-    """Ticks per second between two heartbeats, timed by the worker that sent them: on a loaded
-    machine beats queue and arrive together, and their arrival times would make a rate of
-    millions of ticks per second (and a stop tick minutes ahead of every worker)."""
-    dt = (beat.get("sent_ns", 0) - old.get("sent_ns", 0)) / 1e9
-    return max(beat["k"] - old["k"], 0) / dt if dt > 0 else 0.0
-
-
-def describe_failure(proc: _Proc, report: dict[str, Any]) -> str:
-    """``node 'sa1' (nlif) in process 'neurons' failed at t=1.234 s: ...`` or a dead process."""
-    node = report.get("node")
-    if node:
-        return (
-            f"node '{node}' ({report.get('block')}) failed at t={report.get('now') or 0.0:.3f} s "
-            f"in process '{proc.name}': {report['message']}"
-        )
-    return f"process '{proc.name}' (nodes {', '.join(proc.nodes)}) {report['message']}"

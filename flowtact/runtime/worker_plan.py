@@ -17,7 +17,7 @@ from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.runtime.step_plan import takes_first
 
-__all__ = ["NO_ORIGINS", "InPort", "NodePlan", "OutPort", "Queued", "frozen_empty", "merge_origins", "take"]
+__all__ = ["NO_ORIGINS", "InPort", "OutPort", "Queued", "WorkerNode", "frozen_empty", "merge_origins", "take"]
 
 Queued = deque[tuple[float, Chunk, dict[int, int]]]
 """A node input's queue: (available from tick, chunk, origins) in arrival order."""
@@ -86,8 +86,8 @@ class OutPort:
             buf[-1] = Chunk(last.t, last.data, end)
 
 
-class NodePlan:
-    """Everything one node's step needs, resolved once.
+class WorkerNode:
+    """One node of a worker: everything its step needs (block, input queues, output routes), resolved once.
 
     ``call`` is the block's ``step``, called directly: the worker hands it every needed input,
     read-only (received arrays are, local outputs are sealed as they are delivered), as

@@ -417,7 +417,7 @@ def test_categories_are_stored_in_the_recording_and_cross_processes(recording):
     import h5py
 
     from flowtact.record import stream_specs
-    from flowtact.runtime.placement import spec_from_wire, spec_to_wire
+    from flowtact.runtime.protocol import spec_from_wire, spec_to_wire
 
     with h5py.File(recording) as f:
         assert f["streams/state.y"].attrs["categories"] == '["rest", "grasp", "hold"]'

@@ -1,0 +1,115 @@
+"""The supervisor's view of its worker processes: one :class:`Proc` per process group, how a
+failure is told, and the windows and periods of supervision."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+from dataclasses import dataclass, field
+from typing import Any
+
+import zmq
+
+from flowtact.errors import FlowtactError
+from flowtact.runtime.forked import ForkedWorker
+
+__all__ = ["Failure", "Proc", "WorkerFailed", "describe_failure"]
+
+PING_S = 0.25
+WATCH_S = 0.02
+"""Exits and stalls of workers are looked for this often (the pump also wakes for every message)."""
+WARMUP_S = 1.0
+"""CPU is reported over the running phase after this warm-up (JIT compilation, first allocations)."""
+STOP_MARGIN_S = 0.25
+"""A stop ends on the tick this far (in wall time) ahead of the furthest worker: it reaches them first."""
+DEADLINE_WARN_EVERY_S = 5.0
+"""Deadline misses are told at the first one, then at most this often (with their count)."""
+WAITING_EVERY_S = 15.0
+"""How often the run repeats that it is waiting for a worker on another host."""
+LAST_WORDS_S = 0.2
+"""After a worker exits, how long its last control messages (an error report) may take to arrive."""
+SILENT_PROBE_S = 0.3
+"""How long a worker without progress has its CPU time watched, to tell a hung process from a busy one."""
+IDLE_CPU = 0.05
+"""A worker without progress that uses less than this share of a core is not working: it has stalled."""
+
+
+class WorkerFailed(FlowtactError, RuntimeError):
+    """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause.
+
+    ``traceback`` is the failing block's Python traceback as the worker formatted it (None when
+    no Python exception caused the failure: a death, a stall); ``flowtact --debug`` prints it.
+    """
+
+    def __init__(self, message: str, traceback: str | None = None) -> None:
+        super().__init__(message)
+        self.traceback = traceback
+
+
+@dataclass
+class Proc:
+    """One process group as the supervisor sees it: its definition, its process and what it reported."""
+
+    name: str
+    nodes: list[str]
+    host: str | None
+    restart: str
+    max_restarts: int
+    stall_s: float
+    startup_s: float
+    stop_grace_s: float
+    popen: subprocess.Popen[bytes] | ForkedWorker | None = None
+    spawned_at: float = 0.0  # when its process was started (monotonic)
+    hello_at: float = 0.0  # when its first message arrived
+    ready_at: float = 0.0  # when it said ready (warm, inputs bound)
+    setup: dict[str, float] = field(default_factory=dict)  # its own start-up parts (s): build, warm_up, bind
+    ident: bytes | None = None
+    sock: zmq.Socket | None = None
+    pid: int | None = None
+    state: str = "starting"
+    restarts: int = 0
+    endpoints: dict[int, str] = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
+    warm: tuple[float, int] | None = None  # (cpu_s, wall_ns) at the end of the warm-up
+    cpu_pct: float | None = None
+    done: bool = False
+    rec_done: bool = False
+    counters: dict[str, dict[str, int]] = field(default_factory=dict)
+    summaries: dict[str, str] = field(default_factory=dict)
+    """What its blocks said of the run (``Block.summary``), per node, sent with ``done``."""
+    wired: bool = False
+    last_k: int = 0
+    violations: dict[str, int] = field(default_factory=dict)
+    since: float = 0.0  # when it was (re)started or started running: the clock of its windows
+    beat_at: float = 0.0  # when its last heartbeat arrived
+    beat: dict[str, Any] = field(default_factory=dict)
+    busy_since: float = 0.0  # since when its current step (same node, same step count) runs
+    next_waiting: float = math.inf  # when to repeat that the run waits for it (another host)
+    tick_rate: float = 0.0  # ticks per second lately (from heartbeats)
+    silent_mark: tuple[float, float] | None = None  # (when, CPU seconds) as its heartbeats fell silent
+    progress_at: float = 0.0  # when it last showed start-up progress
+    progress: Any = None  # its last start-up progress report (or CPU seconds before its first message)
+    phase: str = "starting its interpreter"  # its last reported start-up phase
+
+    def describe(self) -> str:
+        where = f" on {self.host}" if self.host else ""
+        return f"process '{self.name}'{where} (nodes {', '.join(self.nodes)})"
+
+
+class Failure(Exception):
+    """A worker reported an error or died (caught by the supervisor: restart or end the run)."""
+
+    def __init__(self, proc: Proc, report: dict[str, Any]) -> None:
+        self.proc, self.report = proc, report
+        super().__init__(report.get("message", ""))
+
+
+def describe_failure(proc: Proc, report: dict[str, Any]) -> str:
+    """``node 'sa1' (nlif) in process 'neurons' failed at t=1.234 s: ...`` or a dead process."""
+    node = report.get("node")
+    if node:
+        return (
+            f"node '{node}' ({report.get('block')}) failed at t={report.get('now') or 0.0:.3f} s "
+            f"in process '{proc.name}': {report['message']}"
+        )
+    return f"process '{proc.name}' (nodes {', '.join(proc.nodes)}) {report['message']}"

@@ -1,0 +1,177 @@
+"""A worker's control loop: its messages to and from the supervisor, the recording pump, statistics.
+
+Part of :class:`flowtact.runtime.worker.Worker` (which holds the state these methods share): the
+control socket is read every :data:`CONTROL_NS` from the tick loop, recorded chunks are coalesced
+for :data:`RECORD_FLUSH_NS`, statistics go out every :data:`HEARTBEAT_S`.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import traceback
+from typing import Any
+
+import zmq
+
+from flowtact.block import Block
+from flowtact.chunk import concat
+from flowtact.runtime.links.zeromq.streams import (
+    POLL_MS,
+)
+from flowtact.runtime.links.zeromq.wire import send_message
+from flowtact.runtime.protocol import Op, decode, encode
+
+__all__ = [
+    "CONTROL_NS",
+    "HEARTBEAT_S",
+    "ORPHAN_S",
+    "RECORD_FLUSH_NS",
+    "RECORD_MAX_CHUNKS",
+    "NodeFailure",
+    "Stop",
+    "WorkerControl",
+]
+
+ORPHAN_S = 10.0
+"""A worker started by hand (another host) that has not heard its supervisor this long exits."""
+HEARTBEAT_S = 0.25
+"""How often the main thread sends its statistics (rates, latencies, drops, CPU)."""
+_EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
+"""As plain ints: ``getsockopt(_EVENTS) & _POLLIN`` is an int ``&``, where ``get(zmq.EVENTS) &
+zmq.POLLIN`` builds enum members for the operands too. pyzmq still makes one for the option it
+reads, so an events check is never free (the control socket is read every :data:`CONTROL_NS`)."""
+CONTROL_NS = 5_000_000
+"""The control socket (stop, abort, pings) is read this often (ns) from the tick loop, not every tick."""
+RECORD_FLUSH_NS = 50_000_000
+"""Recorded chunks are coalesced and sent to the recorder this often (ns), or sooner when many."""
+RECORD_MAX_CHUNKS = 256
+"""... or once this many chunks of one stream wait (a fast run's memory stays bounded)."""
+
+
+class Stop(Exception):
+    """The supervisor asked this worker to abort at once."""
+
+
+class NodeFailure(Exception):
+    """A block raised: what the worker reports (node, block, graph time, message, traceback)."""
+
+    def __init__(self, node: str, block: Block, now: float, cause: BaseException) -> None:
+        super().__init__(str(cause))
+        self.report = {
+            "node": node,
+            "block": block.name,
+            "now": now,
+            "message": f"{type(cause).__name__}: {cause}",
+            "traceback": traceback.format_exc(),
+        }
+
+
+class WorkerControl:
+    """The control loop, recording pump and statistics of a :class:`~flowtact.runtime.worker.Worker`."""
+
+    def _send(self, op: Op, **kw: Any) -> None:
+        self.ctl.send(encode(op, **kw))
+
+    def _recv_ctl(self, timeout_ms: int) -> dict[str, Any] | None:
+        if not self.ctl.poll(timeout_ms):
+            return None
+        msg = decode(self.ctl.recv())
+        self.last_ping = time.monotonic()
+        return msg
+
+    def _expect(self, op: Op) -> dict[str, Any]:
+        """Wait for control message ``op`` for as long as the supervisor lives (it keeps time)."""
+        while True:
+            msg = self._recv_ctl(POLL_MS)
+            if msg is None:
+                self._check_orphan()
+                continue
+            if msg["op"] is op:
+                return msg
+            if msg["op"] in (Op.ABORT, Op.EXIT):
+                raise Stop
+            if msg["op"] is Op.STOP:
+                self.stop_k = min(self.stop_k, int(msg["k"]))
+
+    def _check_orphan(self) -> None:
+        if self.parent is not None:
+            if os.getppid() != self.parent:
+                raise Stop("the supervisor is gone")
+        elif time.monotonic() - self.last_ping > ORPHAN_S:
+            raise Stop("the supervisor is gone")
+
+    def _service(self) -> None:
+        """Handle pending control messages (pings, stop, abort) without blocking; send statistics."""
+        while self.ctl.getsockopt(_EVENTS) & _POLLIN:
+            self._control(decode(self.ctl.recv()))
+            self.last_ping = time.monotonic()
+        self._check_orphan()
+        now_ns = time.monotonic_ns()
+        self.next_service = now_ns + CONTROL_NS
+        if now_ns >= self.next_record:
+            self._flush_records()
+        now = now_ns / 1e9
+        if now >= self.next_beat:
+            self.next_beat = now + HEARTBEAT_S
+            self._send(Op.STATS, **self._stats())
+
+    def _flush_records(self) -> None:
+        """Send every recorded stream's coalesced chunks to the recorder (one message each)."""
+        self.next_record = time.monotonic_ns() + RECORD_FLUSH_NS
+        for o in self.recorded_ports:
+            if o.rec_buf:
+                chunk = concat(o.rec_buf, o.spec)
+                o.rec_buf = []
+                self._send_lossless(self.rec, o.record, 0, self.k, chunk)  # type: ignore[arg-type]
+
+    def _salvage_records(self) -> None:
+        """On an abort or a failure, hand the recorder what was coalesced but not yet sent, without
+        waiting: the recording keeps everything that came before (the supervisor drains it)."""
+        if self.rec is None:
+            return
+        for o in getattr(self, "recorded_ports", ()):
+            if o.rec_buf:
+                chunk = concat(o.rec_buf, o.spec)
+                o.rec_buf = []
+                send_message(self.rec, o.record, 0, self.k, chunk, nowait=True)  # type: ignore[arg-type]
+
+    def _phase(self, text: str) -> None:
+        """Enter a start-up phase: the heartbeat reports it, and the supervisor counts it as progress."""
+        self.phase = text
+        self.marks += 1
+
+    def _control(self, msg: dict[str, Any]) -> None:
+        if msg["op"] is Op.STOP:
+            self.stop_k = min(self.stop_k, int(msg["k"]))
+        elif msg["op"] in (Op.ABORT, Op.EXIT):
+            raise Stop
+
+    def _stats(self) -> dict[str, Any]:
+        return {
+            "k": self.k,
+            "now": self.now,
+            "cpu_s": time.process_time(),
+            "wall_ns": time.monotonic_ns(),
+            "lag_s": self.lag_s,
+            "max_lag_s": self.max_lag_s,
+            "merged_ticks": self.merged_ticks,
+            "node_ns": {nd.name: nd.ns for nd in self.plans},
+            "counts": {o.key: o.samples for nd in self.plans for o in nd.outputs.values()},
+            "inbound": {
+                ib.id: {
+                    "messages": ib.messages,
+                    "samples": ib.samples,
+                    "dropped": ib.dropped,
+                    "gaps": ib.gaps,
+                    "lat": ib.hist.to_wire(),
+                }
+                for ib in self.inbound.values()
+            },
+            "sent_dropped": {ob.id: ob.dropped for ob in self.outbound if ob.dropped},
+            "paths": {
+                d.name: {"lat": d.hist.to_wire(), "violations": d.violations, "worst_ns": d.worst_ns}
+                for ds in self.deadlines.values()
+                for d in ds
+            },
+        }
