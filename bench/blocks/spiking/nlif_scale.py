@@ -226,9 +226,11 @@ def run(ctx: Context) -> None:
         cross = realtime_crossing([r["n"] for r in rs], [r["rtf"] for r in rs])
         hand = next(r for r in rs if r["n"] == HAND)
         word = "without noise" if sigma == 0 else f"with noise (σ = {sigma:g} /√s)"
-        ctx.check(f"a whole hand ({HAND} afferents) in real time on one core, {word}", hand["realtime"],
-                  f"p99 lateness {hand['late_p99_ms']:+.3g} ms, real-time factor {hand['rtf']:.3g}, "
-                  f"{100 * hand['missed']:.2g} % of ticks late")  # fmt: skip
+        ctx.note(  # the goal is two cores with shards (flowtact bench touchsim), not one core
+            f"A whole hand ({HAND} afferents) on one core, {word}: {'in' if hand['realtime'] else 'not in'} "
+            f"real time (p99 lateness {hand['late_p99_ms']:+.3g} ms, real-time factor {hand['rtf']:.3g}, "
+            f"{100 * hand['missed']:.2g} % of ticks late)."
+        )
         if largest is None:
             ctx.note(f"{word.capitalize()}: no measured population ran in real time.")
         else:
