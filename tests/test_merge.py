@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from flowtact.chunk import Chunk
-from flowtact.merge import LatestMerger
+from flowtact.streams.merge import LatestMerger
 
 
 def _reference(td, to, do, initial):

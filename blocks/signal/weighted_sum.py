@@ -19,7 +19,7 @@ from flowtact import (
     StreamSpec,
     param,
 )
-from flowtact.align import Aligner, screen_aligned
+from flowtact.streams.align import Aligner, screen_aligned
 
 __all__ = ["WeightedSum", "WeightedSumConfig"]
 

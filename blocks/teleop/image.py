@@ -21,8 +21,8 @@ import numpy as np
 from numba import njit
 
 from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
-from flowtact.align import Aligner
 from flowtact.limits import MAX_TICK_S
+from flowtact.streams.align import Aligner
 
 from .hand import FINGERS
 from .tactip_sim import pressed_frames

@@ -26,7 +26,7 @@ from flowtact import (
     param,
     screen_nonfinite,
 )
-from flowtact.align import Aligner, screen_aligned
+from flowtact.streams.align import Aligner, screen_aligned
 
 from .aunp import SENSITIVITY_PER_N, reduced_matrix
 
