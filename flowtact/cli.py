@@ -8,7 +8,7 @@ the flag, or the file), control characters escaped, no traceback unless ``--debu
 
 - 0: done;
 - 2: bad usage or bad input, refused before the work starts: an unknown command or flag, a flag
-  value out of its documented range (:mod:`flowtact.limits`), a graph's problems, a file the user
+  value out of its documented range (:mod:`flowtact.inputs.limits`), a graph's problems, a file the user
   named that is missing, a folder, unreadable or not what was asked for;
 - 1: the command ran and failed: a block failed (its node named), a worker died, memory ran out;
 - 130: interrupted.
@@ -31,7 +31,7 @@ from flowtact.command import EXIT_RUN_ERROR, CommandParser, run_command
 from flowtact.deployment import MAX_STARTUP_S
 from flowtact.errors import UsageError
 from flowtact.graph import GraphErrors
-from flowtact.limits import (
+from flowtact.inputs.limits import (
     MAX_TICK_S,
     MIN_TICK_S,
     cli_duration_seconds,

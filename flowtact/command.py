@@ -27,7 +27,7 @@ from typing import NoReturn
 
 from flowtact.debug import debug_enabled, print_error
 from flowtact.errors import FlowtactError, UsageError
-from flowtact.safe_text import shown
+from flowtact.inputs.safe_text import shown
 
 __all__ = ["EXIT_INTERRUPTED", "EXIT_RUN_ERROR", "EXIT_USAGE", "CommandParser", "error_text", "run_command"]
 

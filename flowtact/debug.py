@@ -13,7 +13,7 @@ import sys
 import traceback
 from typing import TextIO
 
-from flowtact.safe_text import shown
+from flowtact.inputs.safe_text import shown
 
 __all__ = ["ENV", "HINT", "debug_enabled", "failure_traceback", "has_traceback", "print_error"]
 
@@ -49,7 +49,7 @@ def print_error(line: str, e: BaseException, debug: bool, file: TextIO | None = 
     """Print ``line``; then the traceback (``debug``) or, where one exists, the hint to ask for it.
 
     Error texts quote files and libraries: control characters in the line, and in each line of the
-    traceback, are shown escaped (:func:`~flowtact.safe_text.shown`), so none reaches the terminal.
+    traceback, are shown escaped (:func:`~flowtact.inputs.safe_text.shown`), so none reaches the terminal.
     """
     out = file if file is not None else sys.stderr
     line = shown(line)

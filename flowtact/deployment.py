@@ -22,7 +22,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from flowtact.limits import host_problem
+from flowtact.inputs.limits import host_problem
 from flowtact.located import GraphError, Loc, Located
 from flowtact.params import did_you_mean
 

@@ -20,7 +20,7 @@ import yaml
 
 from flowtact.block import Block
 from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, deadline_path_errors, parse_deployment
-from flowtact.limits import (
+from flowtact.inputs.limits import (
     MAX_DURATION_S,
     MAX_QUEUE,
     MAX_SEED,
@@ -429,7 +429,7 @@ def _build(
 
 def _run_settings(doc: Mapping[str, Any], y: Located, errors: list[GraphError]) -> tuple[int, Any, Any]:
     """The graph's ``seed``, ``duration_s`` and ``tick_s``, each checked against its documented
-    bound (:mod:`flowtact.limits`); a bad one is reported and replaced by its default."""
+    bound (:mod:`flowtact.inputs.limits`); a bad one is reported and replaced by its default."""
     seed = doc.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         errors.append(GraphError(y.loc("seed"), f"'seed' must be a non-negative integer; got {seed!r}"))

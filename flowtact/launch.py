@@ -20,7 +20,7 @@ from flowtact.compile import Plan, compile_graph
 from flowtact.deployment import DEFAULT_QUEUE, STOP_GRACE_S
 from flowtact.errors import UsageError
 from flowtact.graph import load_graph, resolve_graph_path
-from flowtact.limits import run_ticks_problem
+from flowtact.inputs.limits import run_ticks_problem
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
 from flowtact.source_ends import EndWatch, default_duration
@@ -55,10 +55,10 @@ def load_plan(
 def _stored_graph(path: Path) -> str:
     """The resolved graph a recording stores; a file refused as input (not a regular file, not a
     recording, beyond the reader's bounds, no stored graph) is a located graph error (exit 2)."""
+    from flowtact.inputs.safe_text import shown
     from flowtact.located import GraphError, GraphErrors, Loc
     from flowtact.record import read_recording
     from flowtact.record_integrity import NotARecording, RecordingRefused
-    from flowtact.safe_text import shown
     from flowtact.safe_yaml import MAX_GRAPH_BYTES
 
     where = shown(path)
@@ -162,7 +162,7 @@ def has_feedback(plan: Plan) -> bool:
 
 
 def check_run_length(plan: Plan, duration_s: float | None, tick_s: float | None, fast: bool) -> None:
-    """Refuse, before anything starts, a run of more than :data:`~flowtact.limits.MAX_RUN_TICKS`
+    """Refuse, before anything starts, a run of more than :data:`~flowtact.inputs.limits.MAX_RUN_TICKS`
     ticks: :class:`~flowtact.errors.UsageError` naming where the duration and the tick came from."""
     duration = default_duration(plan, duration_s)
     tick = tick_for(

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self, get_args, get_origin
 
 from flowtact.errors import FlowtactError
-from flowtact.limits import budget_problem
+from flowtact.inputs.limits import budget_problem
 
 __all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param"]
 
@@ -139,7 +139,7 @@ class Config:
         field -> estimate, computed from the field values alone (never by allocating).
 
         ``build`` refuses a value whose estimate exceeds
-        :data:`flowtact.limits.STATE_BUDGET_BYTES`, before ``check()`` or anything else runs.
+        :data:`flowtact.inputs.limits.STATE_BUDGET_BYTES`, before ``check()`` or anything else runs.
         Override it in every config whose state grows with a parameter (a population size, a
         window length, a sample shape).
         """

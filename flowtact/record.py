@@ -77,6 +77,7 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.inputs.safe_text import shown
 from flowtact.record_integrity import (
     MAX_CHUNK_BYTES,
     CheckedFile,
@@ -85,7 +86,6 @@ from flowtact.record_integrity import (
     RecordingCorrupted,
     RecordingRefused,
 )
-from flowtact.safe_text import shown
 
 __all__ = [
     "FORMAT",

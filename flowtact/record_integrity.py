@@ -26,10 +26,10 @@ from typing import Any
 import h5py
 import numpy as np
 
-from flowtact.bounded_files import FileRefused, check_hdf5_signature, open_regular
 from flowtact.errors import FlowtactError
-from flowtact.limits import format_bytes
-from flowtact.safe_text import shown
+from flowtact.inputs.bounded_files import FileRefused, check_hdf5_signature, open_regular
+from flowtact.inputs.limits import format_bytes
+from flowtact.inputs.safe_text import shown
 
 __all__ = [
     "MANIFEST",

@@ -9,9 +9,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from flowtact.inputs.safe_text import shown
 from flowtact.record import FORMAT, stream_header, stream_kind
 from flowtact.record_integrity import CheckedFile, NotARecording, RecordingCorrupted
-from flowtact.safe_text import shown
 
 __all__ = ["RecordingInfo", "StreamInfo", "format_info", "inspect_recording"]
 
@@ -250,7 +250,7 @@ def _run_lines(summary: dict[str, Any] | None) -> list[str]:
 
 def format_info(info: RecordingInfo) -> str:
     """The human-readable report of ``flowtact info``: every text that came from the file is shown
-    as data (:func:`flowtact.safe_text.shown`: control characters escaped, long values cut)."""
+    as data (:func:`flowtact.inputs.safe_text.shown`: control characters escaped, long values cut)."""
     version = f"format {info.format_version}" if info.format_version is not None else "format ?"
     lines = [f"{shown(info.path)}: {FORMAT} ({version}), {_size(info.file_bytes)}"]
     p = info.provenance

@@ -9,7 +9,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from flowtact.bounded_files import (
+from flowtact.inputs.bounded_files import (
     FileRefused,
     check_hdf5_signature,
     open_npz,

@@ -2,7 +2,7 @@
 
 import pytest
 
-from flowtact.safe_text import BIDI_CONTROLS, shown
+from flowtact.inputs.safe_text import BIDI_CONTROLS, shown
 
 
 @pytest.mark.parametrize(

@@ -89,7 +89,7 @@ def graph_text(
     """The graph file's path and its YAML with the seed, the scan's text and speed, node
     parameters (node → {param: value}), the tick and the recorded streams replaced."""
     from flowtact.graph import resolve_graph_path
-    from flowtact.safe_text import shown
+    from flowtact.inputs.safe_text import shown
     from flowtact.safe_yaml import SafeYamlError, load_value, read_graph_text
 
     path = resolve_graph_path(graph)

@@ -35,7 +35,7 @@ from flowtact.blocks.spiking.nb_model import (
 from flowtact.blocks.spiking.window_features import window_features
 from flowtact.command import CommandParser, run_command
 from flowtact.errors import UsageError
-from flowtact.limits import MAX_SEED, cli_float, cli_int, format_bytes
+from flowtact.inputs.limits import MAX_SEED, cli_float, cli_int, format_bytes
 from flowtact.terminal_bar import TerminalBar
 
 from .cells import LETTERS

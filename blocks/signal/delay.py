@@ -16,7 +16,7 @@ from flowtact import (
     StreamSpec,
     param,
 )
-from flowtact.limits import MAX_TICK_S
+from flowtact.inputs.limits import MAX_TICK_S
 
 __all__ = ["Delay", "DelayConfig"]
 

@@ -27,11 +27,18 @@ from flowtact.blocks.signal.replay_limits import (
     rate_problem,
     time_problem,
 )
-from flowtact.bounded_files import FileRefused, NpyHeader, NpzArchive, check_hdf5_signature, open_npz, refusal
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.limits import MAX_TICK_S, format_bytes
+from flowtact.inputs.bounded_files import (
+    FileRefused,
+    NpyHeader,
+    NpzArchive,
+    check_hdf5_signature,
+    open_npz,
+    refusal,
+)
+from flowtact.inputs.limits import MAX_TICK_S, format_bytes
+from flowtact.inputs.safe_text import shown
 from flowtact.params import Config, did_you_mean, param
-from flowtact.safe_text import shown
 
 __all__ = ["Replay", "ReplayConfig"]
 

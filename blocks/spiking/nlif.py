@@ -33,7 +33,7 @@ from flowtact.blocks.spiking._lif_kernels import (
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.finite import all_finite
-from flowtact.limits import NOMINAL_RATE_HZ
+from flowtact.inputs.limits import NOMINAL_RATE_HZ
 from flowtact.params import param
 
 __all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig"]

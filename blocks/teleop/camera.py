@@ -20,7 +20,7 @@ import numpy as np
 from flowtact.block import Example, Port, Source, example_folder
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
-from flowtact.limits import MAX_TICK_S
+from flowtact.inputs.limits import MAX_TICK_S
 from flowtact.params import Config, param
 
 from .hand import FINGERS

@@ -30,9 +30,9 @@ from typing import Any
 import numpy as np
 
 from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
-from flowtact.bounded_files import open_regular, regular_file
-from flowtact.limits import STATE_BUDGET_BYTES, format_bytes
-from flowtact.safe_text import shown
+from flowtact.inputs.bounded_files import open_regular, regular_file
+from flowtact.inputs.limits import STATE_BUDGET_BYTES, format_bytes
+from flowtact.inputs.safe_text import shown
 
 from .hand import FINGERS
 from .image import example_frames

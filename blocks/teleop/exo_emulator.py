@@ -16,7 +16,7 @@ from flowtact.blocks.teleop.exo_protocol import (
 )
 from flowtact.command import CommandParser, run_command
 from flowtact.errors import UsageError
-from flowtact.limits import MAX_SEED, cli_float, cli_int
+from flowtact.inputs.limits import MAX_SEED, cli_float, cli_int
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 # -- the emulator process -----------------------------------------------------------------------

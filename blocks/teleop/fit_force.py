@@ -17,7 +17,7 @@ import numpy as np
 
 from flowtact.command import CommandParser, run_command
 from flowtact.errors import UsageError
-from flowtact.limits import cli_float
+from flowtact.inputs.limits import cli_float
 
 from .hand import FINGERS
 

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from flowtact import Block, Chunk, Config, Example, Port, SpecError, StreamSpec, param
-from flowtact.limits import MAX_TICK_S
+from flowtact.inputs.limits import MAX_TICK_S
 from flowtact.streams.align import Aligner
 
 from .hand import FINGERS

@@ -35,7 +35,7 @@ from flowtact import (
     param,
     screen_nonfinite,
 )
-from flowtact.limits import NOMINAL_FRAME_BYTES
+from flowtact.inputs.limits import NOMINAL_FRAME_BYTES
 
 from .hand import FINGERS
 

@@ -30,7 +30,7 @@ from flowtact.block import (
 )
 from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.limits import MAX_TICK_S
+from flowtact.inputs.limits import MAX_TICK_S
 from flowtact.params import param
 
 from .hand import FINGERS, N_FINGERS

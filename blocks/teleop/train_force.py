@@ -36,7 +36,7 @@ import numpy as np
 
 from flowtact.command import CommandParser, run_command
 from flowtact.errors import UsageError
-from flowtact.limits import MAX_SEED, cli_float, cli_int
+from flowtact.inputs.limits import MAX_SEED, cli_float, cli_int
 from flowtact.terminal_bar import TerminalBar
 
 from .cnn import ARCHS, TORCH_HINT, Arch, Preprocess, build_model, import_torch, n_parameters, save_checkpoint

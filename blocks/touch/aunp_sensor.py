@@ -15,7 +15,7 @@ import numpy as np
 
 from flowtact.block import Example, Port, Source
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.limits import MAX_TICK_S
+from flowtact.inputs.limits import MAX_TICK_S
 from flowtact.params import Config, param
 
 from .aunp import SENSITIVITY_PER_N

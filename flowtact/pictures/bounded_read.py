@@ -17,9 +17,9 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import StreamSpec
+from flowtact.inputs.safe_text import shown
 from flowtact.record import _spec_from_attrs, open_verified
 from flowtact.record_integrity import RecordingCorrupted
-from flowtact.safe_text import shown
 
 __all__ = [
     "BLOCK_BYTES",

@@ -14,9 +14,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from flowtact.inputs.safe_text import shown
 from flowtact.pictures.bounded_read import StreamSource, label, open_recording
 from flowtact.pictures.panels import Panel, binned_rates, draw_frames, draw_panel, plan_panels
-from flowtact.safe_text import shown
 
 __all__ = ["DPI", "binned_rates", "need_matplotlib", "plot_recording", "recording_figure", "time_span"]
 

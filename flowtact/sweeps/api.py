@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from flowtact.limits import positive_seconds
+from flowtact.inputs.limits import positive_seconds
 from flowtact.sweeps.grid import Axis, Row, SweepSpecError, expand_replays, parse_grid, read_table, rows
 from flowtact.sweeps.metrics import MetricSpec, parse_metrics
 from flowtact.sweeps.progress import SweepProgress

@@ -14,7 +14,7 @@ import signal
 import sys
 from typing import Any
 
-from flowtact.limits import cli_duration_seconds, cli_positive_seconds
+from flowtact.inputs.limits import cli_duration_seconds, cli_positive_seconds
 
 __all__ = ["add_sweep_parser", "run_sweep_command"]
 

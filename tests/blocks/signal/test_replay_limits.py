@@ -21,8 +21,8 @@ from flowtact.blocks.signal.csv_log import CsvError, read_csv_log
 from flowtact.blocks.signal.replay import Replay
 from flowtact.blocks.signal.replay_limits import MAX_COLUMNS, listing
 from flowtact.blocks.signal.replay_ports import stand_in_class
-from flowtact.bounded_files import HDF5_SIGNATURE, FileRefused, has_hdf5_signature, open_regular
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.inputs.bounded_files import HDF5_SIGNATURE, FileRefused, has_hdf5_signature, open_regular
 from flowtact.params import ConfigError
 from flowtact.record import Recorder
 

@@ -41,8 +41,8 @@ from typing import BinaryIO
 import numpy as np
 
 from flowtact.errors import FlowtactError
-from flowtact.limits import format_bytes
-from flowtact.safe_text import shown
+from flowtact.inputs.limits import format_bytes
+from flowtact.inputs.safe_text import shown
 
 __all__ = [
     "HDF5_SIGNATURE",
