@@ -146,7 +146,7 @@ def _variants(name: str, quick: bool) -> list[tuple[str, float, float | None]]:
 
 def pruning(ctx: Context) -> list[dict[str, Any]]:
     from flowtact.compile import compile_graph
-    from flowtact.graph import GraphErrors, load_graph, resolve_graph_path
+    from flowtact.graphfile.graph import GraphErrors, load_graph, resolve_graph_path
 
     rows = []
     for name in GRAPHS:
@@ -246,7 +246,7 @@ CNN_EDGES = "  - cams.frames -> cnn.x"
 
 def vision_graph(est: str, scenario: str, noise: float = 3.0) -> Any:
     """tactip_sim (``taps``: busy, ``rest``: quiet) into the SSIM + linear fit or the CNN estimator."""
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
 
     nodes, edges, out = (
         (SSIM_NODES, SSIM_EDGES, "ssim.y, force.y") if est == "ssim" else (CNN_NODES, CNN_EDGES, "cnn.y")
@@ -280,7 +280,7 @@ def _ssim_share(ctx: Context, seconds: float) -> dict[str, float]:
     an SSIM gate could save), and the gate figures with and without sensor noise."""
     from flowtact.blocks.teleop.ssim import Ssim
     from flowtact.compile import compile_graph
-    from flowtact.graph import GraphErrors
+    from flowtact.graphfile.graph import GraphErrors
     from flowtact.testing import run_offline
 
     out: dict[str, float] = {}
@@ -310,7 +310,7 @@ def _ssim_share(ctx: Context, seconds: float) -> dict[str, float]:
 
 def quiet_busy(ctx: Context) -> tuple[list[dict[str, Any]], dict[str, float]]:
     from flowtact.compile import compile_graph
-    from flowtact.graph import GraphErrors, load_graph, resolve_graph_path
+    from flowtact.graphfile.graph import GraphErrors, load_graph, resolve_graph_path
 
     cases: list[tuple[str, Any, Any, float]] = []
     touch = resolve_graph_path("touch")

@@ -176,7 +176,7 @@ class Block:
     #: Optional heavy modules this block imports in ``open``/``reset`` (never at module import):
     #: import name -> the pip extra that installs it (``{"serial": "serial"}``); a plain tuple of
     #: names when no extra provides them. ``validate`` and ``run`` refuse a graph whose active
-    #: blocks need one that is missing (:mod:`flowtact.extras`).
+    #: blocks need one that is missing (:mod:`flowtact.graphfile.extras`).
     requires: ClassVar[Mapping[str, str] | tuple[str, ...]] = ()
     #: Registry name; defaults to the snake_case class name.
     name: ClassVar[str] = ""

@@ -28,9 +28,9 @@ from pathlib import Path
 from typing import Any
 
 from flowtact.command import EXIT_RUN_ERROR, CommandParser, run_command
-from flowtact.deployment import MAX_STARTUP_S
 from flowtact.errors import UsageError
-from flowtact.graph import GraphErrors
+from flowtact.graphfile.deployment import MAX_STARTUP_S
+from flowtact.graphfile.graph import GraphErrors
 from flowtact.inputs.limits import (
     MAX_TICK_S,
     MIN_TICK_S,
@@ -275,7 +275,7 @@ def _complete_graph(prefix: str, **_kwargs: Any) -> list[str]:
     folders under the prefix (argcomplete's file completer)."""
     from argcomplete.completers import FilesCompleter
 
-    from flowtact.graph import shipped_graphs
+    from flowtact.graphfile.graph import shipped_graphs
 
     names = [n for n in shipped_graphs() if n.startswith(prefix)]
     return names + list(FilesCompleter(allowednames=("yaml", "yml", "h5"))(prefix))
@@ -312,7 +312,7 @@ def _version() -> str:
 
 
 def _replays(items: Sequence[str]) -> dict[str, str]:
-    from flowtact.graph import GraphError, Loc
+    from flowtact.graphfile.graph import GraphError, Loc
 
     out: dict[str, str] = {}
     for i, item in enumerate(items):
@@ -331,7 +331,7 @@ def _import_beside_graph(graph: str, modules: Sequence[str]) -> None:
     ``--allow-module envelope``): the graph's real folder goes at the END of ``sys.path`` (an
     installed module of the same name still wins), and workers inherit it. Nothing happens without
     ``--allow-module``: a graph alone never makes its folder importable."""
-    from flowtact.graph import local_module_folder
+    from flowtact.graphfile.graph import local_module_folder
 
     folder = local_module_folder(graph, modules) if modules else None
     if folder is not None and str(folder) not in sys.path:

@@ -73,7 +73,7 @@ def exit_status(e: BaseException) -> int:
 
 def _graph_errors(e: BaseException) -> int | None:
     """Print a graph's located problems (``file:line:col: message`` each) and their count."""
-    from flowtact.graph import GraphErrors
+    from flowtact.graphfile.graph import GraphErrors
 
     if not isinstance(e, GraphErrors):
         return None

@@ -19,8 +19,8 @@ import numpy as np
 from flowtact.block import Block, Source, SpecError
 from flowtact.chunk import StreamSpec
 from flowtact.errors import FlowtactError
-from flowtact.extras import missing_extras
-from flowtact.graph import Edge, Graph, GraphError, GraphErrors, Loc
+from flowtact.graphfile.extras import missing_extras
+from flowtact.graphfile.graph import Edge, Graph, GraphError, GraphErrors, Loc
 from flowtact.params import ConfigError
 
 __all__ = ["BlockSpecsFailed", "Plan", "compile_graph", "node_seed"]

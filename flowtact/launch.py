@@ -17,9 +17,9 @@ import yaml
 
 import flowtact
 from flowtact.compile import Plan, compile_graph
-from flowtact.deployment import DEFAULT_QUEUE, STOP_GRACE_S
 from flowtact.errors import UsageError
-from flowtact.graph import load_graph, resolve_graph_path
+from flowtact.graphfile.deployment import DEFAULT_QUEUE, STOP_GRACE_S
+from flowtact.graphfile.graph import load_graph, resolve_graph_path
 from flowtact.inputs.limits import run_ticks_problem
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
@@ -38,7 +38,7 @@ def load_plan(
     """Load and compile a graph file, or the graph stored in a recording (``.h5``).
 
     ``allow_modules`` (``--allow-module``) are the modules whose ``module:Class`` blocks may be
-    imported (:func:`flowtact.graph.load_graph`); a recording's stored graph never widens them."""
+    imported (:func:`flowtact.graphfile.graph.load_graph`); a recording's stored graph never widens them."""
     path = Path(source)
     if path.suffix in (".h5", ".hdf5"):
         text = _stored_graph(path)
@@ -55,11 +55,11 @@ def load_plan(
 def _stored_graph(path: Path) -> str:
     """The resolved graph a recording stores; a file refused as input (not a regular file, not a
     recording, beyond the reader's bounds, no stored graph) is a located graph error (exit 2)."""
+    from flowtact.graphfile.located import GraphError, GraphErrors, Loc
+    from flowtact.graphfile.safe_yaml import MAX_GRAPH_BYTES
     from flowtact.inputs.safe_text import shown
-    from flowtact.located import GraphError, GraphErrors, Loc
     from flowtact.record import read_recording
     from flowtact.record_integrity import NotARecording, RecordingRefused
-    from flowtact.safe_yaml import MAX_GRAPH_BYTES
 
     where = shown(path)
     try:

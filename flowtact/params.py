@@ -102,7 +102,7 @@ def param(
 
     ``kw_only`` lets a base config's field (with a default) precede a subclass's required fields.
     ``path`` marks a file or folder name (a string, or strings in a list): a relative one written in
-    a graph file is resolved against the graph file's folder (:mod:`flowtact.param_paths`).
+    a graph file is resolved against the graph file's folder (:mod:`flowtact.graphfile.param_paths`).
     """
     if isinstance(default, list):
         default = _freeze(default)

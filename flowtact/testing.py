@@ -211,7 +211,7 @@ def run_graph(
     ``allow_modules``: the modules whose ``module:Class`` blocks may be imported (``--allow-module``).
     """
     from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph, resolve_graph_path
+    from flowtact.graphfile.graph import load_graph, resolve_graph_path
     from flowtact.params import did_you_mean
     from flowtact.runtime.inproc import InprocExecutor
     from flowtact.runtime.rundir import make_run_folder

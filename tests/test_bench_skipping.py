@@ -7,7 +7,7 @@ import pytest
 
 from flowtact.bench import skipping
 from flowtact.compile import compile_graph
-from flowtact.graph import load_graph, resolve_graph_path
+from flowtact.graphfile.graph import load_graph, resolve_graph_path
 
 
 def test_skipped_parts_names_the_pruned_node_the_unfed_inputs_and_the_unused_outputs():

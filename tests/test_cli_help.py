@@ -9,7 +9,7 @@ import shlex
 import pytest
 
 from flowtact.cli import RUN_EXAMPLES, _parser, main, one_line_summary
-from flowtact.graph import shipped_graphs
+from flowtact.graphfile.graph import shipped_graphs
 from flowtact.pictures.graph_figure import FORMATS
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
 from flowtact.testing import run_graph
 
 GRAPHS = Path(__file__).parent.parent / "graphs"

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from flowtact.graph import GraphErrors, load_graph
-from flowtact.param_paths import package_file
+from flowtact.graphfile.graph import GraphErrors, load_graph
+from flowtact.graphfile.param_paths import package_file
 
 ROOT = Path(__file__).resolve().parent.parent
 BRAILLE = ROOT / "graphs" / "braille.yaml"

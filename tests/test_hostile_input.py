@@ -17,10 +17,10 @@ from hostile import CASES, ROOT, TOUCH, run_measured
 
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.cli import main
-from flowtact.extras import module_available
+from flowtact.graphfile.extras import module_available
+from flowtact.graphfile.safe_yaml import MAX_GRAPH_BYTES, SafeYamlError, load_value, read_graph_text
 from flowtact.inputs.limits import STATE_BUDGET_BYTES, host_problem
 from flowtact.params import ConfigError
-from flowtact.safe_yaml import MAX_GRAPH_BYTES, SafeYamlError, load_value, read_graph_text
 
 PEAK_MIB = 500  # the bound on a refusal's peak memory
 

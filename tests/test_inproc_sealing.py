@@ -9,7 +9,7 @@ from runs import TEST_BLOCKS
 
 from flowtact.chunk import Chunk
 from flowtact.compile import compile_graph
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
 from flowtact.runtime.inproc import InprocExecutor, NodeError
 
 

@@ -8,7 +8,7 @@ from flowtact import ConfigError
 from flowtact.blocks.signal.weighted_sum import WeightedSum
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.presets import NEURON_PRESETS, TABLE_I
-from flowtact.graph import GraphErrors, load_graph
+from flowtact.graphfile.graph import GraphErrors, load_graph
 from flowtact.presets import presets_for
 
 

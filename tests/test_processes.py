@@ -13,7 +13,7 @@ import pytest
 import toyblocks
 from runs import ROOT, TEST_BLOCKS, alive, flowtact, wait_children, wait_for_line, wait_recorded, worker_of
 
-from flowtact.graph import GraphErrors
+from flowtact.graphfile.graph import GraphErrors
 from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
 from flowtact.runtime.placement import place
@@ -141,7 +141,7 @@ def test_latest_policy_is_declared_per_edge_and_checked():
         "nodes:\n  src: {block: 'toyblocks:Ramp', process: a}\n  dst: {block: 'toyblocks:Scale', process: b}\n"
         "edges:\n  - {from: src.y, to: dst.x, policy: newest, queue: 0}\n"
     )
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
 
     with pytest.raises(GraphErrors) as e:
         load_graph("g.yaml", text=text, allow_modules=TEST_BLOCKS)

@@ -65,7 +65,7 @@ def test_a_feedback_loop_through_a_source_is_identical_in_and_across_processes(t
 
 
 def test_a_graph_may_set_its_tick_and_a_bad_one_is_refused(tmp_path: Path):
-    from flowtact.graph import GraphErrors, load_graph
+    from flowtact.graphfile.graph import GraphErrors, load_graph
 
     ok = tmp_path / "ok.yaml"
     ok.write_text(LOOP + "tick_s: 0.002\n")

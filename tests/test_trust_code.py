@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from runs import TESTS
 
-from flowtact.graph import GraphErrors, load_graph
+from flowtact.graphfile.graph import GraphErrors, load_graph
 from flowtact.python_child import python_command
 from flowtact.registry import module_allowed
 

@@ -88,9 +88,9 @@ def graph_text(
 ) -> tuple[Path, str]:
     """The graph file's path and its YAML with the seed, the scan's text and speed, node
     parameters (node → {param: value}), the tick and the recorded streams replaced."""
-    from flowtact.graph import resolve_graph_path
+    from flowtact.graphfile.graph import resolve_graph_path
+    from flowtact.graphfile.safe_yaml import SafeYamlError, load_value, read_graph_text
     from flowtact.inputs.safe_text import shown
-    from flowtact.safe_yaml import SafeYamlError, load_value, read_graph_text
 
     path = resolve_graph_path(graph)
     if not path.exists():
@@ -139,7 +139,7 @@ def read_line(
     time; a closed loop must keep its own (pass ``tick_s=0`` to keep the graph's)."""
     from flowtact.chunk import concat
     from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
     from flowtact.runtime.inproc import InprocExecutor
     from flowtact.source_ends import default_duration
 

@@ -153,7 +153,7 @@ def train_layers(
     missing = sorted(set(LETTERS) - set(ys))
     if missing:
         raise ValueError(f"letters {''.join(missing)} never came up in the training text: raise --letters")
-    from flowtact.graph import resolve_graph_path
+    from flowtact.graphfile.graph import resolve_graph_path
     from flowtact.launch import versions
 
     common = {
@@ -212,7 +212,7 @@ def _check_size(
             f"at most {MAX_WINDOWS} in all"
         )
     from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
 
     path, yml = graph_text(graph, seed=0, speed_mm_s=speeds[0], letters=letters, record=[])
     plan = compile_graph(load_graph(path, text=yml))

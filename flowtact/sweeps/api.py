@@ -45,7 +45,7 @@ SEED_POLICY = "row-seed-1: SeedSequence(graph seed, sha256(row key))"
 
 def need_extras() -> None:
     """Raise :class:`SweepSpecError` naming the extra to install when pandas or pyarrow is missing."""
-    from flowtact.extras import install_hint, module_available
+    from flowtact.graphfile.extras import install_hint, module_available
 
     missing = [m for m in ("pandas", "pyarrow") if not module_available(m)]
     if missing:
@@ -60,8 +60,8 @@ def _graph_text(graph: str | Path) -> tuple[str, str]:
         from flowtact.record import read_recording
 
         return f"{path}#graph", read_recording(path, streams=()).provenance["graph_yaml"]
-    from flowtact.graph import resolve_graph_path
-    from flowtact.safe_yaml import SafeYamlError, read_graph_text
+    from flowtact.graphfile.graph import resolve_graph_path
+    from flowtact.graphfile.safe_yaml import SafeYamlError, read_graph_text
 
     source = resolve_graph_path(graph)
     try:
@@ -106,7 +106,7 @@ def _file_digest(path: str) -> str:
 def _row_setup(common: str, row: Row, digests: dict[str, str]) -> str:
     """A row's ``setup`` hash: the sweep's setup and the content of each file the row replays
     (``digests`` caches each file's hash for this sweep)."""
-    from flowtact.replay_spec import split_replay
+    from flowtact.graphfile.replay_spec import split_replay
 
     files = {}
     for node, text in row.recordings.items():
@@ -191,7 +191,7 @@ def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: 
     raise GraphErrors (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too.
     Returns the graph and the run's graph seconds."""
     from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
     from flowtact.source_ends import default_duration
 
     graph = load_graph(source, text=text, overrides=overrides, replays=_abs(first.recordings),
@@ -220,7 +220,7 @@ def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: 
 
 def _abs(recordings: Mapping[str, str]) -> dict[str, str]:
     """Replayed files as absolute names: workers may run in another folder."""
-    from flowtact.replay_spec import split_replay
+    from flowtact.graphfile.replay_spec import split_replay
 
     out = {}
     for node, text in recordings.items():

@@ -119,7 +119,7 @@ def _report(df: Any, args: argparse.Namespace) -> int:
         shown = df.drop(columns=[c for c in ("key", "provenance", "notes", "graph") if c in df.columns])
         print(shown.to_string(index=False))
     if args.plot:
-        from flowtact.graph import GraphErrors
+        from flowtact.graphfile.graph import GraphErrors
         from flowtact.launch import load_plan
         from flowtact.sweeps.plot import plot_rates
 

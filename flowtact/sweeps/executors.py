@@ -297,7 +297,7 @@ def _temporary_security() -> Any:
     try:
         return Security.temporary()
     except ImportError:
-        from flowtact.extras import install_hint
+        from flowtact.graphfile.extras import install_hint
 
         _, how = install_hint("flowtact", "cryptography", "dask")
         raise SweepSpecError(
@@ -333,7 +333,7 @@ def local_cluster(workers: int | None) -> Iterator[Any]:
 @contextlib.contextmanager
 def dask_executor(scheduler: str | None, workers: int | None) -> Iterator[tuple[Executor, int]]:
     """A dask executor and its worker count; a :func:`local_cluster` (closed at the end) without ``scheduler``."""
-    from flowtact.extras import install_hint, module_available
+    from flowtact.graphfile.extras import install_hint, module_available
 
     if not module_available("distributed"):
         what, how = install_hint("flowtact", "distributed", "dask")

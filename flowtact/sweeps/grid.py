@@ -19,9 +19,9 @@ from typing import Any
 import yaml
 
 from flowtact.errors import FlowtactError
-from flowtact.graph import parse_override
-from flowtact.replay_spec import split_replay
-from flowtact.safe_yaml import SafeYamlError, load_value, read_graph_text
+from flowtact.graphfile.graph import parse_override
+from flowtact.graphfile.replay_spec import split_replay
+from flowtact.graphfile.safe_yaml import SafeYamlError, load_value, read_graph_text
 
 __all__ = [
     "Axis",

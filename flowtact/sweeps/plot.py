@@ -25,7 +25,7 @@ RATE_LABEL = "mean rate per unit (events/s)"
 
 def check_plot_extra() -> None:
     """Raise :class:`SweepSpecError` naming the extra when matplotlib is missing."""
-    from flowtact.extras import install_hint, module_available
+    from flowtact.graphfile.extras import install_hint, module_available
 
     if not module_available("matplotlib"):
         what, how = install_hint("flowtact", "matplotlib", "plot")

@@ -99,7 +99,7 @@ def provenance_hash(plan: Any) -> str:
 
 def _plan(task: RunTask) -> Any:
     from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
 
     graph = load_graph(task.source, text=task.text, overrides=task.overrides, replays=task.replays,
                        allow_modules=task.allow_modules)  # fmt: skip

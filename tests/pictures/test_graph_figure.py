@@ -14,7 +14,7 @@ from runs import TEST_BLOCKS
 
 from flowtact.cli import main
 from flowtact.compile import compile_graph
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
 from flowtact.launch import load_plan
 from flowtact.pictures.graph_figure import FEEDBACK, GREY, graph_figure
 

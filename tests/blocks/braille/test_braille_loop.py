@@ -56,7 +56,7 @@ def test_recording_only_the_text_keeps_the_loop_closed():
     it (a single backward pass of the compiler once left the loop open, silently)."""
     from flowtact.blocks.braille.reading import graph_text
     from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
 
     path, text = graph_text(GRAPH, seed=1, text="ab", record=["scan.char"])
     plan = compile_graph(load_graph(path, text=text))

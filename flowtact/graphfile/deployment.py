@@ -2,7 +2,7 @@
 
 These are the graph file's ``processes:``, ``network:`` and ``deadlines:`` sections. They never
 change what a graph computes, only how it is spread over processes and hosts and what the run
-reports; :mod:`flowtact.graph` calls :func:`parse_deployment` and reports problems with locations.
+reports; :mod:`flowtact.graphfile.graph` calls :func:`parse_deployment` and reports problems with locations.
 
 .. code-block:: yaml
 
@@ -22,8 +22,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
+from flowtact.graphfile.located import GraphError, Loc, Located
 from flowtact.inputs.limits import host_problem
-from flowtact.located import GraphError, Loc, Located
 from flowtact.params import did_you_mean
 
 __all__ = [

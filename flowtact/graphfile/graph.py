@@ -19,7 +19,17 @@ from typing import Any
 import yaml
 
 from flowtact.block import Block
-from flowtact.deployment import DEFAULT_QUEUE, POLICIES, Deployment, deadline_path_errors, parse_deployment
+from flowtact.graphfile.deployment import (
+    DEFAULT_QUEUE,
+    POLICIES,
+    Deployment,
+    deadline_path_errors,
+    parse_deployment,
+)
+from flowtact.graphfile.located import GraphError, GraphErrors, Loc, Located
+from flowtact.graphfile.param_paths import graph_folder, path_fields, resolve_path, resolve_value
+from flowtact.graphfile.replay_spec import parse_port_map, split_replay
+from flowtact.graphfile.safe_yaml import SafeYamlError, compose, load_value, read_graph_text
 from flowtact.inputs.limits import (
     MAX_DURATION_S,
     MAX_QUEUE,
@@ -29,12 +39,8 @@ from flowtact.inputs.limits import (
     positive_seconds,
     run_ticks_problem,
 )
-from flowtact.located import GraphError, GraphErrors, Loc, Located
-from flowtact.param_paths import graph_folder, path_fields, resolve_path, resolve_value
 from flowtact.params import ConfigError, did_you_mean
 from flowtact.registry import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
-from flowtact.replay_spec import parse_port_map, split_replay
-from flowtact.safe_yaml import SafeYamlError, compose, load_value, read_graph_text
 
 __all__ = [
     "Edge",
@@ -205,7 +211,7 @@ def _resolved(
     node: str,
     errors: list[GraphError],
 ) -> dict[str, Any]:
-    """``params`` with path fields resolved (:mod:`flowtact.param_paths`), each against its own
+    """``params`` with path fields resolved (:mod:`flowtact.graphfile.param_paths`), each against its own
     base; a name that cannot be resolved (a bad ``pkg:``) is an error at its place, kept as written."""
     fields = path_fields(config_cls)
     out = dict(params)
@@ -234,7 +240,7 @@ def load_graph(
     ``overrides`` are ``node.param=value`` strings (``--set``), applied before validation, so they
     go through exactly the same checks. ``replays`` maps a node to ``FILE[:PORT=COLUMNS;...]``
     (``--replay sensor=log.csv``): the node is swapped for a replay of that file standing in on the
-    node's own output ports (:mod:`flowtact.replay_spec`). ``text`` gives the YAML directly
+    node's own output ports (:mod:`flowtact.graphfile.replay_spec`). ``text`` gives the YAML directly
     (``source`` then only names it). Relative file names in parameters (``param(path=True)``) are
     resolved against the graph file's folder, those given by ``--set`` or ``--replay`` against the
     working directory.
@@ -273,7 +279,7 @@ def _apply_replays(
 ) -> None:
     """Swap each replayed node for a replay of a file on the node's own output ports, in place.
 
-    ``replays`` maps a node to ``FILE[:PORT=COLUMNS;...]`` (:mod:`flowtact.replay_spec`); a relative
+    ``replays`` maps a node to ``FILE[:PORT=COLUMNS;...]`` (:mod:`flowtact.graphfile.replay_spec`); a relative
     FILE is from the working directory. The node keeps its name, ports, process and seed, so edges
     and ``record:`` are untouched; its inputs are dropped (a replay has none). Problems are located
     at ``--replay:1:N`` (the N-th ``--replay``), and so is everything later said about the node.

@@ -14,10 +14,10 @@ import re
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
-from flowtact.located import GraphError
+from flowtact.graphfile.located import GraphError
 
 if TYPE_CHECKING:
-    from flowtact.graph import Graph
+    from flowtact.graphfile.graph import Graph
 
 __all__ = ["install_hint", "missing_extras", "module_available"]
 
