@@ -61,7 +61,7 @@ class _Keep(_Discard):
 
 
 def _tick(plan: Any) -> float | None:
-    from flowtact.launch import has_feedback
+    from flowtact.running.launch import has_feedback
     from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S
 
     return plan.graph.tick_s or (DEFAULT_TICK_REALTIME_S if has_feedback(plan) else None)
@@ -145,8 +145,8 @@ def _variants(name: str, quick: bool) -> list[tuple[str, float, float | None]]:
 
 
 def pruning(ctx: Context) -> list[dict[str, Any]]:
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import GraphErrors, load_graph, resolve_graph_path
+    from flowtact.running.compile import compile_graph
 
     rows = []
     for name in GRAPHS:
@@ -279,8 +279,8 @@ def _ssim_share(ctx: Context, seconds: float) -> dict[str, float]:
     """CPU of the ssim block alone on the quiet scene's cropped frames, per graph second (the most
     an SSIM gate could save), and the gate figures with and without sensor noise."""
     from flowtact.blocks.teleop.ssim import Ssim
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import GraphErrors
+    from flowtact.running.compile import compile_graph
     from flowtact.testing import run_offline
 
     out: dict[str, float] = {}
@@ -309,8 +309,8 @@ def _ssim_share(ctx: Context, seconds: float) -> dict[str, float]:
 
 
 def quiet_busy(ctx: Context) -> tuple[list[dict[str, Any]], dict[str, float]]:
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import GraphErrors, load_graph, resolve_graph_path
+    from flowtact.running.compile import compile_graph
 
     cases: list[tuple[str, Any, Any, float]] = []
     touch = resolve_graph_path("touch")

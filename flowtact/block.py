@@ -398,7 +398,7 @@ class Source(Block):
     def ends_at(self) -> float | None:
         """Graph time after which this source emits nothing more (a played-back file's end), or None
         when it never ends. A run without a duration lasts until its sources' ends
-        (:mod:`flowtact.source_ends`); called after ``specs``."""
+        (:mod:`flowtact.running.source_ends`); called after ``specs``."""
         return None
 
     @staticmethod

@@ -339,7 +339,7 @@ def _import_beside_graph(graph: str, modules: Sequence[str]) -> None:
 
 
 def _plan(args: argparse.Namespace) -> Any:
-    from flowtact.launch import load_plan
+    from flowtact.running.launch import load_plan
 
     _import_beside_graph(args.graph, args.allow_modules)
 
@@ -376,7 +376,7 @@ class _Progress:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from flowtact.launch import run_plan
+    from flowtact.running.launch import run_plan
     from flowtact.runtime.live import LiveView
 
     plan = _plan(args)

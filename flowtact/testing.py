@@ -210,12 +210,12 @@ def run_graph(
     ``duration_s`` the run lasts until the fed samples end (one sample period after the last).
     ``allow_modules``: the modules whose ``module:Class`` blocks may be imported (``--allow-module``).
     """
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import load_graph, resolve_graph_path
     from flowtact.params import did_you_mean
+    from flowtact.running.compile import compile_graph
+    from flowtact.running.source_ends import default_duration
     from flowtact.runtime.inproc import InprocExecutor
     from flowtact.runtime.rundir import make_run_folder
-    from flowtact.source_ends import default_duration
 
     replays: dict[str, str] = {}
     with make_run_folder("feed") as folder:  # swept by a later start if this process is killed

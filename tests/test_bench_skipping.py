@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from flowtact.bench import skipping
-from flowtact.compile import compile_graph
 from flowtact.graphfile.graph import load_graph, resolve_graph_path
+from flowtact.running.compile import compile_graph
 
 
 def test_skipped_parts_names_the_pruned_node_the_unfed_inputs_and_the_unused_outputs():

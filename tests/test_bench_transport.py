@@ -14,8 +14,8 @@ import pytest
 from flowtact.bench import transport
 from flowtact.bench import transport_blocks as tb
 from flowtact.bench.peers import measure
-from flowtact.compile import compile_graph
 from flowtact.graphfile.graph import load_graph
+from flowtact.running.compile import compile_graph
 from flowtact.testing import CHECKS, run_offline, run_source
 
 BENCH = Path(transport.__file__).resolve().parent  # bench/, wherever flowtact.bench is installed

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from runs import TEST_BLOCKS
 
-from flowtact.compile import compile_graph
 from flowtact.graphfile.graph import GraphErrors, load_graph
+from flowtact.running.compile import compile_graph
 from flowtact.runtime.inproc import InprocExecutor, NodeError
 
 BASE = """

@@ -221,7 +221,7 @@ def test_teleop_cnn_without_torch_is_refused_and_the_sim_port_needs_no_pyserial(
 def test_the_extras_check_imports_nothing_heavy():
     code = (
         "import sys\n"
-        "from flowtact.launch import load_plan\n"
+        "from flowtact.running.launch import load_plan\n"
         "plan = load_plan('graphs/teleop_cnn.yaml')\n"
         "print(sorted(plan.requires), 'torch' in sys.modules, 'cv2' in sys.modules)\n"
     )

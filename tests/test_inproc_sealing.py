@@ -8,8 +8,8 @@ import sealblocks
 from runs import TEST_BLOCKS
 
 from flowtact.chunk import Chunk
-from flowtact.compile import compile_graph
 from flowtact.graphfile.graph import load_graph
+from flowtact.running.compile import compile_graph
 from flowtact.runtime.inproc import InprocExecutor, NodeError
 
 

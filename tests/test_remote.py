@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.running.launch import load_plan, run_plan
 from flowtact.runtime.security import generate_keys
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,8 +9,8 @@ import pytest
 import toyblocks
 from runs import TEST_BLOCKS
 
-from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.running.launch import load_plan, run_plan
 from flowtact.testing import CHECKS, run_source
 
 LOOP = """

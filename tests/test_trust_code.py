@@ -18,8 +18,8 @@ import pytest
 from runs import TESTS
 
 from flowtact.graphfile.graph import GraphErrors, load_graph
-from flowtact.python_child import python_command
 from flowtact.registry import module_allowed
+from flowtact.running.python_child import python_command
 
 MARKING = """
 import pathlib

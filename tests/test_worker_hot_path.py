@@ -9,8 +9,8 @@ import pytest
 from runs import TEST_BLOCKS, flowtact
 
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.running.launch import load_plan, run_plan
 from flowtact.runtime.placement import spec_to_wire
 from flowtact.runtime.supervisor import WorkerFailed
 from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound

@@ -138,10 +138,10 @@ def read_line(
     nothing of its tick (its blocks are chunking-invariant), so a long ``tick_s`` only saves
     time; a closed loop must keep its own (pass ``tick_s=0`` to keep the graph's)."""
     from flowtact.chunk import concat
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
+    from flowtact.running.source_ends import default_duration
     from flowtact.runtime.inproc import InprocExecutor
-    from flowtact.source_ends import default_duration
 
     streams = ["scan.char", *(f"{LAYERS[k]}.spikes" for k in layers), *extra]
     path, yml = graph_text(

@@ -154,7 +154,7 @@ def train_layers(
     if missing:
         raise ValueError(f"letters {''.join(missing)} never came up in the training text: raise --letters")
     from flowtact.graphfile.graph import resolve_graph_path
-    from flowtact.launch import versions
+    from flowtact.running.launch import versions
 
     common = {
         "graph": str(graph),
@@ -211,8 +211,8 @@ def _check_size(
             f"--letters {letters} × {n_runs} runs (--speeds × --repeats) is {windows} letters; "
             f"at most {MAX_WINDOWS} in all"
         )
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
 
     path, yml = graph_text(graph, seed=0, speed_mm_s=speeds[0], letters=letters, record=[])
     plan = compile_graph(load_graph(path, text=yml))

@@ -33,7 +33,7 @@ from flowtact.blocks.teleop.exo_protocol import (
 from flowtact.blocks.teleop.hand import FINGERS, N_FINGERS
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
-from flowtact.python_child import python_command
+from flowtact.running.python_child import python_command
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 __all__ = ["SerialIo", "SerialIoConfig"]

@@ -23,7 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from flowtact.python_child import python_command
+from flowtact.running.python_child import python_command
 from flowtact.runtime.rundir import make_run_folder
 
 __all__ = ["STEP_MARK", "Prior", "measure_children", "share"]

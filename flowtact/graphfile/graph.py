@@ -4,7 +4,7 @@ Loading is strict and collects every problem before giving up: YAML syntax, unkn
 parameters and ports (each with a did-you-mean hint), wrong parameter values (the block's own
 rules), duplicate nodes, malformed edges and record entries. Stream-level checks (dtype, shape,
 units, rates, cycles, unconnected inputs) happen when the graph is compiled
-(:mod:`flowtact.compile`). Parsing uses ``yaml.SafeLoader``: a graph never executes code.
+(:mod:`flowtact.running.compile`). Parsing uses ``yaml.SafeLoader``: a graph never executes code.
 """
 
 from __future__ import annotations

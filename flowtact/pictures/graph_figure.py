@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from flowtact.compile import Plan
 from flowtact.pictures.graph_layout import EdgeIn, Layout, Rect, layout
+from flowtact.running.compile import Plan
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

@@ -19,8 +19,8 @@ import numpy as np
 
 from flowtact.block import Block
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
+from flowtact.running.compile import Plan
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
 from flowtact.runtime.sealing import sealed
 from flowtact.runtime.stats import format_factor
@@ -197,7 +197,7 @@ class RunSummary:
 
 
 class InprocExecutor:
-    """Runs a :class:`~flowtact.compile.Plan` in this process."""
+    """Runs a :class:`~flowtact.running.compile.Plan` in this process."""
 
     def __init__(
         self,

@@ -14,9 +14,9 @@ from typing import Any
 
 from flowtact.block import Source
 from flowtact.chunk import StreamSpec
-from flowtact.compile import Plan
 from flowtact.graphfile.deployment import ProcessDef
 from flowtact.graphfile.graph import GraphError, GraphErrors
+from flowtact.running.compile import Plan
 from flowtact.runtime.worker_plan import ticks_mergeable
 
 __all__ = ["DEFAULT_GROUP", "MAX_LOCAL_PROCESSES", "Placement", "place", "spec_from_wire", "spec_to_wire"]

@@ -16,7 +16,7 @@ import numpy as np
 
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.compile import Plan
+from flowtact.running.compile import Plan
 
 __all__ = ["NodePlan", "OutPlan", "build_plans", "takes_first", "tallies"]
 

@@ -43,9 +43,9 @@ from typing import Any
 import msgpack
 import zmq
 
-from flowtact.compile import Plan
 from flowtact.errors import FlowtactError
-from flowtact.python_child import python_command
+from flowtact.running.compile import Plan
+from flowtact.running.python_child import python_command
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.inproc import RunSummary, Sink, explain_counters
@@ -134,7 +134,7 @@ class _Proc:
 
 
 class ProcessExecutor:
-    """Runs a :class:`~flowtact.compile.Plan` across worker processes joined by ZeroMQ."""
+    """Runs a :class:`~flowtact.running.compile.Plan` across worker processes joined by ZeroMQ."""
 
     def __init__(
         self,

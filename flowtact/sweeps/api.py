@@ -190,9 +190,9 @@ def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: 
     """Load the graph as the first row would run it (without the swept values): graph problems
     raise GraphErrors (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too.
     Returns the graph and the run's graph seconds."""
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import load_graph
-    from flowtact.source_ends import default_duration
+    from flowtact.running.compile import compile_graph
+    from flowtact.running.source_ends import default_duration
 
     graph = load_graph(source, text=text, overrides=overrides, replays=_abs(first.recordings),
                        allow_modules=allow_modules)  # fmt: skip

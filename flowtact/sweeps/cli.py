@@ -120,7 +120,7 @@ def _report(df: Any, args: argparse.Namespace) -> int:
         print(shown.to_string(index=False))
     if args.plot:
         from flowtact.graphfile.graph import GraphErrors
-        from flowtact.launch import load_plan
+        from flowtact.running.launch import load_plan
         from flowtact.sweeps.plot import plot_rates
 
         try:

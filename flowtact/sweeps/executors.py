@@ -25,7 +25,7 @@ from concurrent.futures import Executor, Future, InvalidStateError
 from typing import Any
 
 from flowtact.errors import FlowtactError
-from flowtact.python_child import safe_path_env
+from flowtact.running.python_child import safe_path_env
 from flowtact.sweeps.grid import SweepSpecError
 from flowtact.sweeps.schedule import WORKER_DIED
 
@@ -43,7 +43,9 @@ def local_pool_factory(workers: int | None, preload: Sequence[str] = ()) -> Call
     pool's preload list holds for later ones."""
     n = workers or os.cpu_count() or 1
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["flowtact.sweeps.runs", "flowtact.launch", "flowtact.compile", *preload])
+    ctx.set_forkserver_preload(
+        ["flowtact.sweeps.runs", "flowtact.running.launch", "flowtact.running.compile", *preload]
+    )
 
     def make() -> Executor:
         from multiprocessing import forkserver

@@ -13,10 +13,10 @@ from matplotlib.transforms import Bbox
 from runs import TEST_BLOCKS
 
 from flowtact.cli import main
-from flowtact.compile import compile_graph
 from flowtact.graphfile.graph import load_graph
-from flowtact.launch import load_plan
 from flowtact.pictures.graph_figure import FEEDBACK, GREY, graph_figure
+from flowtact.running.compile import compile_graph
+from flowtact.running.launch import load_plan
 
 GRAPH_DIR = Path(__file__).resolve().parents[2] / "graphs"
 GRAPHS = sorted(p.stem for p in GRAPH_DIR.glob("*.yaml"))

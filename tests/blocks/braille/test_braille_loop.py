@@ -7,8 +7,8 @@ from runs import ROOT
 from flowtact.blocks.braille.reading import char_windows
 from flowtact.blocks.braille.train_braille import HELDOUT_SEED
 from flowtact.blocks.spiking.nb_model import load_model
-from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.running.launch import load_plan, run_plan
 from flowtact.runtime.placement import place
 
 GRAPH = ROOT / "graphs" / "braille.yaml"
@@ -55,8 +55,8 @@ def test_recording_only_the_text_keeps_the_loop_closed():
     """Demand flows back through the delayed speed input: the controller runs though nothing records
     it (a single backward pass of the compiler once left the loop open, silently)."""
     from flowtact.blocks.braille.reading import graph_text
-    from flowtact.compile import compile_graph
     from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
 
     path, text = graph_text(GRAPH, seed=1, text="ab", record=["scan.char"])
     plan = compile_graph(load_graph(path, text=text))

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.running.launch import load_plan, run_plan
 from flowtact.runtime.placement import place
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.launch import load_plan, run_plan
 from flowtact.record import read_recording
+from flowtact.running.launch import load_plan, run_plan
 
 ROOT = Path(__file__).resolve().parents[3]
 TELEOP = ROOT / "graphs" / "teleop.yaml"
@@ -96,7 +96,7 @@ def test_a_soft_object_lets_the_fingers_deviate_more_than_a_firm_one(tmp_path, s
 def test_the_ssim_graph_never_imports_torch():
     code = (
         "import sys\n"
-        "from flowtact.launch import load_plan, run_plan\n"
+        "from flowtact.running.launch import load_plan, run_plan\n"
         f"plan = load_plan({str(TELEOP)!r}, overrides=['exo.port=sim'])\n"
         "run_plan(plan, duration_s=1.0, fast=True, inproc=True)\n"
         "assert 'torch' not in sys.modules, 'torch was imported'\n"

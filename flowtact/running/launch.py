@@ -16,14 +16,14 @@ from typing import Any
 import yaml
 
 import flowtact
-from flowtact.compile import Plan, compile_graph
 from flowtact.errors import UsageError
 from flowtact.graphfile.deployment import DEFAULT_QUEUE, STOP_GRACE_S
 from flowtact.graphfile.graph import load_graph, resolve_graph_path
 from flowtact.inputs.limits import run_ticks_problem
+from flowtact.running.compile import Plan, compile_graph
+from flowtact.running.source_ends import EndWatch, default_duration
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
-from flowtact.source_ends import EndWatch, default_duration
 
 __all__ = ["load_plan", "provenance", "resolved_graph", "run_plan", "versions"]
 

@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from flowtact.compile import Plan
+from flowtact.running.compile import Plan
 
 __all__ = ["EndWatch", "default_duration"]
 
