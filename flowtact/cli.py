@@ -481,7 +481,7 @@ def _cmd_graph(args: argparse.Namespace) -> int:
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     from flowtact.pictures.recording_figure import plot_recording
-    from flowtact.record_integrity import NotARecording, RecordingRefused
+    from flowtact.recording.integrity import NotARecording, RecordingRefused
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     try:
@@ -497,8 +497,8 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from flowtact.record_integrity import NotARecording, RecordingRefused
-    from flowtact.recording_info import format_info, inspect_recording
+    from flowtact.recording.info import format_info, inspect_recording
+    from flowtact.recording.integrity import NotARecording, RecordingRefused
 
     try:
         info = inspect_recording(args.recording)

@@ -221,7 +221,7 @@ def run_graph(
     with make_run_folder("feed") as folder:  # swept by a later start if this process is killed
         tmp = folder.path
         if feed:
-            from flowtact.record import Recorder
+            from flowtact.recording.hdf5 import Recorder
 
             base = compile_graph(
                 load_graph(resolve_graph_path(graph), overrides=overrides, allow_modules=allow_modules)

@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTS = Path(__file__).resolve().parent

@@ -14,7 +14,7 @@ import toyblocks
 from runs import ROOT, TEST_BLOCKS, alive, flowtact, wait_children, wait_for_line, wait_recorded, worker_of
 
 from flowtact.graphfile.graph import GraphErrors
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.running.launch import load_plan, run_plan
 from flowtact.runtime.placement import place
 from flowtact.testing import CHECKS

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.record import Recorder, read_recording, stream_specs
+from flowtact.recording.hdf5 import Recorder, read_recording, stream_specs
 
 FORCE = StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz"))
 SPIKES = StreamSpec("int64", (), "1", None, events=True, n_units=24)
@@ -252,7 +252,7 @@ CHILD = textwrap.dedent(
     import h5py
     import numpy as np
     from flowtact.chunk import Chunk, StreamSpec
-    from flowtact.record import Recorder
+    from flowtact.recording.hdf5 import Recorder
 
     path, interval, hook = sys.argv[1], float(sys.argv[2]), sys.argv[3]
     armed = False
@@ -396,7 +396,7 @@ def test_committed_file_is_never_opened_for_writing(tmp_path, monkeypatch):
 
 
 def test_the_recorder_refuses_a_sample_its_readers_would_refuse(tmp_path):
-    from flowtact.record_integrity import MAX_CHUNK_BYTES
+    from flowtact.recording.integrity import MAX_CHUNK_BYTES
 
     side = int((MAX_CHUNK_BYTES // 8) ** 0.5) + 1  # one float64 frame just over the chunk bound
     with pytest.raises(ValueError, match=r"one sample of .* is larger than a recording's chunks may be"):

@@ -10,8 +10,8 @@ import pytest
 
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
-from flowtact.record import Recorder, open_stream, open_verified, read_recording, stream_specs
-from flowtact.record_integrity import CheckedFile, RecordingCorrupted, RecordingError
+from flowtact.recording.hdf5 import Recorder, open_stream, open_verified, read_recording, stream_specs
+from flowtact.recording.integrity import CheckedFile, RecordingCorrupted, RecordingError
 
 FORCE = StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz"))
 SPIKES = StreamSpec("int64", (), "1", None, events=True, n_units=24)
@@ -289,8 +289,8 @@ def test_raw_file_for_readers_that_walk_it_is_verified_first(good, tmp_path):
 
 
 def test_a_large_unchunked_dataset_is_read_in_bounded_pieces(tmp_path):
-    from flowtact.record import read_recording
-    from flowtact.record_integrity import MAX_READ_BYTES
+    from flowtact.recording.hdf5 import read_recording
+    from flowtact.recording.integrity import MAX_READ_BYTES
 
     n = MAX_READ_BYTES // 16 + 1000  # (n, 2) float64: more than one read may fetch
     with h5py.File(tmp_path / "c.h5", "w") as f:  # written by another tool: contiguous, no checksums

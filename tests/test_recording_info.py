@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from flowtact.cli import main
-from flowtact.recording_info import format_info, inspect_recording
+from flowtact.recording.info import format_info, inspect_recording
 
 ROOT = Path(__file__).resolve().parent.parent
 TOUCH = str(ROOT / "graphs" / "touch.yaml")
@@ -204,7 +204,7 @@ def _hostile_names(path):
     """A checksummed recording whose stream name, units, labels, command, host and an attribute
     name carry terminal escapes and a forged line."""
     from flowtact.chunk import Chunk, StreamSpec
-    from flowtact.record import Recorder
+    from flowtact.recording.hdf5 import Recorder
 
     spec = StreamSpec(dtype="float64", shape=(2,), units=f"N{ESC}", rate_hz=10.0, labels=(f"a{ESC}", "b"))
     prov = {"graph_name": f"g{ESC}", "command": f"flowtact run {ESC}{FORGED}", "host": f"h{ESC}"}
@@ -228,7 +228,7 @@ def test_info_shows_text_from_the_file_as_data(tmp_path, capsys):
 
 def test_info_cuts_long_text(tmp_path, capsys):
     from flowtact.chunk import StreamSpec
-    from flowtact.record import Recorder
+    from flowtact.recording.hdf5 import Recorder
 
     with Recorder(
         tmp_path / "long.h5", {"s.y": StreamSpec(dtype="float64", shape=(1,))}, {"host": "h" * 5000}

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.testing import run_graph
 
 ROOT = Path(__file__).parent.parent

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from runs import allow_args, env
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.runtime.inproc import RunSummary
 
 ROOT = Path(__file__).parent.parent

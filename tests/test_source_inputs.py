@@ -9,7 +9,7 @@ import pytest
 import toyblocks
 from runs import TEST_BLOCKS
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.running.launch import load_plan, run_plan
 from flowtact.testing import CHECKS, run_source
 

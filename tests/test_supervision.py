@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from runs import ROOT, alive, flowtact, wait_children, wait_for_line, wait_recorded, worker_of
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 
 pytestmark = pytest.mark.slow
 

@@ -9,7 +9,7 @@ import pytest
 from runs import TEST_BLOCKS, flowtact
 
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.running.launch import load_plan, run_plan
 from flowtact.runtime.placement import spec_to_wire
 from flowtact.runtime.supervisor import WorkerFailed

@@ -430,7 +430,7 @@ class Replay(Source):
         self._src = src
         path = Path(self.config.path)
         if src.h5_stream is not None and src.h5_file is None:
-            from flowtact.record import open_stream
+            from flowtact.recording.hdf5 import open_stream
 
             try:  # the file as inspected: bounded, no declared size beyond what it stores
                 check_h5_file(path)
@@ -537,7 +537,7 @@ def _period(src: _Source, t: np.ndarray) -> float:
 
 def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
     """The last time stamp of a recorded stream and its recorded end watermark (None if absent)."""
-    from flowtact.record import open_recording, stream_header
+    from flowtact.recording.hdf5 import open_recording, stream_header
 
     with open_recording(path) as f:  # checked reads: damage is refused naming the dataset
         h = stream_header(f, stream)
@@ -582,8 +582,8 @@ def check_h5_file(path: Path) -> None:
 
 def h5_streams(path: Path) -> dict[str, tuple[StreamSpec, int]]:
     """The streams of a recording to replay, from its header (:func:`check_h5_file`, then
-    :func:`flowtact.record.stream_specs`); any refusal a :class:`FileRefused` naming the file once."""
-    from flowtact.record import stream_specs
+    :func:`flowtact.recording.hdf5.stream_specs`); any refusal a :class:`FileRefused` naming the file once."""
+    from flowtact.recording.hdf5 import stream_specs
 
     check_h5_file(path)
     try:
@@ -595,7 +595,7 @@ def h5_streams(path: Path) -> dict[str, tuple[StreamSpec, int]]:
 def _check_h5_stream(path: Path, name: str, spec: StreamSpec, offset: float) -> None:
     """The played stream's datasets: sizes within the budget and the file (every declared sample
     stored), its sample shape as its spec says, its first and last time stamps playable."""
-    from flowtact.record import open_recording, stream_header
+    from flowtact.recording.hdf5 import open_recording, stream_header
 
     with open_recording(path) as f:
         h = stream_header(f, name)

@@ -80,7 +80,7 @@ def fit_from_recording(
     ``intercept_n`` (lists, ready for ``linear_force``'s parameters), ``mae_n``, ``pairs`` (number
     of paired samples), ``sensors`` (labels), the stream names and the path.
     """
-    from flowtact.record import read_recording, stream_specs
+    from flowtact.recording.hdf5 import read_recording, stream_specs
 
     specs = stream_specs(path)
     for name in (ssim_stream, force_stream):

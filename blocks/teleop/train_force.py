@@ -200,7 +200,7 @@ class Dataset:
 
 def _provenance(path: Path) -> dict[str, Any]:
     """The recording's command, graph seed, creation time, flowtact version and graph name (those it has)."""
-    from flowtact.record import read_recording
+    from flowtact.recording.hdf5 import read_recording
 
     bundle = read_recording(path, streams=()).provenance
     out = {
@@ -225,7 +225,7 @@ def load_recording_pairs(
 
     Frames are read and cropped slice by slice, so the whole-frame stream never sits in memory.
     """
-    from flowtact.record import open_verified, stream_specs
+    from flowtact.recording.hdf5 import open_verified, stream_specs
 
     path = Path(path)
     specs = stream_specs(path)

@@ -18,8 +18,8 @@ import numpy as np
 
 from flowtact.chunk import StreamSpec
 from flowtact.inputs.safe_text import shown
-from flowtact.record import _spec_from_attrs, open_verified
-from flowtact.record_integrity import RecordingCorrupted
+from flowtact.recording.hdf5 import _spec_from_attrs, open_verified
+from flowtact.recording.integrity import RecordingCorrupted
 
 __all__ = [
     "BLOCK_BYTES",

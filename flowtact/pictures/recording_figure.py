@@ -100,7 +100,7 @@ def recording_figure(
     Figure, FigureCanvasAgg = need_matplotlib()
     path = Path(source)
     if streams is None:  # refuse a figure of thousands of panels before verifying them all
-        from flowtact.record import stream_count
+        from flowtact.recording.hdf5 import stream_count
 
         _check_count(path, stream_count(path))
     f, sources, root = open_recording(path)

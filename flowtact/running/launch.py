@@ -58,8 +58,8 @@ def _stored_graph(path: Path) -> str:
     from flowtact.graphfile.located import GraphError, GraphErrors, Loc
     from flowtact.graphfile.safe_yaml import MAX_GRAPH_BYTES
     from flowtact.inputs.safe_text import shown
-    from flowtact.record import read_recording
-    from flowtact.record_integrity import NotARecording, RecordingRefused
+    from flowtact.recording.hdf5 import read_recording
+    from flowtact.recording.integrity import NotARecording, RecordingRefused
 
     where = shown(path)
     try:
@@ -128,8 +128,8 @@ def resolved_graph(plan: Plan) -> dict[str, Any]:
 
 
 def versions() -> dict[str, str]:
-    """Python, flowtact, HDF5 and dependency versions (:func:`flowtact.record.package_versions`)."""
-    from flowtact.record import package_versions
+    """Python, flowtact, HDF5 and dependency versions (:func:`flowtact.recording.hdf5.package_versions`)."""
+    from flowtact.recording.hdf5 import package_versions
 
     return {**package_versions(), "flowtact": flowtact.__version__}
 
@@ -234,7 +234,7 @@ def run_plan(
         summary = executor(sink).run(duration)
         ends.finish(summary)
         return summary
-    from flowtact.record import Recorder
+    from flowtact.recording.hdf5 import Recorder
 
     streams = {f"{n}.{p}": plan.specs[(n, p)] for n, p in plan.record}
     with Recorder(record, streams, provenance(plan, argv)) as recorder:

@@ -31,7 +31,7 @@ __all__ = ["InprocExecutor", "NodeError", "RunSummary", "block_summaries", "chec
 
 
 class Sink(Protocol):
-    """What the executor writes recorded streams to (a :class:`flowtact.record.Recorder`)."""
+    """What the executor writes recorded streams to (a :class:`flowtact.recording.hdf5.Recorder`)."""
 
     def write(self, stream: str, chunk: Chunk) -> None: ...
 

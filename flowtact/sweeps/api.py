@@ -57,7 +57,7 @@ def _graph_text(graph: str | Path) -> tuple[str, str]:
     """(source name, YAML text) of a graph file, a shipped graph's name, or a recording's graph."""
     path = Path(graph)
     if path.suffix in (".h5", ".hdf5"):
-        from flowtact.record import read_recording
+        from flowtact.recording.hdf5 import read_recording
 
         return f"{path}#graph", read_recording(path, streams=()).provenance["graph_yaml"]
     from flowtact.graphfile.graph import resolve_graph_path

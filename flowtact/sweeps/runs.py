@@ -56,8 +56,8 @@ class MemorySink:
         """Nothing to flush: everything stays in memory."""
 
     def streams(self) -> dict[str, Any]:
-        """Each recorded stream as a :class:`flowtact.record.RecordedStream`, as read back from a file."""
-        from flowtact.record import RecordedStream
+        """Each recorded stream as a :class:`flowtact.recording.hdf5.RecordedStream`, as read back from a file."""
+        from flowtact.recording.hdf5 import RecordedStream
 
         out = {}
         for name, spec in self.specs.items():

@@ -7,7 +7,7 @@ from runs import ROOT
 from flowtact.blocks.braille.reading import char_windows
 from flowtact.blocks.braille.train_braille import HELDOUT_SEED
 from flowtact.blocks.spiking.nb_model import load_model
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.running.launch import load_plan, run_plan
 from flowtact.runtime.placement import place
 

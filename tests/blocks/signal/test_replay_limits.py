@@ -24,7 +24,7 @@ from flowtact.blocks.signal.replay_ports import stand_in_class
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.inputs.bounded_files import HDF5_SIGNATURE, FileRefused, has_hdf5_signature, open_regular
 from flowtact.params import ConfigError
-from flowtact.record import Recorder
+from flowtact.recording.hdf5 import Recorder
 
 
 def _npy(array: np.ndarray) -> bytes:
@@ -235,7 +235,7 @@ def _forged(path, samples: int, *, stored: int = 0, rate: float = 100.0, end_s: 
 
 
 def test_a_stream_declaring_more_samples_than_it_stores_is_refused(tmp_path):
-    # the recording reader (flowtact/record.py) refuses these first: located at the file, named once
+    # the recording reader (flowtact/recording/hdf5.py) refuses these first: located at the file, named once
     Replay(path=_forged(tmp_path / "ok.h5", 200, stored=200)).bind({})
     hollow = _forged(tmp_path / "hollow.h5", 1 << 20, stored=200)
     e = _refusal(Replay(path=hollow))

@@ -6,7 +6,7 @@ import pytest
 from flowtact.block import SpecError
 from flowtact.blocks.signal.replay_ports import stand_in_class
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.record import Recorder
+from flowtact.recording.hdf5 import Recorder
 from flowtact.registry import load_block
 from flowtact.testing import CHECKS, run_source
 

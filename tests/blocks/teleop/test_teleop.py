@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.running.launch import load_plan, run_plan
 
 ROOT = Path(__file__).resolve().parents[3]

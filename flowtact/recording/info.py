@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from flowtact.inputs.safe_text import shown
-from flowtact.record import FORMAT, stream_header, stream_kind
-from flowtact.record_integrity import CheckedFile, NotARecording, RecordingCorrupted
+from flowtact.recording.hdf5 import FORMAT, stream_header, stream_kind
+from flowtact.recording.integrity import CheckedFile, NotARecording, RecordingCorrupted
 
 __all__ = ["RecordingInfo", "StreamInfo", "format_info", "inspect_recording"]
 
@@ -66,7 +66,7 @@ class RecordingInfo:
 def inspect_recording(path: str | Path) -> RecordingInfo:
     """Describe a recording and verify every checksum (every chunk of every dataset).
 
-    A missing, non-HDF5 or truncated file raises :class:`flowtact.record_integrity.RecordingError`
+    A missing, non-HDF5 or truncated file raises :class:`flowtact.recording.integrity.RecordingError`
     (one line), an HDF5 file that is no recording :class:`NotARecording`; damage inside a readable
     recording is listed in ``problems``, never raised, and what can still be read is described.
     """

@@ -14,11 +14,11 @@ Layout of a recording (one ``.h5`` file; docs/recordings.md documents it with Py
         the channels are named), labels and categories (JSON lists or "null"; categories[i] names
         sample value i), dtype, shape (JSON list), end_s (last time the stream reached)
     /provenance/<key>          only for provenance values too long for an attribute (> 60 kB)
-    /integrity                 the checksum manifest (flowtact.record_integrity)
+    /integrity                 the checksum manifest (flowtact.recording.integrity)
 
 Every dataset carries HDF5's Fletcher-32 checksum; the manifest holds the SHA-256 of every
 attribute and the shape of every dataset, so the readers here refuse a damaged file naming the
-dataset or attribute (:class:`flowtact.record_integrity.RecordingCorrupted`). Recordings of
+dataset or attribute (:class:`flowtact.recording.integrity.RecordingCorrupted`). Recordings of
 format_version 1 (no checksums) still read.
 
 Values that were not strings (dicts, lists) are stored as JSON text and listed in the root
@@ -78,7 +78,7 @@ import numpy as np
 
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.inputs.safe_text import shown
-from flowtact.record_integrity import (
+from flowtact.recording.integrity import (
     MAX_CHUNK_BYTES,
     CheckedFile,
     Manifest,
@@ -648,7 +648,7 @@ def read_recording(path: str | Path, streams: Iterable[str] | None = None) -> Re
     """Read a recording (all streams, or the named ones); copes with a killed run (no summary).
 
     Every attribute and chunk read is checked against the file's checksums: a damaged recording
-    raises :class:`flowtact.record_integrity.RecordingCorrupted` naming the dataset.
+    raises :class:`flowtact.recording.integrity.RecordingCorrupted` naming the dataset.
     """
     with open_recording(path) as f:
         out = {}
