@@ -44,7 +44,7 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    from flowtact.rst_text import inline_text
+    from flowtact.help.rst_text import inline_text
 
     p = CommandParser(
         prog="flowtact",
@@ -235,13 +235,13 @@ def _plugin_help(ep: Any) -> str:
 
 def entry_point_summary(ep: Any) -> str:
     """An entry point's one-line summary for help lists: the first sentence of its module's
-    docstring as plain text (reST markup gone, :func:`flowtact.rst_text.inline_text`), without a
+    docstring as plain text (reST markup gone, :func:`flowtact.help.rst_text.inline_text`), without a
     leading ``flowtact NAME ...:`` or trailing ``: flowtact NAME`` that repeats the name beside
     it. Cheap: the module is parsed, not imported."""
     import ast
     import importlib.util
 
-    from flowtact.rst_text import inline_text
+    from flowtact.help.rst_text import inline_text
 
     try:
         spec = importlib.util.find_spec(ep.value.partition(":")[0])
@@ -462,7 +462,7 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
         cls = load_block(args.name, [args.name.partition(":")[0]])  # named on the command line: allowed
     except UnknownBlockError as e:  # a usage error: the name given is not a block
         raise UsageError(str(e)) from e
-    from flowtact.describe import describe_block
+    from flowtact.help.describe import describe_block
 
     print(describe_block(cls))
     return 0

@@ -41,7 +41,7 @@ def test_top_level_help_has_no_rest_markup(capsys):
     ],
 )
 def test_one_line_summary(doc, line):
-    from flowtact.rst_text import inline_text
+    from flowtact.help.rst_text import inline_text
 
     assert one_line_summary(inline_text(doc)) == line
 

@@ -6,7 +6,7 @@ import re
 import pytest
 
 from flowtact.cli import main
-from flowtact.describe import describe_block, units_of
+from flowtact.help.describe import describe_block, units_of
 from flowtact.registry import block_names, load_block
 
 MARKUP = re.compile(

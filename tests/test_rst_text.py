@@ -1,8 +1,8 @@
-"""reStructuredText docstrings as plain text (flowtact.rst_text)."""
+"""reStructuredText docstrings as plain text (flowtact.help.rst_text)."""
 
 import pytest
 
-from flowtact.rst_text import inline_text, latex_text, rst_to_text
+from flowtact.help.rst_text import inline_text, latex_text, rst_to_text
 
 
 @pytest.mark.parametrize(

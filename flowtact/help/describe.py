@@ -1,6 +1,6 @@
 """``flowtact blocks NAME``: a block's docs as readable terminal text, with the presets that apply to it.
 
-The docstring's reStructuredText is rendered by :mod:`flowtact.rst_text`; ports, parameters (type,
+The docstring's reStructuredText is rendered by :mod:`flowtact.help.rst_text`; ports, parameters (type,
 default, rules, doc) and counters come from the class; every preset published for the block
 (``flowtact.presets`` entry points) is listed with each value and the units its field name carries.
 """
@@ -13,8 +13,8 @@ import shutil
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from flowtact.help.rst_text import inline_text, rst_to_text
 from flowtact.presets import presets_for
-from flowtact.rst_text import inline_text, rst_to_text
 
 __all__ = ["describe_block", "units_of"]
 
