@@ -2,7 +2,7 @@
 """The ``flowtact`` command: run, validate, draw and document graphs; list blocks; plot recordings.
 
 Every command, the plugins' (``flowtact.commands``) included, fails the same way
-(:func:`flowtact.command.run_command`): ONE line on stderr naming the place (``file:line:col``,
+(:func:`flowtact.console.command.run_command`): ONE line on stderr naming the place (``file:line:col``,
 the flag, or the file), control characters escaped, no traceback unless ``--debug``
 (``flowtact --debug CMD ...`` or ``FLOWTACT_DEBUG=1``). Exit status:
 
@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from flowtact.command import EXIT_RUN_ERROR, CommandParser, run_command
+from flowtact.console.command import EXIT_RUN_ERROR, CommandParser, run_command
 from flowtact.errors import UsageError
 from flowtact.graphfile.deployment import MAX_STARTUP_S
 from flowtact.graphfile.graph import GraphErrors
@@ -539,7 +539,7 @@ COMMANDS = {
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``flowtact`` command: its exit status (see the module notes)."""
-    from flowtact.debug import ENV, debug_enabled
+    from flowtact.console.debug import ENV, debug_enabled
 
     as_program = argv is None  # the process's own command line: its exit status is ours to keep
     argv = list(sys.argv[1:] if argv is None else argv)

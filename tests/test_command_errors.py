@@ -14,7 +14,7 @@ from hostile import TOUCH, run_measured
 
 from flowtact import cli
 from flowtact.cli import main
-from flowtact.debug import ENV, HINT
+from flowtact.console.debug import ENV, HINT
 
 PEAK_MIB = 500  # the bound on a refusal's peak memory
 

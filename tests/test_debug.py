@@ -7,7 +7,7 @@ import sys
 import pytest
 from runs import allow_args, env, flowtact
 
-from flowtact.debug import HINT, debug_enabled, print_error
+from flowtact.console.debug import HINT, debug_enabled, print_error
 from flowtact.runtime.inproc import NodeError
 from flowtact.runtime.supervisor import WorkerFailed
 

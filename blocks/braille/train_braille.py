@@ -33,10 +33,10 @@ from flowtact.blocks.spiking.nb_model import (
     save_model,
 )
 from flowtact.blocks.spiking.window_features import window_features
-from flowtact.command import CommandParser, run_command
+from flowtact.console.command import CommandParser, run_command
+from flowtact.console.terminal_bar import TerminalBar
 from flowtact.errors import UsageError
 from flowtact.inputs.limits import MAX_SEED, cli_float, cli_int, format_bytes
-from flowtact.terminal_bar import TerminalBar
 
 from .cells import LETTERS
 from .reading import LAYERS, OPEN_GRAPH, graph_text, prefix_windows, read_line
@@ -298,7 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``flowtact train-braille``: returns the exit status (:func:`flowtact.command.run_command`:
+    """``flowtact train-braille``: returns the exit status (:func:`flowtact.console.command.run_command`:
     0 ok, 2 a bad flag or a training set over its bounds, 1 failed)."""
     return run_command(
         lambda: _train(list(sys.argv[1:] if argv is None else argv)), prog="flowtact train-braille"

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from importlib.metadata import entry_points
 from typing import Any
 
-from flowtact.command import run_command
+from flowtact.console.command import run_command
 from flowtact.errors import UsageError
 
 __all__ = ["GROUP", "main"]
@@ -20,7 +20,7 @@ GROUP = "flowtact.emulators"
 
 def main(argv: Sequence[str]) -> int:
     """Dispatch ``flowtact sim DEVICE ...`` to the device's emulator; its exit status (an unknown
-    device: one line, 2), through :func:`flowtact.command.run_command` like every command."""
+    device: one line, 2), through :func:`flowtact.console.command.run_command` like every command."""
     return run_command(lambda: _dispatch(list(argv)), prog="flowtact sim")
 
 

@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.command import CommandParser, run_command
+from flowtact.console.command import CommandParser, run_command
+from flowtact.console.terminal_bar import TerminalBar
 from flowtact.errors import UsageError
 from flowtact.inputs.limits import MAX_SEED, cli_float, cli_int
-from flowtact.terminal_bar import TerminalBar
 
 from .cnn import ARCHS, TORCH_HINT, Arch, Preprocess, build_model, import_torch, n_parameters, save_checkpoint
 from .hand import FINGERS
@@ -764,7 +764,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``flowtact train-force``: returns the exit status (:func:`flowtact.command.run_command`:
+    """``flowtact train-force``: returns the exit status (:func:`flowtact.console.command.run_command`:
     0 ok, 2 a bad flag or input, 1 failed)."""
     return run_command(
         lambda: _command(list(sys.argv[1:] if argv is None else argv)), prog="flowtact train-force"

@@ -25,7 +25,7 @@ import sys
 from collections.abc import Callable
 from typing import NoReturn
 
-from flowtact.debug import debug_enabled, print_error
+from flowtact.console.debug import debug_enabled, print_error
 from flowtact.errors import FlowtactError, UsageError
 from flowtact.inputs.safe_text import shown
 
