@@ -19,11 +19,11 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 
+from flowtact.catalog.presets import apply_preset
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.errors import FlowtactError
 from flowtact.finite import all_finite
 from flowtact.params import Config, param
-from flowtact.presets import apply_preset
 
 if TYPE_CHECKING:
     from flowtact.runtime.rundir import RunFolder

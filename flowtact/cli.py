@@ -282,7 +282,7 @@ def _complete_graph(prefix: str, **_kwargs: Any) -> list[str]:
 
 
 def _module_name(text: str) -> str:
-    from flowtact.registry import check_module_name
+    from flowtact.catalog.blocks import check_module_name
 
     try:
         return check_module_name(text)
@@ -449,14 +449,14 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _cmd_blocks(args: argparse.Namespace) -> int:
-    from flowtact.registry import block_names, load_block
+    from flowtact.catalog.blocks import block_names, load_block
 
     if not args.name:
         for name in block_names():
             doc = (load_block(name).__doc__ or "").strip().splitlines()
             print(f"{name:<16} {doc[0] if doc else ''}")
         return 0
-    from flowtact.registry import UnknownBlockError
+    from flowtact.catalog.blocks import UnknownBlockError
 
     try:
         cls = load_block(args.name, [args.name.partition(":")[0]])  # named on the command line: allowed

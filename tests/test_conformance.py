@@ -2,7 +2,7 @@
 
 import pytest
 
-from flowtact.registry import block_names, load_block
+from flowtact.catalog.blocks import block_names, load_block
 from flowtact.testing import CHECKS
 
 

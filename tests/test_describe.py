@@ -5,9 +5,9 @@ import re
 
 import pytest
 
+from flowtact.catalog.blocks import block_names, load_block
 from flowtact.cli import main
 from flowtact.help.describe import describe_block, units_of
-from flowtact.registry import block_names, load_block
 
 MARKUP = re.compile(
     r"``|:(?:class|func|meth|mod|attr|data|obj|math|ref|doc|py:\w+):`|^\s*\.\. [\w-]+::", re.M

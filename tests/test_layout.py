@@ -21,7 +21,7 @@ import pytest
 
 import flowtact.blocks
 from flowtact.block import Block
-from flowtact.registry import block_names, load_block
+from flowtact.catalog.blocks import block_names, load_block
 
 ROOT = Path(__file__).resolve().parent.parent
 FAMILIES = ("signal", "spiking", "devices")

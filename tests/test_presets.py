@@ -8,8 +8,8 @@ from flowtact import ConfigError
 from flowtact.blocks.signal.weighted_sum import WeightedSum
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.presets import NEURON_PRESETS, TABLE_I
+from flowtact.catalog.presets import presets_for
 from flowtact.graphfile.graph import GraphErrors, load_graph
-from flowtact.presets import presets_for
 
 
 def test_the_touch_domain_publishes_its_presets_for_generic_blocks():

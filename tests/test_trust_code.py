@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from runs import TESTS
 
+from flowtact.catalog.blocks import module_allowed
 from flowtact.graphfile.graph import GraphErrors, load_graph
-from flowtact.registry import module_allowed
 from flowtact.running.python_child import python_command
 
 MARKING = """
@@ -255,7 +255,7 @@ def test_a_worker_on_another_host_imports_only_what_its_own_command_line_allows(
 
 
 def test_modules_of_installed_block_packages_need_no_flag_but_never_a_main():
-    from flowtact.registry import ModuleNotAllowedError, load_block
+    from flowtact.catalog.blocks import ModuleNotAllowedError, load_block
 
     # what --replay writes into a graph (and so into recordings): loads without a flag
     stand_in = load_block("flowtact.blocks.signal.replay_ports:aunp_sensor")

@@ -22,8 +22,8 @@ from runs import env, flowtact
 from warmblocks import JitScale, SlowWarmUp, scale_kernel
 
 from flowtact.block import Source
+from flowtact.catalog.blocks import block_names, load_block
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.registry import block_names, load_block
 from flowtact.runtime.warm_up import CompileWatch, _unaligned, synthetic_inputs, warm_up
 from flowtact.runtime.wire import recv_message, send_message
 from flowtact.testing import example_of, infer_specs, run_offline, run_source

@@ -20,11 +20,11 @@ from flowtact.block import Block, Example, Source, SpecError, example_folder
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
 from flowtact.blocks.signal.replay import SUFFIXES, Replay, h5_streams
 from flowtact.blocks.signal.replay_limits import MAX_STREAMS, listing
+from flowtact.catalog.blocks import UnknownBlockError, load_block
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.graphfile.replay_spec import parse_port_map
 from flowtact.inputs.bounded_files import FileRefused, open_npz, refusal
 from flowtact.params import Config, ConfigError, did_you_mean, param
-from flowtact.registry import UnknownBlockError, load_block
 
 __all__ = ["ReplayPorts", "ReplayPortsConfig", "stand_in_class"]
 

@@ -19,6 +19,7 @@ from typing import Any
 import yaml
 
 from flowtact.block import Block
+from flowtact.catalog.blocks import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
 from flowtact.graphfile.deployment import (
     DEFAULT_QUEUE,
     POLICIES,
@@ -40,7 +41,6 @@ from flowtact.inputs.limits import (
     run_ticks_problem,
 )
 from flowtact.params import ConfigError, did_you_mean
-from flowtact.registry import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
 
 __all__ = [
     "Edge",
@@ -234,7 +234,7 @@ def load_graph(
     """Load and validate a graph file; raise :class:`GraphErrors` listing every problem.
 
     A ``module:Class`` block is imported only if its module is in ``allow_modules`` (module names
-    or package prefixes: ``mypkg`` allows ``mypkg.blocks``; :mod:`flowtact.registry`); otherwise it
+    or package prefixes: ``mypkg`` allows ``mypkg.blocks``; :mod:`flowtact.catalog.blocks`); otherwise it
     is an error at the block's place and nothing is imported.
 
     ``overrides`` are ``node.param=value`` strings (``--set``), applied before validation, so they

@@ -13,8 +13,8 @@ import shutil
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from flowtact.catalog.presets import presets_for
 from flowtact.help.rst_text import inline_text, rst_to_text
-from flowtact.presets import presets_for
 
 __all__ = ["describe_block", "units_of"]
 

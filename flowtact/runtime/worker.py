@@ -58,8 +58,8 @@ import numpy as np
 import zmq
 
 from flowtact.block import Block, Source
+from flowtact.catalog.blocks import load_block
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.registry import load_block
 from flowtact.runtime.inproc import block_summaries, check_chunk
 from flowtact.runtime.placement import spec_from_wire
 from flowtact.runtime.stats import LatencyHistogram

@@ -5,9 +5,9 @@ import pytest
 
 from flowtact.block import SpecError
 from flowtact.blocks.signal.replay_ports import stand_in_class
+from flowtact.catalog.blocks import load_block
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.recording.hdf5 import Recorder
-from flowtact.registry import load_block
 from flowtact.testing import CHECKS, run_source
 
 SENSOR = stand_in_class("aunp_sensor")
