@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from flowtact.stress import collect, markdown_table, run_case
+from flowtact.verify.stress import collect, markdown_table, run_case
 
 #: Every room that has stress cases, in the order of the table.
 MODULES = (

@@ -9,7 +9,7 @@ import pytest
 from flowtact.bench import stress
 from flowtact.benchmark.suite import Context
 from flowtact.cli import main
-from flowtact.stress import Outcome, StressCase
+from flowtact.verify.stress import Outcome, StressCase
 
 
 def _crash() -> Outcome:
@@ -22,7 +22,7 @@ def _fine() -> Outcome:
 
 def test_a_crashing_case_is_a_failed_check_and_the_suite_goes_on(monkeypatch):
     cases = [StressCase("crash", "toy", _crash), StressCase("fine", "toy", _fine)]
-    monkeypatch.setattr("flowtact.stress.collect", lambda _modules: cases)
+    monkeypatch.setattr("flowtact.verify.stress.collect", lambda _modules: cases)
     ctx = Context(stress.SUITE, quick=True)
     stress.SUITE.run(ctx)
     assert [c.passed for c in ctx.checks] == [False, True]
@@ -34,7 +34,7 @@ def test_a_crashing_case_is_a_failed_check_and_the_suite_goes_on(monkeypatch):
 
 def test_the_full_run_takes_each_case_s_full_variant(monkeypatch):
     short = StressCase("long", "toy", _crash, full=_fine)
-    monkeypatch.setattr("flowtact.stress.collect", lambda _modules: [short])
+    monkeypatch.setattr("flowtact.verify.stress.collect", lambda _modules: [short])
     ctx = Context(stress.SUITE, quick=False)
     stress.SUITE.run(ctx)
     assert [c.passed for c in ctx.checks] == [True] and "1e8" in ctx.notes[0]
@@ -45,7 +45,7 @@ def test_the_stress_suite_runs_every_case_through_the_runner(tmp_path, capsys):
     assert main(["bench", "stress", "--quick", "--json", "--out", str(tmp_path)]) == 0
     assert json.loads(capsys.readouterr().out)["suites"] == {"stress": "ok"}
     res = json.loads((tmp_path / "results" / "stress.json").read_text())
-    from flowtact.stress import collect
+    from flowtact.verify.stress import collect
 
     assert len(res["checks"]) == len(collect(stress.MODULES)) >= 40
     assert all(c["passed"] for c in res["checks"]), [c for c in res["checks"] if not c["passed"]]

@@ -5,7 +5,6 @@ import re
 import brokenblocks as broken
 import pytest
 
-from flowtact.conformance import ConformanceError, example_of
 from flowtact.testing import (
     CHECKS,
     check_chunking_invariance,
@@ -14,6 +13,7 @@ from flowtact.testing import (
     check_documented,
     check_inputs_not_mutated,
 )
+from flowtact.verify.conformance import ConformanceError, example_of
 
 
 def failure(check, cls) -> str:
