@@ -21,7 +21,7 @@ import numpy as np
 
 from flowtact.catalog.presets import apply_preset
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.errors import FlowtactError
+from flowtact.errors import BadDataError, SpecError
 from flowtact.finite import all_finite
 from flowtact.params import Config, param
 
@@ -30,13 +30,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "BadDataConfig",
-    "BadDataError",
     "BadDataPolicy",
     "Block",
     "Example",
     "Port",
     "Source",
-    "SpecError",
     "example_folder",
     "nonfinite_counter_docs",
     "screen_nonfinite",
@@ -87,23 +85,6 @@ class Port:
         if self.units is not None and self.units != spec.units:
             return f"expects units '{self.units}' but gets '{spec.units}'"
         return None
-
-
-class SpecError(FlowtactError, ValueError):
-    """An input stream does not fit what a block expects (``port`` names the input, if any).
-
-    ``where`` is (file, line, column) when the problem sits in a data file the block reads (a
-    replayed CSV log): the graph compiler then reports it there instead of at the node.
-    """
-
-    def __init__(self, port: str | None, message: str, where: tuple[str, int, int] | None = None) -> None:
-        self.port = port
-        self.where = where
-        super().__init__(message)
-
-
-class BadDataError(FlowtactError, ValueError):
-    """Non-finite samples reached a block whose policy is ``raise``."""
 
 
 @dataclass(frozen=True)

@@ -28,9 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from flowtact.console.command import EXIT_RUN_ERROR, CommandParser, run_command
-from flowtact.errors import UsageError
+from flowtact.errors import GraphFileError, UsageError
 from flowtact.graphfile.deployment import MAX_STARTUP_S
-from flowtact.graphfile.graph import GraphErrors
 from flowtact.inputs.limits import (
     MAX_TICK_S,
     MIN_TICK_S,
@@ -312,7 +311,8 @@ def _version() -> str:
 
 
 def _replays(items: Sequence[str]) -> dict[str, str]:
-    from flowtact.graphfile.graph import GraphError, Loc
+    from flowtact.graphfile.graph import Loc
+    from flowtact.graphfile.located import GraphProblem
 
     out: dict[str, str] = {}
     for i, item in enumerate(items):
@@ -321,7 +321,7 @@ def _replays(items: Sequence[str]) -> dict[str, str]:
         why = "expected NODE=FILE[:PORT=COLUMN,...;PORT=...]" if not sep or not node or not path else ""
         why = why or (f"node '{node}' is replayed twice" if node in out else "")
         if why:
-            raise GraphErrors([GraphError(Loc("--replay", 1, i + 1), f"--replay '{item}': {why}")])
+            raise GraphFileError([GraphProblem(Loc("--replay", 1, i + 1), f"--replay '{item}': {why}")])
         out[node] = path
     return out
 
@@ -339,11 +339,11 @@ def _import_beside_graph(graph: str, modules: Sequence[str]) -> None:
 
 
 def _plan(args: argparse.Namespace) -> Any:
-    from flowtact.running.launch import load_plan
+    from flowtact.running.launch import load_compiled
 
     _import_beside_graph(args.graph, args.allow_modules)
 
-    return load_plan(
+    return load_compiled(
         args.graph,
         overrides=args.overrides,
         replays=_replays(args.replays),
@@ -376,7 +376,7 @@ class _Progress:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from flowtact.running.launch import run_plan
+    from flowtact.running.launch import run_compiled
     from flowtact.runtime.live import LiveView
 
     plan = _plan(args)
@@ -390,7 +390,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_term)
     try:
         with live:
-            summary = run_plan(
+            summary = run_compiled(
                 plan,
                 duration_s=args.duration,
                 fast=args.fast,
@@ -456,7 +456,7 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
             doc = (load_block(name).__doc__ or "").strip().splitlines()
             print(f"{name:<16} {doc[0] if doc else ''}")
         return 0
-    from flowtact.catalog.blocks import UnknownBlockError
+    from flowtact.errors import UnknownBlockError
 
     try:
         cls = load_block(args.name, [args.name.partition(":")[0]])  # named on the command line: allowed
@@ -469,19 +469,19 @@ def _cmd_blocks(args: argparse.Namespace) -> int:
 
 
 def _cmd_graph(args: argparse.Namespace) -> int:
-    from flowtact.pictures.graph_figure import FORMATS, draw_plan
+    from flowtact.pictures.graph_figure import FORMATS, draw_compiled
 
     suffix = Path(args.output).suffix
     if suffix not in FORMATS:  # a usage error: say so before loading anything
         raise UsageError(f"-o {args.output}: cannot draw to '{suffix}'; use {', '.join(FORMATS)}")
-    out = draw_plan(_plan(args), args.output)
+    out = draw_compiled(_plan(args), args.output)
     print(f"wrote {out}")
     return 0
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
+    from flowtact.errors import NotARecording, RecordingRefused
     from flowtact.pictures.recording_figure import plot_recording
-    from flowtact.recording.integrity import NotARecording, RecordingRefused
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     try:
@@ -497,8 +497,8 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    from flowtact.errors import NotARecording, RecordingRefused
     from flowtact.recording.info import format_info, inspect_recording
-    from flowtact.recording.integrity import NotARecording, RecordingRefused
 
     try:
         info = inspect_recording(args.recording)

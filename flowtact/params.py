@@ -16,20 +16,10 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self, get_args, get_origin
 
-from flowtact.errors import FlowtactError
+from flowtact.errors import ConfigError
 from flowtact.inputs.limits import budget_problem
 
-__all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param"]
-
-
-class ConfigError(FlowtactError, ValueError):
-    """A parameter broke a rule: ``"<owner>: 'field' must be <rule>; got <value>"``."""
-
-    def __init__(self, owner: str, field: str | None, message: str, *, type_error: bool = False) -> None:
-        self.owner, self.field, self.rule = owner, field, message
-        self.type_error = type_error  # the value had the wrong type (vs. broke a rule)
-        where = f"'{field}' " if field else ""
-        super().__init__(f"{owner}: {where}{message}")
+__all__ = ["Config", "FieldInfo", "Rules", "did_you_mean", "param"]
 
 
 def did_you_mean(name: str, options: typing.Iterable[str]) -> str:

@@ -17,14 +17,8 @@ import yaml
 
 from flowtact.block import Block, Example, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.params import ConfigError
-from flowtact.verify.conformance import (
-    ConformanceError,
-    differing_rows,
-    example_of,
-    first_difference,
-    value_text,
-)
+from flowtact.errors import ConfigError, ConformanceError
+from flowtact.verify.conformance import differing_rows, example_of, first_difference, value_text
 
 __all__ = [
     "CHECKS",

@@ -9,8 +9,8 @@ import zipfile
 import numpy as np
 import pytest
 
+from flowtact.errors import FileRefused
 from flowtact.inputs.bounded_files import (
-    FileRefused,
     check_hdf5_signature,
     open_npz,
     open_regular,

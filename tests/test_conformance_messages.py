@@ -5,6 +5,7 @@ import re
 import brokenblocks as broken
 import pytest
 
+from flowtact.errors import ConformanceError
 from flowtact.testing import (
     CHECKS,
     check_chunking_invariance,
@@ -13,7 +14,7 @@ from flowtact.testing import (
     check_documented,
     check_inputs_not_mutated,
 )
-from flowtact.verify.conformance import ConformanceError, example_of
+from flowtact.verify.conformance import example_of
 
 
 def failure(check, cls) -> str:

@@ -8,8 +8,7 @@ import pytest
 from runs import allow_args, env, flowtact
 
 from flowtact.console.debug import HINT, debug_enabled, print_error
-from flowtact.runtime.inproc import NodeError
-from flowtact.runtime.supervisor import WorkerFailed
+from flowtact.errors import NodeError, WorkerFailed
 
 BOOM = """
 name: boom

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from runs import TEST_BLOCKS
 
-from flowtact.graphfile.graph import GraphErrors, load_graph
+from flowtact.errors import GraphFileError, NodeError
+from flowtact.graphfile.graph import load_graph
 from flowtact.running.compile import compile_graph
-from flowtact.runtime.inproc import InprocExecutor, NodeError
+from flowtact.runtime.inproc import InprocExecutor
 
 BASE = """
 name: toy
@@ -118,10 +119,10 @@ def test_overrides_are_validated_like_the_file():
     plan = compile_graph(load(BASE, overrides=["dbl.gain=3"]))
     node = plan.graph.nodes["dbl"]
     assert node.config.gain == 3.0
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         load(BASE, overrides=["dbl.gain=fast"])
     assert "--set:1:1: dbl (scale): 'gain' must be a number; got 'fast'" in str(e.value)
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         load(BASE, overrides=["dbll.gain=3"])
     assert "unknown node 'dbll' (did you mean 'dbl'?)" in str(e.value)
 
@@ -156,7 +157,7 @@ def test_cycle_without_delay_is_rejected_with_its_path():
       - a.y -> b.x
       - b.y -> a.b
     """
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         compile_graph(load(text))
     msg = str(e.value)
     assert "g.yaml:9:5: cycle without a delay: a -> b -> a" in msg
@@ -171,7 +172,7 @@ def test_units_and_rate_mismatches_are_errors_at_the_edge():
     edges:
       - src.y -> add.a
     """
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         compile_graph(load(text))
     assert (
         "g.yaml:6:5: src.y -> add.a: input 'a' of 'add' (add: first) expects units 'N' but gets 'mN'"
@@ -185,7 +186,7 @@ def test_units_and_rate_mismatches_are_errors_at_the_edge():
       - src.y -> s.x
     record: [s.y]
     """
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         compile_graph(load(text))
     assert "g.yaml:6:5: node 's' (scale): expects 250 Hz (rate_hz) but the stream is 1000 Hz" in str(e.value)
 
@@ -237,7 +238,7 @@ def test_errors_are_all_collected_with_locations():
       - src.w -> s.x
     record: [s.q]
     """
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         load(text)
     lines = str(e.value).splitlines()
     assert lines[0].startswith("g.yaml:3:1: unknown top-level key 'nodse' (did you mean 'nodes'?)")
@@ -266,5 +267,5 @@ def test_a_delay_block_closes_a_loop_when_it_declares_the_fed_back_stream():
     ex = InprocExecutor(plan, fast=True, tick_s=0.5)
     ex.run(2.0)
     assert ex.blocks["a"].got_feedback == 2000
-    with pytest.raises(GraphErrors, match="declare the fed-back stream"):
+    with pytest.raises(GraphFileError, match="declare the fed-back stream"):
         compile_graph(load(DELAY_LOOP.replace("units: N,", "units: mN,")))

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from flowtact.graphfile.graph import GraphErrors, load_graph
+from flowtact.errors import GraphFileError
+from flowtact.graphfile.graph import load_graph
 from flowtact.graphfile.param_paths import package_file
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -66,7 +67,7 @@ def test_a_symlinked_graph_file_reads_beside_its_target(tmp_path):
 def test_a_bad_package_name_is_refused_at_its_place(tmp_path, name, why):
     text = BRAILLE.read_text().replace(f"pkg:flowtact.blocks.braille.models/{MODEL}", name)
     (tmp_path / "g.yaml").write_text(text)
-    with pytest.raises(GraphErrors) as info:
+    with pytest.raises(GraphFileError) as info:
         load_graph(tmp_path / "g.yaml")
     (err,) = info.value.errors
     line = 1 + next(i for i, ln in enumerate(text.splitlines()) if ln.strip().startswith("decoder:"))

@@ -17,10 +17,10 @@ from hostile import CASES, ROOT, TOUCH, run_measured
 
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.cli import main
+from flowtact.errors import ConfigError, SafeYamlError
 from flowtact.graphfile.extras import module_available
-from flowtact.graphfile.safe_yaml import MAX_GRAPH_BYTES, SafeYamlError, load_value, read_graph_text
+from flowtact.graphfile.safe_yaml import MAX_GRAPH_BYTES, load_value, read_graph_text
 from flowtact.inputs.limits import STATE_BUDGET_BYTES, host_problem
-from flowtact.params import ConfigError
 
 PEAK_MIB = 500  # the bound on a refusal's peak memory
 
@@ -221,8 +221,8 @@ def test_teleop_cnn_without_torch_is_refused_and_the_sim_port_needs_no_pyserial(
 def test_the_extras_check_imports_nothing_heavy():
     code = (
         "import sys\n"
-        "from flowtact.running.launch import load_plan\n"
-        "plan = load_plan('graphs/teleop_cnn.yaml')\n"
+        "from flowtact.running.launch import load_compiled\n"
+        "plan = load_compiled('graphs/teleop_cnn.yaml')\n"
         "print(sorted(plan.requires), 'torch' in sys.modules, 'cv2' in sys.modules)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300)

@@ -8,9 +8,10 @@ import sealblocks
 from runs import TEST_BLOCKS
 
 from flowtact.chunk import Chunk
+from flowtact.errors import NodeError
 from flowtact.graphfile.graph import load_graph
 from flowtact.running.compile import compile_graph
-from flowtact.runtime.inproc import InprocExecutor, NodeError
+from flowtact.runtime.inproc import InprocExecutor
 
 
 def run(text: str, ticks: int = 5) -> dict[str, list[Chunk]]:

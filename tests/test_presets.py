@@ -9,7 +9,8 @@ from flowtact.blocks.signal.weighted_sum import WeightedSum
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.presets import NEURON_PRESETS, TABLE_I
 from flowtact.catalog.presets import presets_for
-from flowtact.graphfile.graph import GraphErrors, load_graph
+from flowtact.errors import GraphFileError
+from flowtact.graphfile.graph import load_graph
 
 
 def test_the_touch_domain_publishes_its_presets_for_generic_blocks():
@@ -51,7 +52,7 @@ def test_a_graph_with_an_old_preset_spelling_points_at_the_value(tmp_path):
         "  w: {block: weighted_sum, params: {preset: SA1}}\n"
         "edges: [s.r -> f.r, s.ref -> f.ref, f.f -> w.x1]\n"
     )
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         load_graph(path)
     text = str(e.value)
     assert text.startswith(f"{path}:5:") and "did you mean 'touch.SA1'?" in text

@@ -13,9 +13,9 @@ import pytest
 import toyblocks
 from runs import ROOT, TEST_BLOCKS, alive, flowtact, wait_children, wait_for_line, wait_recorded, worker_of
 
-from flowtact.graphfile.graph import GraphErrors
+from flowtact.errors import GraphFileError
 from flowtact.recording.hdf5 import read_recording
-from flowtact.running.launch import load_plan, run_plan
+from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.runtime.placement import place
 from flowtact.testing import CHECKS
 
@@ -41,10 +41,12 @@ def _same(a: Path, b: Path) -> None:
 
 @pytest.mark.parametrize("graph", ["touch", "slip"])
 def test_fast_runs_are_bit_identical_in_process_and_across_processes(graph, tmp_path):
-    plan = load_plan(ROOT / "graphs" / f"{graph}.yaml")
+    plan = load_compiled(ROOT / "graphs" / f"{graph}.yaml")
     assert len(place(plan, fast=True).groups) == 3  # really spread over processes
-    run_plan(plan, fast=True, inproc=True, record=tmp_path / "inproc.h5")
-    summary = run_plan(load_plan(ROOT / "graphs" / f"{graph}.yaml"), fast=True, record=tmp_path / "procs.h5")
+    run_compiled(plan, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    summary = run_compiled(
+        load_compiled(ROOT / "graphs" / f"{graph}.yaml"), fast=True, record=tmp_path / "procs.h5"
+    )
     _same(tmp_path / "procs.h5", tmp_path / "inproc.h5")
     assert set(summary.processes) == {"sensing", "encoding", "afferents"}
     assert {"force.f", "sa1_drive.y", "fa1_drive.y"} <= set(summary.streams)
@@ -52,7 +54,7 @@ def test_fast_runs_are_bit_identical_in_process_and_across_processes(graph, tmp_
 
 
 def test_placement_follows_the_first_input_and_defaults_to_main():
-    plan = load_plan(ROOT / "graphs" / "touch.yaml")
+    plan = load_compiled(ROOT / "graphs" / "touch.yaml")
     p = place(plan, fast=True)
     assert p.group_of["force"] == "sensing"  # no process: runs with its producer
     assert p.group_of["sa1_stim"] == "afferents"
@@ -78,11 +80,11 @@ record: [gain.y, mean.y, camera.y]
 def test_a_multi_rate_graph_gives_the_same_outputs_in_real_time_and_fast(tmp_path):
     path = tmp_path / "multirate.yaml"
     path.write_text(MULTIRATE)
-    run_plan(
-        load_plan(path, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=False, record=tmp_path / "rt.h5"
+    run_compiled(
+        load_compiled(path, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=False, record=tmp_path / "rt.h5"
     )
-    run_plan(
-        load_plan(path, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=True, record=tmp_path / "fast.h5"
+    run_compiled(
+        load_compiled(path, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=True, record=tmp_path / "fast.h5"
     )
     _same(tmp_path / "rt.h5", tmp_path / "fast.h5")
     rec = read_recording(tmp_path / "fast.h5")
@@ -112,19 +114,22 @@ record: [g2.y, g3.y, g4.y]
 def test_one_output_fans_out_to_several_processes_and_recordings_keep_the_placement(tmp_path):
     path = tmp_path / "fanout.yaml"
     path.write_text(FANOUT)
-    summary = run_plan(
-        load_plan(path, allow_modules=TEST_BLOCKS), duration_s=2.0, fast=True, record=tmp_path / "procs.h5"
+    summary = run_compiled(
+        load_compiled(path, allow_modules=TEST_BLOCKS),
+        duration_s=2.0,
+        fast=True,
+        record=tmp_path / "procs.h5",
     )
     assert set(summary.streams) == {"src.y@b", "src.y@c"}
-    run_plan(
-        load_plan(path, allow_modules=TEST_BLOCKS),
+    run_compiled(
+        load_compiled(path, allow_modules=TEST_BLOCKS),
         duration_s=2.0,
         fast=True,
         inproc=True,
         record=tmp_path / "inproc.h5",
     )
     _same(tmp_path / "procs.h5", tmp_path / "inproc.h5")
-    again = load_plan(
+    again = load_compiled(
         tmp_path / "procs.h5", allow_modules=TEST_BLOCKS
     )  # re-created from the recording's provenance
     assert again.graph.deployment.processes["c"].restart == "on-failure"
@@ -132,7 +137,7 @@ def test_one_output_fans_out_to_several_processes_and_recordings_keep_the_placem
     assert [(e.policy, e.queue) for e in again.graph.edges] == [("block", 64), ("latest", 2), ("latest", 2)]
     assert (
         place(again, fast=False).group_of
-        == place(load_plan(path, allow_modules=TEST_BLOCKS), fast=False).group_of
+        == place(load_compiled(path, allow_modules=TEST_BLOCKS), fast=False).group_of
     )
 
 
@@ -143,7 +148,7 @@ def test_latest_policy_is_declared_per_edge_and_checked():
     )
     from flowtact.graphfile.graph import load_graph
 
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         load_graph("g.yaml", text=text, allow_modules=TEST_BLOCKS)
     assert "edge policy must be one of block, latest; got 'newest'" in str(e.value)
     assert "edge queue must be an integer from 1 to" in str(e.value)
@@ -354,7 +359,7 @@ def test_the_live_view_gets_rates_latencies_and_cpu_while_running(tmp_path):
     path = tmp_path / "deadline.yaml"
     path.write_text(DEADLINE.replace("BUDGET", "50ms"))
     live = Capture()
-    run_plan(load_plan(path, allow_modules=TEST_BLOCKS), duration_s=2.5, fast=False, live=live)
+    run_compiled(load_compiled(path, allow_modules=TEST_BLOCKS), duration_s=2.5, fast=False, live=live)
     # the last view taken while running (on a loaded machine a view may also come after the end)
     running = [
         s

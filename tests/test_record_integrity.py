@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.errors import FlowtactError
+from flowtact.errors import FlowtactError, RecordingCorrupted, RecordingError
 from flowtact.recording.hdf5 import Recorder, open_stream, open_verified, read_recording, stream_specs
-from flowtact.recording.integrity import CheckedFile, RecordingCorrupted, RecordingError
+from flowtact.recording.integrity import CheckedFile
 
 FORCE = StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz"))
 SPIKES = StreamSpec("int64", (), "1", None, events=True, n_units=24)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from flowtact.recording.hdf5 import read_recording
-from flowtact.running.launch import load_plan, run_plan
+from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.runtime.security import generate_keys
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -77,7 +77,7 @@ def test_a_remote_group_runs_over_curve_tcp_and_matches_in_process(tmp_path):
     worker.communicate(timeout=10)
     assert sup.returncode == 0, err
     assert worker.returncode == 0
-    run_plan(load_plan(graph), duration_s=2.0, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    run_compiled(load_compiled(graph), duration_s=2.0, fast=True, inproc=True, record=tmp_path / "inproc.h5")
     a, b = read_recording(tmp_path / "remote.h5"), read_recording(tmp_path / "inproc.h5")
     for name in b.streams:
         assert np.array_equal(a.streams[name].data, b.streams[name].data), name

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import zmq
 
+from flowtact.errors import SecurityError
 from flowtact.runtime.security import (
     ENV_VAR,
     PUBLIC_FILE,
@@ -19,7 +20,6 @@ from flowtact.runtime.security import (
     Authenticator,
     CurveKeys,
     HandshakeWatch,
-    SecurityError,
     generate_keys,
     is_loopback,
     load_keys,

@@ -10,7 +10,7 @@ import toyblocks
 from runs import TEST_BLOCKS
 
 from flowtact.recording.hdf5 import read_recording
-from flowtact.running.launch import load_plan, run_plan
+from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.testing import CHECKS, run_source
 
 LOOP = """
@@ -43,15 +43,15 @@ def test_a_feedback_loop_through_a_source_is_identical_in_and_across_processes(t
     graph = tmp_path / "loop.yaml"
     graph.write_text(LOOP)
     # a loop keeps the real-time tick in --fast runs (5 ms), so the command really comes back
-    a = run_plan(
-        load_plan(graph, allow_modules=TEST_BLOCKS),
+    a = run_compiled(
+        load_compiled(graph, allow_modules=TEST_BLOCKS),
         duration_s=1.0,
         fast=True,
         inproc=True,
         record=tmp_path / "a.h5",
     )
-    b = run_plan(
-        load_plan(graph, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=True, record=tmp_path / "b.h5"
+    b = run_compiled(
+        load_compiled(graph, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=True, record=tmp_path / "b.h5"
     )
     assert set(b.processes) == {"hardware", "control"}
     ra, rb = read_recording(tmp_path / "a.h5"), read_recording(tmp_path / "b.h5")
@@ -65,12 +65,13 @@ def test_a_feedback_loop_through_a_source_is_identical_in_and_across_processes(t
 
 
 def test_a_graph_may_set_its_tick_and_a_bad_one_is_refused(tmp_path: Path):
-    from flowtact.graphfile.graph import GraphErrors, load_graph
+    from flowtact.errors import GraphFileError
+    from flowtact.graphfile.graph import load_graph
 
     ok = tmp_path / "ok.yaml"
     ok.write_text(LOOP + "tick_s: 0.002\n")
     assert load_graph(str(ok), allow_modules=TEST_BLOCKS).tick_s == 0.002
     bad = tmp_path / "bad.yaml"
     bad.write_text(LOOP + "tick_s: -1\n")
-    with pytest.raises(GraphErrors, match="'tick_s' must be a number of seconds > 0"):
+    with pytest.raises(GraphFileError, match="'tick_s' must be a number of seconds > 0"):
         load_graph(str(bad), allow_modules=TEST_BLOCKS)

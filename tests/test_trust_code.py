@@ -18,7 +18,8 @@ import pytest
 from runs import TESTS
 
 from flowtact.catalog.blocks import module_allowed
-from flowtact.graphfile.graph import GraphErrors, load_graph
+from flowtact.errors import GraphFileError
+from flowtact.graphfile.graph import load_graph
 from flowtact.running.python_child import python_command
 
 MARKING = """
@@ -113,7 +114,7 @@ def test_a_stored_replay_stand_in_does_not_smuggle_a_module_in(evil, monkeypatch
     graph, mark = evil
     monkeypatch.syspath_prepend(str(graph.parent / "mods"))
     text = 'nodes:\n  src: {block: "flowtact.blocks.signal.replay_ports:evilblocks:Ramp", params: {path: x.csv}}\n'
-    with pytest.raises(GraphErrors, match="--allow-module evilblocks"):
+    with pytest.raises(GraphFileError, match="--allow-module evilblocks"):
         load_graph("rec.h5#graph", text=text)
     assert "evilblocks" not in sys.modules and not mark.exists()
 
@@ -121,7 +122,7 @@ def test_a_stored_replay_stand_in_does_not_smuggle_a_module_in(evil, monkeypatch
 def test_the_python_api_takes_allow_modules(evil, monkeypatch):
     graph, mark = evil
     monkeypatch.syspath_prepend(str(graph.parent / "mods"))
-    with pytest.raises(GraphErrors) as e:
+    with pytest.raises(GraphFileError) as e:
         load_graph(graph)
     gain = REFUSAL.replace("'src'", "'gain'").replace(":Ramp", ":Scale")
     assert str(e.value).splitlines() == [f"{graph}:3:17: {REFUSAL}", f"{graph}:4:17: {gain}"]
@@ -198,7 +199,7 @@ def test_a_sweep_refuses_the_module_before_any_run(evil, monkeypatch):
 
     graph, mark = evil
     monkeypatch.syspath_prepend(str(graph.parent / "mods"))
-    with pytest.raises(GraphErrors, match="--allow-module evilblocks"):
+    with pytest.raises(GraphFileError, match="--allow-module evilblocks"):
         flowtact.sweep(graph, grid={"gain.gain": [1.0, 2.0]}, workers=1)
     assert not mark.exists()
 
@@ -255,7 +256,8 @@ def test_a_worker_on_another_host_imports_only_what_its_own_command_line_allows(
 
 
 def test_modules_of_installed_block_packages_need_no_flag_but_never_a_main():
-    from flowtact.catalog.blocks import ModuleNotAllowedError, load_block
+    from flowtact.catalog.blocks import load_block
+    from flowtact.errors import ModuleNotAllowedError
 
     # what --replay writes into a graph (and so into recordings): loads without a flag
     stand_in = load_block("flowtact.blocks.signal.replay_ports:aunp_sensor")

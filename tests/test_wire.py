@@ -9,7 +9,8 @@ import pytest
 import zmq
 
 from flowtact.chunk import Chunk
-from flowtact.runtime.wire import COPY_THRESHOLD, END, WireError, recv_message, send_message
+from flowtact.errors import WireError
+from flowtact.runtime.wire import COPY_THRESHOLD, END, recv_message, send_message
 
 
 @pytest.fixture

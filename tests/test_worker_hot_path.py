@@ -9,10 +9,10 @@ import pytest
 from runs import TEST_BLOCKS, flowtact
 
 from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.errors import WorkerFailed
 from flowtact.recording.hdf5 import read_recording
-from flowtact.running.launch import load_plan, run_plan
+from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.runtime.placement import spec_to_wire
-from flowtact.runtime.supervisor import WorkerFailed
 from flowtact.runtime.worker import FOREVER, MERGE_MAX_BYTES, Worker, _Inbound
 from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
 
@@ -86,18 +86,21 @@ def _same(a, b) -> None:
 def _fast_and_inproc(tmp_path, text: str):
     path = tmp_path / "g.yaml"
     path.write_text(text)
-    summary = run_plan(
-        load_plan(path, allow_modules=TEST_BLOCKS), duration_s=1.0, fast=True, record=tmp_path / "procs.h5"
+    summary = run_compiled(
+        load_compiled(path, allow_modules=TEST_BLOCKS),
+        duration_s=1.0,
+        fast=True,
+        record=tmp_path / "procs.h5",
     )
-    run_plan(
-        load_plan(path, allow_modules=TEST_BLOCKS),
+    run_compiled(
+        load_compiled(path, allow_modules=TEST_BLOCKS),
         duration_s=1.0,
         fast=True,
         inproc=True,
         record=tmp_path / "inproc.h5",
     )
     _same(tmp_path / "procs.h5", tmp_path / "inproc.h5")
-    return summary, load_plan(path, allow_modules=TEST_BLOCKS)
+    return summary, load_compiled(path, allow_modules=TEST_BLOCKS)
 
 
 def test_a_fast_consumer_behind_steps_once_over_the_ticks_it_holds_and_stays_bit_identical(tmp_path):
@@ -130,8 +133,8 @@ def test_loops_and_sources_with_inputs_are_not_mergeable(tmp_path):
         "  g: {block: 'toyblocks:Scale', process: b, params: {gain: 0.5}}\n"
         "edges:\n  - p.y -> g.x\n  - g.y -> p.u\nrecord: [p.y]\n"
     )
-    assert not ticks_mergeable(load_plan(loop, allow_modules=TEST_BLOCKS))
-    assert not ticks_mergeable(load_plan(plant, allow_modules=TEST_BLOCKS))
+    assert not ticks_mergeable(load_compiled(loop, allow_modules=TEST_BLOCKS))
+    assert not ticks_mergeable(load_compiled(plant, allow_modules=TEST_BLOCKS))
 
 
 def test_blocks_not_known_to_be_chunking_invariant_are_not_merged(tmp_path):
@@ -140,14 +143,14 @@ def test_blocks_not_known_to_be_chunking_invariant_are_not_merged(tmp_path):
     undeclared.write_text(
         CHAIN.replace('"hotpathblocks:SlowScale", process: c', '"toyblocks:Scale", process: c')
     )
-    assert not ticks_mergeable(load_plan(undeclared, allow_modules=TEST_BLOCKS))
+    assert not ticks_mergeable(load_compiled(undeclared, allow_modules=TEST_BLOCKS))
     registered = tmp_path / "registered.yaml"
     registered.write_text(
         "name: reg\nnodes:\n  src: {block: 'toyblocks:Ramp', process: a}\n"
         "  f: {block: savgol, process: b, params: {window: 5, order: 2}}\n"
         "edges:\n  - src.y -> f.x\nrecord: [f.y]\n"
     )
-    assert ticks_mergeable(load_plan(registered, allow_modules=TEST_BLOCKS))
+    assert ticks_mergeable(load_compiled(registered, allow_modules=TEST_BLOCKS))
 
 
 READ_ONLY = """
@@ -174,7 +177,7 @@ def test_a_block_in_a_worker_cannot_write_what_it_receives(tmp_path, source, whe
     path = tmp_path / "g.yaml"
     path.write_text(READ_ONLY.format(source=source, where=where))
     with pytest.raises(WorkerFailed, match=r"node 'w' \(writes\).*read-only"):
-        run_plan(load_plan(path, allow_modules=TEST_BLOCKS), duration_s=0.05, fast=True)
+        run_compiled(load_compiled(path, allow_modules=TEST_BLOCKS), duration_s=0.05, fast=True)
 
 
 def _inbound(spec: StreamSpec, messages: int, samples: int) -> _Inbound:

@@ -88,8 +88,9 @@ def graph_text(
 ) -> tuple[Path, str]:
     """The graph file's path and its YAML with the seed, the scan's text and speed, node
     parameters (node → {param: value}), the tick and the recorded streams replaced."""
+    from flowtact.errors import SafeYamlError
     from flowtact.graphfile.graph import resolve_graph_path
-    from flowtact.graphfile.safe_yaml import SafeYamlError, load_value, read_graph_text
+    from flowtact.graphfile.safe_yaml import load_value, read_graph_text
     from flowtact.inputs.safe_text import shown
 
     path = resolve_graph_path(graph)

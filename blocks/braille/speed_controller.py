@@ -10,8 +10,9 @@ from typing import Literal
 
 import numpy as np
 
-from flowtact.block import Block, Example, Port, SpecError
+from flowtact.block import Block, Example, Port
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import SpecError
 from flowtact.params import Config, param
 
 __all__ = ["SpeedController", "SpeedControllerConfig", "confidence"]

@@ -11,7 +11,7 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError
+from flowtact.errors import BadDataError
 from flowtact.testing import run_source
 from flowtact.verify.stress import Outcome, StressCase
 

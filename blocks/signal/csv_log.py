@@ -26,8 +26,8 @@ from typing import BinaryIO
 import numpy as np
 
 from flowtact.blocks.signal.replay_limits import MAX_COLUMNS, MAX_LINE_BYTES, MAX_TEXT_BYTES, listing
-from flowtact.errors import FlowtactError
-from flowtact.inputs.bounded_files import FileRefused, open_regular, refusal
+from flowtact.errors import FileRefused, FlowtactError
+from flowtact.inputs.bounded_files import open_regular, refusal
 from flowtact.inputs.limits import format_bytes
 
 __all__ = ["CsvError", "CsvLog", "read_csv_log", "row_place"]

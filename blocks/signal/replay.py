@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.block import Example, Port, Source, SpecError, example_folder
+from flowtact.block import Example, Port, Source, example_folder
 from flowtact.blocks.signal.csv_log import CsvError, CsvLog, display, read_csv_log, row_place
 from flowtact.blocks.signal.replay_limits import (
     MAX_CHUNK_BYTES,
@@ -28,14 +28,8 @@ from flowtact.blocks.signal.replay_limits import (
     time_problem,
 )
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.inputs.bounded_files import (
-    FileRefused,
-    NpyHeader,
-    NpzArchive,
-    check_hdf5_signature,
-    open_npz,
-    refusal,
-)
+from flowtact.errors import FileRefused, SpecError
+from flowtact.inputs.bounded_files import NpyHeader, NpzArchive, check_hdf5_signature, open_npz, refusal
 from flowtact.inputs.limits import MAX_TICK_S, format_bytes
 from flowtact.inputs.safe_text import shown
 from flowtact.params import Config, did_you_mean, param

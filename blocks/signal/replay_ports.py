@@ -16,15 +16,16 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from flowtact.block import Block, Example, Source, SpecError, example_folder
+from flowtact.block import Block, Example, Source, example_folder
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
 from flowtact.blocks.signal.replay import SUFFIXES, Replay, h5_streams
 from flowtact.blocks.signal.replay_limits import MAX_STREAMS, listing
-from flowtact.catalog.blocks import UnknownBlockError, load_block
+from flowtact.catalog.blocks import load_block
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import ConfigError, FileRefused, SpecError, UnknownBlockError
 from flowtact.graphfile.replay_spec import parse_port_map
-from flowtact.inputs.bounded_files import FileRefused, open_npz, refusal
-from flowtact.params import Config, ConfigError, did_you_mean, param
+from flowtact.inputs.bounded_files import open_npz, refusal
+from flowtact.params import Config, did_you_mean, param
 
 __all__ = ["ReplayPorts", "ReplayPortsConfig", "stand_in_class"]
 

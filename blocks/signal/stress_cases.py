@@ -13,7 +13,7 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError
+from flowtact.errors import BadDataError
 from flowtact.testing import run_offline
 from flowtact.verify.stress import EPS, Outcome, StressCase
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flowtact.block import Block, Example, Port, SpecError
+from flowtact.block import Block, Example, Port
 from flowtact.blocks.spiking.nb_model import (
     ModelError,
     NaiveBayesModel,
@@ -21,6 +21,7 @@ from flowtact.blocks.spiking.nb_model import (
 )
 from flowtact.blocks.spiking.window_features import window_features
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import SpecError
 from flowtact.params import Config, param
 
 __all__ = ["EXAMPLE_MODEL", "NaiveBayes", "NaiveBayesConfig", "example_model_path"]

@@ -32,8 +32,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flowtact.errors import FlowtactError
-from flowtact.inputs.bounded_files import FileRefused, read_npz_bounded
+from flowtact.errors import FileRefused, FlowtactError
+from flowtact.inputs.bounded_files import read_npz_bounded
 from flowtact.inputs.safe_text import shown
 
 __all__ = [

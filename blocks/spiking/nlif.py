@@ -10,15 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from flowtact.block import (
-    BadDataConfig,
-    Block,
-    Example,
-    Port,
-    SpecError,
-    nonfinite_counter_docs,
-    screen_nonfinite,
-)
+from flowtact.block import BadDataConfig, Block, Example, Port, nonfinite_counter_docs, screen_nonfinite
 from flowtact.blocks.spiking._lif_kernels import (
     NOISE_FILL,
     NOISE_INTERNAL,
@@ -32,6 +24,7 @@ from flowtact.blocks.spiking._lif_kernels import (
 )
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import SpecError
 from flowtact.finite import all_finite
 from flowtact.inputs.limits import NOMINAL_RATE_HZ
 from flowtact.params import param

@@ -13,16 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from flowtact.block import (
-    BadDataConfig,
-    Block,
-    Example,
-    Port,
-    SpecError,
-    nonfinite_counter_docs,
-    screen_nonfinite,
-)
+from flowtact.block import BadDataConfig, Block, Example, Port, nonfinite_counter_docs, screen_nonfinite
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import SpecError
 from flowtact.params import param
 
 __all__ = ["FLAGS", "Pulses", "PulsesConfig", "pulse_kernel", "pulse_kernel_py"]

@@ -12,8 +12,8 @@ from functools import partial
 
 import numpy as np
 
-from flowtact.block import BadDataError, SpecError
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import BadDataError, SpecError
 from flowtact.testing import run_offline
 from flowtact.verify.stress import EPS, Outcome, StressCase
 

@@ -19,17 +19,10 @@ from typing import Any, Literal
 import numpy as np
 from numba import njit
 
-from flowtact.block import (
-    BadDataConfig,
-    Example,
-    Port,
-    Source,
-    SpecError,
-    nonfinite_counter_docs,
-    screen_nonfinite,
-)
+from flowtact.block import BadDataConfig, Example, Port, Source, nonfinite_counter_docs, screen_nonfinite
 from flowtact.blocks.signal.shapes import raised_cosine
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import SpecError
 from flowtact.inputs.limits import MAX_TICK_S
 from flowtact.params import param
 

@@ -91,7 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     """A child: run one part of a suite and write its figures' raw samples as JSON."""
     from flowtact.benchmark.registry import Unavailable, suites
     from flowtact.benchmark.runner import pin_threads
-    from flowtact.benchmark.suite import Context, SuiteSkipped
+    from flowtact.benchmark.suite import Context
+    from flowtact.errors import SuiteSkipped
 
     ap = argparse.ArgumentParser(prog="python -m flowtact.benchmark.process_rounds")
     ap.add_argument("suite", help="a registered suite's name, or module:attribute of a Suite")

@@ -18,7 +18,8 @@ from flowtact.benchmark.plots import draw_tradeoff, save_plot
 from flowtact.benchmark.process_rounds import measure_children
 from flowtact.benchmark.progress import Progress
 from flowtact.benchmark.registry import Unavailable, in_process_only, suites
-from flowtact.benchmark.suite import Context, Suite, SuiteSkipped
+from flowtact.benchmark.suite import Context, Suite
+from flowtact.errors import SuiteSkipped
 
 __all__ = ["command_line", "list_suites", "run_suites"]
 

@@ -20,12 +20,10 @@ from functools import cache
 from importlib.metadata import entry_points
 
 from flowtact.block import Block
-from flowtact.errors import FlowtactError
+from flowtact.errors import ModuleNotAllowedError, UnknownBlockError
 from flowtact.params import did_you_mean
 
 __all__ = [
-    "ModuleNotAllowedError",
-    "UnknownBlockError",
     "allowing",
     "block_names",
     "check_module_name",
@@ -40,14 +38,6 @@ MODULE_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*\Z")
 _ALLOWED: ContextVar[frozenset[str]] = ContextVar("flowtact_allowed_modules", default=frozenset())
 """The allow-list of the :func:`load_block` call in progress, so a block looked up while its module
 is imported (a replay stand-in for an allowed ``module:Class``) keeps the caller's permission."""
-
-
-class UnknownBlockError(FlowtactError, LookupError):
-    """No block of that name is registered (the message suggests the closest one)."""
-
-
-class ModuleNotAllowedError(UnknownBlockError):
-    """A ``module:Class`` block whose module the user did not allow: it was not imported."""
 
 
 @cache

@@ -14,7 +14,8 @@ from functools import cache
 from importlib.metadata import entry_points
 from typing import Any
 
-from flowtact.params import ConfigError, did_you_mean
+from flowtact.errors import ConfigError
+from flowtact.params import did_you_mean
 
 __all__ = ["GROUP", "apply_preset", "presets_for"]
 

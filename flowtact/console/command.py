@@ -73,9 +73,9 @@ def exit_status(e: BaseException) -> int:
 
 def _graph_errors(e: BaseException) -> int | None:
     """Print a graph's located problems (``file:line:col: message`` each) and their count."""
-    from flowtact.graphfile.graph import GraphErrors
+    from flowtact.errors import GraphFileError
 
-    if not isinstance(e, GraphErrors):
+    if not isinstance(e, GraphFileError):
         return None
     for line in str(e).splitlines():
         print(shown(line), file=sys.stderr)

@@ -2,8 +2,8 @@
 
 Without it the line ends with a hint that ``--debug`` shows the traceback. A block that failed in a
 worker process has its traceback formatted there and sent with the failure report
-(:attr:`~flowtact.runtime.supervisor.WorkerFailed.traceback`); in-process, a
-:class:`~flowtact.runtime.inproc.NodeError` keeps the block's exception as its ``cause``.
+(:attr:`~flowtact.errors.WorkerFailed.traceback`); in-process, a
+:class:`~flowtact.errors.NodeError` keeps the block's exception as its ``cause``.
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from flowtact.graphfile.located import GraphError, Loc, Located
+from flowtact.graphfile.located import GraphProblem, Loc, Located
 from flowtact.inputs.limits import host_problem
 from flowtact.params import did_you_mean
 
@@ -165,13 +165,15 @@ def _parse_processes(doc: dict[str, Any], y: Located, node_docs: dict[str, Any])
     }
     raw = doc.get("processes") or {}
     if not isinstance(raw, dict):
-        y.errors.append(GraphError(y.loc("processes"), "'processes' must map a process name to its settings"))
+        y.errors.append(
+            GraphProblem(y.loc("processes"), "'processes' must map a process name to its settings")
+        )
         raw = {}
     out: dict[str, ProcessDef] = {}
     for name, pdoc in raw.items():
         if name not in used:
             y.errors.append(
-                GraphError(
+                GraphProblem(
                     y.key_loc("processes", name),
                     f"process '{name}' has no nodes{did_you_mean(str(name), [u for u in used if u])}",
                     "place nodes in it with `process: NAME` on each node",
@@ -188,13 +190,13 @@ def _parse_process(name: Any, pdoc: Any, y: Located) -> ProcessDef | None:
     """One group's supervision settings (defaults for what is missing or malformed); None if not a mapping."""
     where = f"process '{name}'"
     if not isinstance(pdoc, dict):
-        y.errors.append(GraphError(y.loc("processes", name), f"{where} must be a mapping"))
+        y.errors.append(GraphProblem(y.loc("processes", name), f"{where} must be a mapping"))
         return None
     y.errors.extend(y.unknown_keys(pdoc, PROCESS_KEYS, where, "processes", name))
     restart = pdoc.get("restart", "never")
     if restart not in RESTARTS:
         y.errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("processes", name, "restart"),
                 f"{where}: restart must be one of {', '.join(RESTARTS)}; got {restart!r}",
             )
@@ -203,7 +205,7 @@ def _parse_process(name: Any, pdoc: Any, y: Located) -> ProcessDef | None:
     max_restarts = pdoc.get("max_restarts", 3)
     if isinstance(max_restarts, bool) or not isinstance(max_restarts, int) or max_restarts < 0:
         y.errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("processes", name, "max_restarts"), f"{where}: max_restarts must be an integer >= 0"
             )
         )
@@ -211,7 +213,7 @@ def _parse_process(name: Any, pdoc: Any, y: Located) -> ProcessDef | None:
     host = pdoc.get("host")
     problem = host_problem(host) if host is not None else None
     if problem:
-        y.errors.append(GraphError(y.loc("processes", name, "host"), f"{where}: host {problem}"))
+        y.errors.append(GraphProblem(y.loc("processes", name, "host"), f"{where}: host {problem}"))
         host = None
     windows = _process_windows(name, pdoc, y)
     return ProcessDef(str(name), restart, max_restarts, host, **windows)  # type: ignore[arg-type]
@@ -226,7 +228,7 @@ def _process_windows(name: Any, pdoc: dict[str, Any], y: Located) -> dict[str, f
         seconds = parse_duration(pdoc[key])
         if seconds is None or not math.isfinite(seconds):
             y.errors.append(
-                GraphError(
+                GraphProblem(
                     y.loc("processes", name, key),
                     f"process '{name}': {key} must be a positive duration such as 1 or 500ms; got {pdoc[key]!r}",
                 )
@@ -240,17 +242,19 @@ def _parse_network(doc: dict[str, Any], y: Located) -> Network:
     """``network:`` (listen address, port, CURVE keys directory), defaults for what is missing or bad."""
     net = doc.get("network") or {}
     if not isinstance(net, dict):
-        y.errors.append(GraphError(y.loc("network"), "'network' must be a mapping (listen, port, keys)"))
+        y.errors.append(GraphProblem(y.loc("network"), "'network' must be a mapping (listen, port, keys)"))
         net = {}
     y.errors.extend(y.unknown_keys(net, NETWORK_KEYS, "network", "network"))
     port = net.get("port", 5550)
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port < 65536:
-        y.errors.append(GraphError(y.loc("network", "port"), f"network: port must be 0..65535; got {port!r}"))
+        y.errors.append(
+            GraphProblem(y.loc("network", "port"), f"network: port must be 0..65535; got {port!r}")
+        )
         port = 5550
     listen = net.get("listen", "127.0.0.1")
     problem = host_problem(listen, wildcard=True)
     if problem:
-        y.errors.append(GraphError(y.loc("network", "listen"), f"network: listen {problem}"))
+        y.errors.append(GraphProblem(y.loc("network", "listen"), f"network: listen {problem}"))
         listen = "127.0.0.1"
     keys = net.get("keys")
     return Network(str(listen), port, str(keys) if keys is not None else None)
@@ -260,7 +264,7 @@ def _parse_deadlines(doc: dict[str, Any], y: Located, node_docs: dict[str, Any])
     """The valid entries of ``deadlines:``."""
     raw = doc.get("deadlines") or []
     if not isinstance(raw, list):
-        y.errors.append(GraphError(y.loc("deadlines"), "'deadlines' must be a list of {from, to, budget}"))
+        y.errors.append(GraphProblem(y.loc("deadlines"), "'deadlines' must be a list of {from, to, budget}"))
         raw = []
     deadlines = (_parse_deadline(i, d, y, node_docs) for i, d in enumerate(raw))
     return [d for d in deadlines if d is not None]
@@ -270,7 +274,9 @@ def _parse_deadline(i: int, d: Any, y: Located, node_docs: dict[str, Any]) -> De
     """Deadline ``i``: two known nodes and a positive budget, or None (the problems go to ``y.errors``)."""
     loc = y.loc("deadlines", i)
     if not isinstance(d, dict):
-        y.errors.append(GraphError(loc, "a deadline is a mapping like {from: sensor, to: stim, budget: 4ms}"))
+        y.errors.append(
+            GraphProblem(loc, "a deadline is a mapping like {from: sensor, to: stim, budget: 4ms}")
+        )
         return None
     y.errors.extend(y.unknown_keys(d, DEADLINE_KEYS, "deadline", "deadlines", i))
     ends = []
@@ -278,7 +284,7 @@ def _parse_deadline(i: int, d: Any, y: Located, node_docs: dict[str, Any]) -> De
         node = d.get(key)
         if node not in node_docs:
             y.errors.append(
-                GraphError(
+                GraphProblem(
                     y.loc("deadlines", i, key),
                     f"deadline '{key}': unknown node {node!r}{did_you_mean(str(node), map(str, node_docs))}",
                 )
@@ -287,7 +293,7 @@ def _parse_deadline(i: int, d: Any, y: Located, node_docs: dict[str, Any]) -> De
     budget = parse_duration(d.get("budget"))
     if budget is None:
         y.errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("deadlines", i, "budget"),
                 f"deadline budget must be a positive duration such as 4ms or 500us; got {d.get('budget')!r}",
             )
@@ -297,7 +303,7 @@ def _parse_deadline(i: int, d: Any, y: Located, node_docs: dict[str, Any]) -> De
     return None
 
 
-def deadline_path_errors(deadlines: Iterable[Deadline], edges: Iterable[Any]) -> list[GraphError]:
+def deadline_path_errors(deadlines: Iterable[Deadline], edges: Iterable[Any]) -> list[GraphProblem]:
     """An error at each deadline whose ``to`` node no path of ``edges`` (``.src`` -> ``.dst``)
     leads to from its ``from`` node: its latency could never be measured."""
     after: dict[str, set[str]] = {}
@@ -313,7 +319,7 @@ def deadline_path_errors(deadlines: Iterable[Deadline], edges: Iterable[Any]) ->
                     todo.append(nxt)
         if d.dst not in reached:
             errors.append(
-                GraphError(
+                GraphProblem(
                     d.loc or Loc("?"),
                     f"deadline {d.src} -> {d.dst}: no path of edges leads from '{d.src}' to '{d.dst}'",
                     "a deadline times data along a path; pick nodes that one feeds the other",

@@ -14,7 +14,7 @@ import re
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
-from flowtact.graphfile.located import GraphError
+from flowtact.graphfile.located import GraphProblem
 
 if TYPE_CHECKING:
     from flowtact.graphfile.graph import Graph
@@ -68,7 +68,7 @@ def install_hint(block_module: str, module: str, extra: str) -> tuple[str, str]:
     return (", ".join(packages) or f"module '{module}'"), f'pip install "{dist}[{extra}]"'
 
 
-def missing_extras(graph: Graph, active: Iterable[str]) -> list[GraphError]:
+def missing_extras(graph: Graph, active: Iterable[str]) -> list[GraphProblem]:
     """An error at each active node whose block needs a module that is not installed."""
     errors = []
     for name in active:
@@ -77,5 +77,5 @@ def missing_extras(graph: Graph, active: Iterable[str]) -> list[GraphError]:
             if module_available(module):
                 continue
             what, how = install_hint(node.cls.__module__, module, extra)
-            errors.append(GraphError(node.loc, f"node '{name}': block {node.cls.name} needs {what}: {how}"))
+            errors.append(GraphProblem(node.loc, f"node '{name}': block {node.cls.name} needs {what}: {how}"))
     return errors

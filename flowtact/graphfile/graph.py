@@ -19,7 +19,14 @@ from typing import Any
 import yaml
 
 from flowtact.block import Block
-from flowtact.catalog.blocks import ModuleNotAllowedError, UnknownBlockError, allowing, load_block
+from flowtact.catalog.blocks import allowing, load_block
+from flowtact.errors import (
+    ConfigError,
+    GraphFileError,
+    ModuleNotAllowedError,
+    SafeYamlError,
+    UnknownBlockError,
+)
 from flowtact.graphfile.deployment import (
     DEFAULT_QUEUE,
     POLICIES,
@@ -27,10 +34,10 @@ from flowtact.graphfile.deployment import (
     deadline_path_errors,
     parse_deployment,
 )
-from flowtact.graphfile.located import GraphError, GraphErrors, Loc, Located
+from flowtact.graphfile.located import GraphProblem, Loc, Located
 from flowtact.graphfile.param_paths import graph_folder, path_fields, resolve_path, resolve_value
 from flowtact.graphfile.replay_spec import parse_port_map, split_replay
-from flowtact.graphfile.safe_yaml import SafeYamlError, compose, load_value, read_graph_text
+from flowtact.graphfile.safe_yaml import compose, load_value, read_graph_text
 from flowtact.inputs.limits import (
     MAX_DURATION_S,
     MAX_QUEUE,
@@ -40,13 +47,11 @@ from flowtact.inputs.limits import (
     positive_seconds,
     run_ticks_problem,
 )
-from flowtact.params import ConfigError, did_you_mean
+from flowtact.params import did_you_mean
 
 __all__ = [
     "Edge",
     "Graph",
-    "GraphError",
-    "GraphErrors",
     "Loc",
     "NodeDef",
     "load_graph",
@@ -151,7 +156,7 @@ def resolve_graph_path(name: str | Path) -> Path:
     return Path(str(packaged)) if packaged.is_file() else p
 
 
-def missing_graph_error(path: str) -> GraphError:
+def missing_graph_error(path: str) -> GraphProblem:
     """A graph file that is not there, with the closest graph file beside it or shipped graph name
     (``flowtact run touhc`` -> did you mean 'touch'?) and the shipped graphs as the hint."""
     import difflib
@@ -168,7 +173,7 @@ def missing_graph_error(path: str) -> GraphError:
     guess = ""
     if close:
         guess = f" (did you mean '{close[0] if bare else p.parent / close[0]}'?)"
-    return GraphError(
+    return GraphProblem(
         Loc(path),
         f"no such graph file{guess}",
         f"shipped graphs, run by name (flowtact run touch): {', '.join(shipped)}",
@@ -209,7 +214,7 @@ def _resolved(
     bases: Mapping[str, Path],
     locs: Mapping[str, Loc],
     node: str,
-    errors: list[GraphError],
+    errors: list[GraphProblem],
 ) -> dict[str, Any]:
     """``params`` with path fields resolved (:mod:`flowtact.graphfile.param_paths`), each against its own
     base; a name that cannot be resolved (a bad ``pkg:``) is an error at its place, kept as written."""
@@ -219,7 +224,7 @@ def _resolved(
         try:
             out[k] = resolve_value(params[k], bases[k])
         except ValueError as e:
-            errors.append(GraphError(locs[k], f"node '{node}': '{k}': {e}"))
+            errors.append(GraphProblem(locs[k], f"node '{node}': '{k}': {e}"))
     return out
 
 
@@ -231,7 +236,7 @@ def load_graph(
     text: str | None = None,
     allow_modules: Iterable[str] = (),
 ) -> Graph:
-    """Load and validate a graph file; raise :class:`GraphErrors` listing every problem.
+    """Load and validate a graph file; raise :class:`~flowtact.errors.GraphFileError` listing every problem.
 
     A ``module:Class`` block is imported only if its module is in ``allow_modules`` (module names
     or package prefixes: ``mypkg`` allows ``mypkg.blocks``; :mod:`flowtact.catalog.blocks`); otherwise it
@@ -252,21 +257,23 @@ def load_graph(
             text = read_graph_text(source)
         root = compose(text)
     except SafeYamlError as e:
-        raise GraphErrors([GraphError(Loc(path, e.line, e.col), e.message, e.hint)]) from None
+        raise GraphFileError([GraphProblem(Loc(path, e.line, e.col), e.message, e.hint)]) from None
     except FileNotFoundError:
-        raise GraphErrors([missing_graph_error(path)]) from None
+        raise GraphFileError([missing_graph_error(path)]) from None
     except OSError as e:
-        raise GraphErrors([GraphError(Loc(path), f"cannot read graph file: {e.strerror or e}")]) from None
+        raise GraphFileError(
+            [GraphProblem(Loc(path), f"cannot read graph file: {e.strerror or e}")]
+        ) from None
     if root is None:
-        raise GraphErrors(
-            [GraphError(Loc(path), "the graph file is empty", "a graph needs at least 'nodes:'")]
+        raise GraphFileError(
+            [GraphProblem(Loc(path), "the graph file is empty", "a graph needs at least 'nodes:'")]
         )
     try:
         doc = located.convert(root)
     except yaml.constructor.ConstructorError as e:
         mark = e.problem_mark
         loc = Loc(path, mark.line + 1, mark.column + 1) if mark else Loc(path)
-        raise GraphErrors([GraphError(loc, f"unsupported YAML value: {e.problem}")]) from None
+        raise GraphFileError([GraphProblem(loc, f"unsupported YAML value: {e.problem}")]) from None
     allow = tuple(dict.fromkeys(allow_modules))
     with allowing(allow):
         graph = _build(doc, located, path, text, list(overrides), dict(replays or {}))
@@ -275,7 +282,7 @@ def load_graph(
 
 
 def _apply_replays(
-    doc: dict[str, Any], y: Located, replays: Mapping[str, str], errors: list[GraphError]
+    doc: dict[str, Any], y: Located, replays: Mapping[str, str], errors: list[GraphProblem]
 ) -> None:
     """Swap each replayed node for a replay of a file on the node's own output ports, in place.
 
@@ -292,12 +299,12 @@ def _apply_replays(
         ndoc = nodes.get(name) if isinstance(nodes, dict) else None
         if not isinstance(ndoc, dict):
             known = map(str, nodes if isinstance(nodes, dict) else {})
-            errors.append(GraphError(loc, f"{where}: unknown node '{name}'{did_you_mean(name, known)}"))
+            errors.append(GraphProblem(loc, f"{where}: unknown node '{name}'{did_you_mean(name, known)}"))
             continue
         try:
             cls = load_block(str(ndoc.get("block")))
         except UnknownBlockError:
-            errors.append(GraphError(loc, f"{where}: node '{name}' has no valid block to stand in for"))
+            errors.append(GraphProblem(loc, f"{where}: node '{name}' has no valid block to stand in for"))
             continue
         path, mapping = split_replay(text)
         head, colon, tail = path.rpartition(":")
@@ -307,7 +314,7 @@ def _apply_replays(
             ports = parse_port_map(mapping)
         except ValueError as e:
             errors.append(
-                GraphError(loc, f"{where}: {e}", "map ports as FILE:PORT=COLUMN[,COLUMN...];PORT=...")
+                GraphProblem(loc, f"{where}: {e}", "map ports as FILE:PORT=COLUMN[,COLUMN...];PORT=...")
             )
             continue
         bad = [p for p in ports if p not in cls.outputs]
@@ -318,13 +325,13 @@ def _apply_replays(
                 else f"'{bad[0]}' is not an output of {cls.name}{did_you_mean(bad[0], cls.outputs)}"
             )
             errors.append(
-                GraphError(loc, f"{where}: {why}", f"outputs of {cls.name}: {', '.join(cls.outputs)}")
+                GraphProblem(loc, f"{where}: {why}", f"outputs of {cls.name}: {', '.join(cls.outputs)}")
             )
             continue
         try:
             resolved = resolve_path(path, Path.cwd())
         except ValueError as e:
-            errors.append(GraphError(loc, f"{where}: {e}"))
+            errors.append(GraphProblem(loc, f"{where}: {e}"))
             continue
         planned[name] = (loc, str(ndoc["block"]), resolved, mapping)
     if not planned:
@@ -337,7 +344,9 @@ def _apply_replays(
         need = sorted(p for n, p in consumed if n == name)
         if not need and name not in recorded:
             errors.append(
-                GraphError(loc, f"--replay {name}={replays[name]}: nothing consumes or records node '{name}'")
+                GraphProblem(
+                    loc, f"--replay {name}={replays[name]}: nothing consumes or records node '{name}'"
+                )
             )
             continue
         old = nodes[name]
@@ -377,27 +386,33 @@ def _build(
 ) -> Graph:
     errors = y.errors
     if not isinstance(doc, dict):
-        raise GraphErrors([GraphError(y.loc(), "a graph file must be a mapping with 'nodes:' and 'edges:'")])
+        raise GraphFileError(
+            [GraphProblem(y.loc(), "a graph file must be a mapping with 'nodes:' and 'edges:'")]
+        )
     if replays:
         _apply_replays(doc, y, replays, errors)
     for key in doc:
         if key not in TOP_KEYS:
             errors.append(
-                GraphError(y.key_loc(key), f"unknown top-level key '{key}'{did_you_mean(str(key), TOP_KEYS)}")
+                GraphProblem(
+                    y.key_loc(key), f"unknown top-level key '{key}'{did_you_mean(str(key), TOP_KEYS)}"
+                )
             )
     seed, duration, tick = _run_settings(doc, y, errors)
     name = doc.get("name", Path(path).stem)
     if not isinstance(name, str):
-        errors.append(GraphError(y.loc("name"), f"'name' must be a string; got {name!r}"))
+        errors.append(GraphProblem(y.loc("name"), f"'name' must be a string; got {name!r}"))
         name = Path(path).stem
 
     node_docs = doc.get("nodes")
     if node_docs is None:
-        errors.append(GraphError(y.loc(), "the graph has no 'nodes:' section"))
+        errors.append(GraphProblem(y.loc(), "the graph has no 'nodes:' section"))
         node_docs = {}
     elif not isinstance(node_docs, dict):
         errors.append(
-            GraphError(y.loc("nodes"), "'nodes' must be a mapping of node name -> {block: ..., params: ...}")
+            GraphProblem(
+                y.loc("nodes"), "'nodes' must be a mapping of node name -> {block: ..., params: ...}"
+            )
         )
         node_docs = {}
 
@@ -416,7 +431,7 @@ def _build(
     deployment = parse_deployment(doc, y, node_docs)
     errors.extend(deadline_path_errors(deployment.deadlines, edges))
     if errors:
-        raise GraphErrors(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
+        raise GraphFileError(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
     return Graph(
         name=name,
         path=path,
@@ -433,25 +448,25 @@ def _build(
     )
 
 
-def _run_settings(doc: Mapping[str, Any], y: Located, errors: list[GraphError]) -> tuple[int, Any, Any]:
+def _run_settings(doc: Mapping[str, Any], y: Located, errors: list[GraphProblem]) -> tuple[int, Any, Any]:
     """The graph's ``seed``, ``duration_s`` and ``tick_s``, each checked against its documented
     bound (:mod:`flowtact.inputs.limits`); a bad one is reported and replaced by its default."""
     seed = doc.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        errors.append(GraphError(y.loc("seed"), f"'seed' must be a non-negative integer; got {seed!r}"))
+        errors.append(GraphProblem(y.loc("seed"), f"'seed' must be a non-negative integer; got {seed!r}"))
         seed = 0
     elif seed > MAX_SEED:
-        errors.append(GraphError(y.loc("seed"), f"'seed' must be at most 2**63 - 1; got {seed!r}"))
+        errors.append(GraphProblem(y.loc("seed"), f"'seed' must be at most 2**63 - 1; got {seed!r}"))
         seed = 0
     duration = doc.get("duration_s")
     if duration is not None and positive_seconds(duration) is None:
         errors.append(
-            GraphError(y.loc("duration_s"), f"'duration_s' must be a finite number > 0; got {duration!r}")
+            GraphProblem(y.loc("duration_s"), f"'duration_s' must be a finite number > 0; got {duration!r}")
         )
         duration = None
     elif duration is not None and duration > MAX_DURATION_S:
         errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("duration_s"), f"'duration_s' must be at most {MAX_DURATION_S:g} s; got {duration!r}"
             )
         )
@@ -459,7 +474,7 @@ def _run_settings(doc: Mapping[str, Any], y: Located, errors: list[GraphError]) 
     tick = doc.get("tick_s")
     if tick is not None and not (positive_seconds(tick) or math.inf) <= MAX_TICK_S:
         errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("tick_s"),
                 f"'tick_s' must be a number of seconds > 0 and <= {MAX_TICK_S:g}; got {tick!r}",
             )
@@ -467,18 +482,18 @@ def _run_settings(doc: Mapping[str, Any], y: Located, errors: list[GraphError]) 
         tick = None
     elif tick is not None and tick < MIN_TICK_S:
         errors.append(
-            GraphError(y.loc("tick_s"), f"'tick_s' must be at least {MIN_TICK_S:g} s; got {tick!r}")
+            GraphProblem(y.loc("tick_s"), f"'tick_s' must be at least {MIN_TICK_S:g} s; got {tick!r}")
         )
         tick = None
     too_long = run_ticks_problem(duration, tick) if duration is not None and tick is not None else None
     if too_long:
-        errors.append(GraphError(y.loc("duration_s"), f"'duration_s' at 'tick_s': {too_long}"))
+        errors.append(GraphProblem(y.loc("duration_s"), f"'duration_s' at 'tick_s': {too_long}"))
     return seed, duration, tick
 
 
 def _overrides(
     overrides: list[str], node_docs: Mapping[str, Any]
-) -> tuple[dict[str, dict[str, tuple[Any, Loc]]], list[GraphError]]:
+) -> tuple[dict[str, dict[str, tuple[Any, Loc]]], list[GraphProblem]]:
     out: dict[str, dict[str, tuple[Any, Loc]]] = {}
     errors = []
     for i, text in enumerate(overrides):
@@ -486,11 +501,11 @@ def _overrides(
         try:
             node, param, value = parse_override(text)
         except ValueError as e:
-            errors.append(GraphError(loc, str(e)))
+            errors.append(GraphProblem(loc, str(e)))
             continue
         if node not in node_docs:
             errors.append(
-                GraphError(
+                GraphProblem(
                     loc, f"--set '{text}': unknown node '{node}'{did_you_mean(node, map(str, node_docs))}"
                 )
             )
@@ -504,18 +519,18 @@ def _node(
     ndoc: Any,
     y: Located,
     sets: Mapping[str, tuple[Any, Loc]],
-    errors: list[GraphError],
+    errors: list[GraphProblem],
     classes: dict[str, type[Block]],
 ) -> NodeDef | None:
     loc = y.key_loc("nodes", name)
     if not NAME_RE.match(name):
         errors.append(
-            GraphError(loc, f"node name '{name}' must be an identifier (letters, digits, _), no dots")
+            GraphProblem(loc, f"node name '{name}' must be an identifier (letters, digits, _), no dots")
         )
         return None
     if not isinstance(ndoc, dict):
         errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("nodes", name),
                 f"node '{name}' must be a mapping like {{block: savgol, params: {{...}}}}",
             )
@@ -525,7 +540,7 @@ def _node(
     block_name = ndoc.get("block")
     if not isinstance(block_name, str):
         errors.append(
-            GraphError(
+            GraphProblem(
                 loc,
                 f"node '{name}' has no 'block:' (the block type to run)",
                 "see `flowtact blocks` for the catalogue",
@@ -536,13 +551,13 @@ def _node(
         cls = load_block(block_name)
     except UnknownBlockError as e:
         hint = "" if isinstance(e, ModuleNotAllowedError) else "see `flowtact blocks` for the catalogue"
-        errors.append(GraphError(y.loc("nodes", name, "block"), f"node '{name}': {e}", hint))
+        errors.append(GraphProblem(y.loc("nodes", name, "block"), f"node '{name}': {e}", hint))
         return None
     classes[name] = cls
     params = ndoc.get("params", {}) or {}
     if not isinstance(params, dict):
         errors.append(
-            GraphError(y.loc("nodes", name, "params"), f"node '{name}': 'params' must be a mapping")
+            GraphProblem(y.loc("nodes", name, "params"), f"node '{name}': 'params' must be a mapping")
         )
         return None
     param_locs = {k: y.loc("nodes", name, "params", k) for k in params}
@@ -554,7 +569,7 @@ def _node(
     process = ndoc.get("process")
     if process is not None and not (isinstance(process, str) and NAME_RE.match(process)):
         errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("nodes", name, "process"),
                 f"node '{name}': 'process' must be an identifier; got {process!r}",
             )
@@ -562,7 +577,9 @@ def _node(
     seed = ndoc.get("seed")
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         errors.append(
-            GraphError(y.loc("nodes", name, "seed"), f"node '{name}': 'seed' must be a non-negative integer")
+            GraphProblem(
+                y.loc("nodes", name, "seed"), f"node '{name}': 'seed' must be a non-negative integer"
+            )
         )
         seed = None
     try:
@@ -580,7 +597,7 @@ def _node(
                 if key in (ndoc.get("params") or {})
                 else param_locs.get(key, loc)
             )
-        errors.append(GraphError(ploc, str(e), f"`flowtact blocks {cls.name}` documents every parameter"))
+        errors.append(GraphProblem(ploc, str(e), f"`flowtact blocks {cls.name}` documents every parameter"))
         return None
     return NodeDef(
         name=name,
@@ -602,9 +619,9 @@ def _endpoint_errors(
     loc: Loc,
     node_docs: Mapping[str, Any],
     classes: Mapping[str, type[Block]],
-) -> GraphError | None:
+) -> GraphProblem | None:
     if node not in node_docs:
-        return GraphError(loc, f"unknown node '{node}'{did_you_mean(node, map(str, node_docs))}")
+        return GraphProblem(loc, f"unknown node '{node}'{did_you_mean(node, map(str, node_docs))}")
     if node not in classes:
         return None  # the node's block is unknown: already reported
     cls = classes[node]
@@ -612,7 +629,9 @@ def _endpoint_errors(
     if port not in ports:
         suggestion = did_you_mean(port, ports)
         hint = f"{side}s of {cls.name}: {', '.join(ports) or 'none'}" if "(valid" not in suggestion else ""
-        return GraphError(loc, f"block '{cls.name}' (node '{node}') has no {side} '{port}'{suggestion}", hint)
+        return GraphProblem(
+            loc, f"block '{cls.name}' (node '{node}') has no {side} '{port}'{suggestion}", hint
+        )
     return None
 
 
@@ -621,13 +640,13 @@ def _edges(
     y: Located,
     node_docs: Mapping[str, Any],
     classes: Mapping[str, type[Block]],
-    errors: list[GraphError],
+    errors: list[GraphProblem],
 ) -> list[Edge]:
     if raw is None:
         return []
     if not isinstance(raw, list):
         errors.append(
-            GraphError(y.loc("edges"), "'edges' must be a list of 'node.port -> node.port' strings")
+            GraphProblem(y.loc("edges"), "'edges' must be a list of 'node.port -> node.port' strings")
         )
         return []
     edges = []
@@ -643,7 +662,7 @@ def _edges(
         m = EDGE_RE.match(item) if isinstance(item, str) else None
         if not m:
             errors.append(
-                GraphError(loc, f"malformed edge {item!r}", "write edges as 'node.port -> node.port'")
+                GraphProblem(loc, f"malformed edge {item!r}", "write edges as 'node.port -> node.port'")
             )
             continue
         edge = Edge(m.group(1), m.group(2), m.group(3), m.group(4), loc, policy, queue)
@@ -660,7 +679,7 @@ def _edges(
         key = (edge.dst, edge.dst_port)
         if key in seen_inputs:
             errors.append(
-                GraphError(
+                GraphProblem(
                     loc,
                     f"input '{edge.dst}.{edge.dst_port}' is already fed by "
                     f"'{seen_inputs[key]}' (at {seen_inputs[key].loc})",
@@ -673,12 +692,12 @@ def _edges(
     return edges
 
 
-def _edge_flow(item: dict[str, Any], y: Located, i: int, errors: list[GraphError]) -> tuple[str, int]:
+def _edge_flow(item: dict[str, Any], y: Located, i: int, errors: list[GraphProblem]) -> tuple[str, int]:
     """An edge mapping's ``policy`` and ``queue``, checked."""
     policy = item.get("policy", "block")
     if policy not in POLICIES:
         errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("edges", i, "policy"),
                 f"edge policy must be one of {', '.join(POLICIES)}; got {policy!r}",
                 "block: lossless with back-pressure; latest: drop the oldest messages (real time)",
@@ -688,7 +707,7 @@ def _edge_flow(item: dict[str, Any], y: Located, i: int, errors: list[GraphError
     queue = item.get("queue", DEFAULT_QUEUE)
     if isinstance(queue, bool) or not isinstance(queue, int) or not 1 <= queue <= MAX_QUEUE:
         errors.append(
-            GraphError(
+            GraphProblem(
                 y.loc("edges", i, "queue"),
                 f"edge queue must be an integer from 1 to {MAX_QUEUE}; got {queue!r}",
             )
@@ -702,12 +721,12 @@ def _record(
     y: Located,
     node_docs: Mapping[str, Any],
     classes: Mapping[str, type[Block]],
-    errors: list[GraphError],
+    errors: list[GraphProblem],
 ) -> list[tuple[str, str, Loc]]:
     if raw is None:
         return []
     if not isinstance(raw, list):
-        errors.append(GraphError(y.loc("record"), "'record' must be a list of 'node.port' streams"))
+        errors.append(GraphProblem(y.loc("record"), "'record' must be a list of 'node.port' streams"))
         return []
     out = []
     for i, item in enumerate(raw):
@@ -715,12 +734,12 @@ def _record(
         m = re.match(r"^\s*([^\s.]+)\.([^\s.]+)\s*$", item) if isinstance(item, str) else None
         if not m:
             errors.append(
-                GraphError(loc, f"cannot record {item!r}", "record entries are 'node.port' output streams")
+                GraphProblem(loc, f"cannot record {item!r}", "record entries are 'node.port' output streams")
             )
             continue
         err = _endpoint_errors(m.group(1), m.group(2), "output", loc, node_docs, classes)
         if err:
-            errors.append(GraphError(err.loc, f"cannot record '{item}': {err.message}", err.hint))
+            errors.append(GraphProblem(err.loc, f"cannot record '{item}': {err.message}", err.hint))
             continue
         out.append((m.group(1), m.group(2), loc))
     return out

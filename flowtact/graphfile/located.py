@@ -1,7 +1,7 @@
 """YAML read with the file location of every value, and errors reported at those locations.
 
-Every problem found in a graph file is a :class:`GraphError` at ``file:line:col``; loaders collect
-them and raise one :class:`GraphErrors`. :class:`Located` keeps, beside the plain values that
+Every problem found in a graph file is a :class:`GraphProblem` at ``file:line:col``; loaders collect
+them and raise one :class:`GraphFileError`. :class:`Located` keeps, beside the plain values that
 ``yaml.safe_load`` would give, where each value (and each mapping key) was written.
 """
 
@@ -13,10 +13,9 @@ from typing import Any
 
 import yaml
 
-from flowtact.errors import FlowtactError
 from flowtact.params import did_you_mean
 
-__all__ = ["GraphError", "GraphErrors", "Loc", "Located"]
+__all__ = ["GraphProblem", "Loc", "Located"]
 
 
 @dataclass(frozen=True)
@@ -32,7 +31,7 @@ class Loc:
 
 
 @dataclass(frozen=True)
-class GraphError:
+class GraphProblem:
     """One problem with a graph, at a place, with an optional hint on what would be right."""
 
     loc: Loc
@@ -44,14 +43,6 @@ class GraphError:
         return f"{text}\n    hint: {self.hint}" if self.hint else text
 
 
-class GraphErrors(FlowtactError):
-    """Raised with every :class:`GraphError` found; ``str()`` lists them one per line."""
-
-    def __init__(self, errors: Iterable[GraphError]) -> None:
-        self.errors = list(errors)
-        super().__init__("\n".join(map(str, self.errors)))
-
-
 class Located:
     """Plain values plus a location for each YAML node, keyed by the value's path."""
 
@@ -59,7 +50,7 @@ class Located:
         self.path = path
         self.locs: dict[tuple[Any, ...], Loc] = {}
         self.key_locs: dict[tuple[Any, ...], Loc] = {}
-        self.errors: list[GraphError] = []
+        self.errors: list[GraphProblem] = []
 
     def loc(self, *keys: Any) -> Loc:
         """Location of the value at ``keys`` (or of its closest parent)."""
@@ -73,11 +64,11 @@ class Located:
 
     def unknown_keys(
         self, mapping: Iterable[Any], allowed: Sequence[str], where: str, *keys: Any
-    ) -> list[GraphError]:
+    ) -> list[GraphProblem]:
         """An error at each key of ``mapping`` (the mapping at ``keys``) that is not ``allowed``,
         suggesting the closest allowed one; ``where`` names the mapping in the message."""
         return [
-            GraphError(self.key_loc(*keys, k), f"{where}: unknown key '{k}'{did_you_mean(str(k), allowed)}")
+            GraphProblem(self.key_loc(*keys, k), f"{where}: unknown key '{k}'{did_you_mean(str(k), allowed)}")
             for k in mapping
             if k not in allowed
         ]
@@ -94,7 +85,7 @@ class Located:
                 if key in out:
                     what = "node" if keys == ("nodes",) else "key"
                     self.errors.append(
-                        GraphError(
+                        GraphProblem(
                             kloc,
                             f"duplicate {what} '{key}'",
                             f"first defined at {self.key_locs[(*keys, key)]}",

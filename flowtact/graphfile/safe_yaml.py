@@ -19,12 +19,13 @@ from typing import Any
 
 import yaml
 
+from flowtact.errors import SafeYamlError
+
 __all__ = [
     "MAX_DEPTH",
     "MAX_GRAPH_BYTES",
     "MAX_NODES",
     "LimitedLoader",
-    "SafeYamlError",
     "check_text",
     "compose",
     "load_value",
@@ -40,14 +41,6 @@ MAX_NODES = 50_000
 
 # the characters YAML 1.1 forbids in a stream (as yaml.reader.Reader.NON_PRINTABLE)
 _NON_PRINTABLE = re.compile("[^\x09\x0a\x0d\x20-\x7e\x85\xa0-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
-
-
-class SafeYamlError(ValueError):
-    """A graph file refused by a limit or by the YAML parser, at 1-based ``line``:``col``."""
-
-    def __init__(self, message: str, line: int = 1, col: int = 1, hint: str = "") -> None:
-        self.message, self.line, self.col, self.hint = message, line, col, hint
-        super().__init__(f"{line}:{col}: {message}")
 
 
 def read_graph_text(path: str | Path) -> str:

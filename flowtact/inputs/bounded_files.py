@@ -40,7 +40,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from flowtact.errors import FlowtactError
+from flowtact.errors import FileRefused
 from flowtact.inputs.limits import format_bytes
 from flowtact.inputs.safe_text import shown
 
@@ -50,7 +50,6 @@ __all__ = [
     "MAX_NPZ_MEMBERS",
     "NPZ_BUDGET_BYTES",
     "NPZ_DIRECTORY_BYTES_PER_MEMBER",
-    "FileRefused",
     "NpyHeader",
     "NpzArchive",
     "check_hdf5_signature",
@@ -84,18 +83,6 @@ _EOCD64_LOCATOR = struct.Struct("<4sLQL")
 _EOCD_MAX_COMMENT = 0xFFFF
 #: What zipfile, or a damaged member, may raise while an archive is listed or a member inflated.
 _ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, NotImplementedError)
-
-
-class FileRefused(FlowtactError, ValueError):
-    """A file flowtact will not read: not a regular file, not the expected format, or over a budget.
-
-    ``str(e)`` is one line, ``PATH: reason``, with the path shown as data (control characters
-    escaped); ``e.reason`` is the reason alone (for a message located at the file).
-    """
-
-    def __init__(self, path: str | os.PathLike[str], reason: str) -> None:
-        self.path, self.reason = str(path), reason
-        super().__init__(f"{shown(self.path)}: {reason}")
 
 
 def refusal(path: str | os.PathLike[str], error: OSError) -> FileRefused:

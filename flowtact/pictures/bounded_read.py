@@ -17,9 +17,9 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import StreamSpec
+from flowtact.errors import RecordingCorrupted
 from flowtact.inputs.safe_text import shown
 from flowtact.recording.hdf5 import _spec_from_attrs, open_verified
-from flowtact.recording.integrity import RecordingCorrupted
 
 __all__ = [
     "BLOCK_BYTES",

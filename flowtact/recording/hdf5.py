@@ -18,7 +18,7 @@ Layout of a recording (one ``.h5`` file; docs/recordings.md documents it with Py
 
 Every dataset carries HDF5's Fletcher-32 checksum; the manifest holds the SHA-256 of every
 attribute and the shape of every dataset, so the readers here refuse a damaged file naming the
-dataset or attribute (:class:`flowtact.recording.integrity.RecordingCorrupted`). Recordings of
+dataset or attribute (:class:`flowtact.errors.RecordingCorrupted`). Recordings of
 format_version 1 (no checksums) still read.
 
 Values that were not strings (dicts, lists) are stored as JSON text and listed in the root
@@ -77,15 +77,9 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import NotARecording, RecordingCorrupted, RecordingRefused
 from flowtact.inputs.safe_text import shown
-from flowtact.recording.integrity import (
-    MAX_CHUNK_BYTES,
-    CheckedFile,
-    Manifest,
-    NotARecording,
-    RecordingCorrupted,
-    RecordingRefused,
-)
+from flowtact.recording.integrity import MAX_CHUNK_BYTES, CheckedFile, Manifest
 
 __all__ = [
     "FORMAT",
@@ -648,7 +642,7 @@ def read_recording(path: str | Path, streams: Iterable[str] | None = None) -> Re
     """Read a recording (all streams, or the named ones); copes with a killed run (no summary).
 
     Every attribute and chunk read is checked against the file's checksums: a damaged recording
-    raises :class:`flowtact.recording.integrity.RecordingCorrupted` naming the dataset.
+    raises :class:`flowtact.errors.RecordingCorrupted` naming the dataset.
     """
     with open_recording(path) as f:
         out = {}

@@ -9,9 +9,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from flowtact.errors import NotARecording, RecordingCorrupted
 from flowtact.inputs.safe_text import shown
 from flowtact.recording.hdf5 import FORMAT, stream_header, stream_kind
-from flowtact.recording.integrity import CheckedFile, NotARecording, RecordingCorrupted
+from flowtact.recording.integrity import CheckedFile
 
 __all__ = ["RecordingInfo", "StreamInfo", "format_info", "inspect_recording"]
 
@@ -66,7 +67,7 @@ class RecordingInfo:
 def inspect_recording(path: str | Path) -> RecordingInfo:
     """Describe a recording and verify every checksum (every chunk of every dataset).
 
-    A missing, non-HDF5 or truncated file raises :class:`flowtact.recording.integrity.RecordingError`
+    A missing, non-HDF5 or truncated file raises :class:`flowtact.errors.RecordingError`
     (one line), an HDF5 file that is no recording :class:`NotARecording`; damage inside a readable
     recording is listed in ``problems``, never raised, and what can still be read is described.
     """

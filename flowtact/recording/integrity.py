@@ -26,8 +26,13 @@ from typing import Any
 import h5py
 import numpy as np
 
-from flowtact.errors import FlowtactError
-from flowtact.inputs.bounded_files import FileRefused, check_hdf5_signature, open_regular
+from flowtact.errors import (
+    FileRefused,
+    RecordingCorrupted,
+    RecordingError,
+    RecordingRefused,
+)
+from flowtact.inputs.bounded_files import check_hdf5_signature, open_regular
 from flowtact.inputs.limits import format_bytes
 from flowtact.inputs.safe_text import shown
 
@@ -35,11 +40,7 @@ __all__ = [
     "MANIFEST",
     "CheckedFile",
     "Manifest",
-    "NotARecording",
     "Problem",
-    "RecordingCorrupted",
-    "RecordingError",
-    "RecordingRefused",
     "attr_digest",
 ]
 
@@ -74,27 +75,6 @@ attribute's declared length before reading it, and that length is whatever the f
 MAX_COMPRESSION_RATIO = 1100
 """Most uncompressed bytes a dataset may declare per stored byte when it is compressed (deflate
 cannot exceed 1032:1); uncompressed, it must store every byte it declares (plus one chunk)."""
-
-
-class RecordingError(FlowtactError, OSError):
-    """A recording that cannot be read: missing, not HDF5, truncated, or damaged."""
-
-
-class RecordingCorrupted(RecordingError):
-    """Part of a recording does not match its checksum or cannot be read; names file and object."""
-
-    def __init__(self, path: str | Path, where: str, what: str = "checksum mismatch") -> None:
-        self.path, self.where, self.what = str(path), where, what
-        super().__init__(f"{shown(path)}: {shown(where, limit=200)}: {what} {_CORRUPT}")
-
-
-class NotARecording(FlowtactError, ValueError):
-    """An HDF5 file that is not a flowtact recording (no ``/streams`` group)."""
-
-
-class RecordingRefused(RecordingError):
-    """A file refused before it is read: not a regular file, not HDF5, or beyond a documented bound
-    (:data:`MAX_STREAMS`, :data:`MAX_CHUNK_BYTES`, ...): bad input rather than damage."""
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Graph -> Plan: execution order, resolved stream specs, and what the scene actually needs.
+"""Graph -> CompiledGraph: execution order, resolved stream specs, and what the scene actually needs.
 
 Compilation checks what only the whole graph can tell (port dtype/shape/units/rate agreement,
 unconnected required inputs, cycles that do not pass through a delay port) and propagates demand
@@ -16,20 +16,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flowtact.block import Block, Source, SpecError
+from flowtact.block import Block, Source
 from flowtact.chunk import StreamSpec
-from flowtact.errors import FlowtactError
+from flowtact.errors import BlockSpecsFailed, ConfigError, GraphFileError, SpecError
 from flowtact.graphfile.extras import missing_extras
-from flowtact.graphfile.graph import Edge, Graph, GraphError, GraphErrors, Loc
-from flowtact.params import ConfigError
+from flowtact.graphfile.graph import Edge, Graph, Loc
+from flowtact.graphfile.located import GraphProblem
 
-__all__ = ["BlockSpecsFailed", "Plan", "compile_graph", "node_seed"]
+__all__ = ["CompiledGraph", "compile_graph", "node_seed"]
 
 Stream = tuple[str, str]
 
 
 @dataclass
-class Plan:
+class CompiledGraph:
     """A compiled graph: what runs, in which order, on which streams."""
 
     graph: Graph
@@ -77,7 +77,7 @@ def _essential(spec: StreamSpec) -> tuple[object, ...]:
     return (spec.dtype, tuple(spec.shape), spec.units, spec.rate_hz, spec.events)
 
 
-def _topo_order(graph: Graph, errors: list[GraphError]) -> list[str]:
+def _topo_order(graph: Graph, errors: list[GraphProblem]) -> list[str]:
     """Kahn's order over non-delay edges; reports a cycle that has no delay port."""
     deps: dict[str, set[str]] = {n: set() for n in graph.nodes}
     for e in graph.edges:
@@ -99,7 +99,7 @@ def _topo_order(graph: Graph, errors: list[GraphError]) -> list[str]:
         cycle = _find_cycle(stuck, deps)
         edge = next(e for e in graph.edges if e.src == cycle[-2] and e.dst == cycle[-1])
         errors.append(
-            GraphError(
+            GraphProblem(
                 edge.loc,
                 f"cycle without a delay: {' -> '.join(cycle)}",
                 "a feedback loop must pass through an input declared with a one-step delay (e.g. a `delay` block)",
@@ -122,16 +122,16 @@ def _find_cycle(stuck: list[str], deps: Mapping[str, set[str]]) -> list[str]:
         node = nxt
 
 
-def compile_graph(graph: Graph, *, prune: bool = True) -> Plan:
-    """Check the graph's streams and compute its plan; raise :class:`GraphErrors` on problems.
+def compile_graph(graph: Graph, *, prune: bool = True) -> CompiledGraph:
+    """Check the graph's streams and compute its plan; raise :class:`~flowtact.errors.GraphFileError` on problems.
 
     ``prune=False`` keeps every node, output and connected input (nothing is skipped, ``pruned``
     is empty): the forced-full plan ``flowtact bench skipping`` measures the pruned one against.
     """
-    errors: list[GraphError] = []
+    errors: list[GraphProblem] = []
     order = _topo_order(graph, errors)
     if errors:
-        raise GraphErrors(errors)
+        raise GraphFileError(errors)
     incoming: dict[str, list[Edge]] = defaultdict(list)
     for e in graph.edges:
         incoming[e.dst].append(e)
@@ -140,7 +140,7 @@ def compile_graph(graph: Graph, *, prune: bool = True) -> Plan:
     specs, broken, delayed = _stream_specs(graph, order, blocks, incoming, errors)
     _check_delayed_inputs(graph, delayed, broken, blocks, incoming, specs, errors)
     if errors:
-        raise GraphErrors(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
+        raise GraphFileError(sorted(errors, key=lambda e: (e.loc.line, e.loc.col)))
 
     record, notes = _recordable(graph, specs)
     active, demanded, needed, active_edges, pruning = (
@@ -155,8 +155,8 @@ def compile_graph(graph: Graph, *, prune: bool = True) -> Plan:
     }
     missing = missing_extras(graph, active)  # before anything starts, naming the pip extra
     if missing:
-        raise GraphErrors(missing)
-    return Plan(
+        raise GraphFileError(missing)
+    return CompiledGraph(
         graph=graph,
         order=active,
         specs=specs,
@@ -186,21 +186,12 @@ def _recordable(
     return kept, notes
 
 
-class BlockSpecsFailed(FlowtactError, RuntimeError):
-    """A block's ``specs()`` raised something other than a SpecError: a bug in the block, not in
-    the graph. Names the node and keeps the exception (``cause``) for ``--debug``."""
-
-    def __init__(self, loc: Loc, node: str, block: str, cause: BaseException) -> None:
-        self.node, self.block, self.cause = node, block, cause
-        super().__init__(f"{loc}: node '{node}' ({block}): specs() raised {type(cause).__name__}: {cause}")
-
-
 def _stream_specs(
     graph: Graph,
     order: list[str],
     blocks: Mapping[str, Block],
     incoming: Mapping[str, list[Edge]],
-    errors: list[GraphError],
+    errors: list[GraphProblem],
 ) -> tuple[dict[Stream, StreamSpec], set[str], list[str]]:
     """Every output's spec, node by node in order, with the nodes that failed (or sit downstream of
     a failure) and the nodes with an input fed back through a delay, in order."""
@@ -219,7 +210,7 @@ def _stream_specs(
             )
             where = getattr(err, "where", None)
             errors.append(
-                GraphError(Loc(*where) if where else loc, f"node '{n}' ({graph.nodes[n].cls.name}): {err}")
+                GraphProblem(Loc(*where) if where else loc, f"node '{n}' ({graph.nodes[n].cls.name}): {err}")
             )
             broken.add(n)
             continue
@@ -237,7 +228,7 @@ def _node_inputs(
     specs: Mapping[Stream, StreamSpec],
     broken: set[str],
     delayed: dict[str, None],
-    errors: list[GraphError],
+    errors: list[GraphProblem],
 ) -> dict[str, StreamSpec]:
     """The specs arriving at node ``n``'s inputs. Marks ``n`` broken for a missing or mismatched
     input or a broken upstream node, and delayed for an input fed by a node later in the order."""
@@ -247,7 +238,7 @@ def _node_inputs(
     for pname, port in cls.inputs.items():
         if not port.optional and pname not in connected:
             errors.append(
-                GraphError(
+                GraphProblem(
                     node.loc,
                     f"node '{n}': required input '{pname}' is not connected",
                     f"add an edge 'some_node.port -> {n}.{pname}'",
@@ -267,7 +258,7 @@ def _node_inputs(
         why = port.mismatch(specs[src])
         if why:
             what = f": {port.doc}" if port.doc else ""
-            errors.append(GraphError(e.loc, f"{e}: input '{e.dst_port}' of '{n}' ({cls.name}{what}) {why}"))
+            errors.append(GraphProblem(e.loc, f"{e}: input '{e.dst_port}' of '{n}' ({cls.name}{what}) {why}"))
             broken.add(n)
         inputs[e.dst_port] = specs[src]
     return inputs
@@ -280,7 +271,7 @@ def _check_delayed_inputs(
     blocks: Mapping[str, Block],
     incoming: Mapping[str, list[Edge]],
     specs: Mapping[Stream, StreamSpec],
-    errors: list[GraphError],
+    errors: list[GraphProblem],
 ) -> None:
     """Ask the nodes fed back through a delay for their specs again, now that the loop's upstream
     is known: their outputs must not depend on the delayed input."""
@@ -291,11 +282,11 @@ def _check_delayed_inputs(
         try:
             again = blocks[n].specs(inputs)
         except SpecError as err:
-            errors.append(GraphError(graph.nodes[n].loc, f"node '{n}': {err}"))
+            errors.append(GraphProblem(graph.nodes[n].loc, f"node '{n}': {err}"))
             continue
         if any(_essential(again[p]) != _essential(specs[(n, p)]) for p in again):
             errors.append(
-                GraphError(
+                GraphProblem(
                     graph.nodes[n].loc,
                     f"node '{n}': its output spec depends on its delayed input",
                     "declare the fed-back stream (dtype, shape, units, rate_hz) in the delay block's parameters",

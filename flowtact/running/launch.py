@@ -20,21 +20,21 @@ from flowtact.errors import UsageError
 from flowtact.graphfile.deployment import DEFAULT_QUEUE, STOP_GRACE_S
 from flowtact.graphfile.graph import load_graph, resolve_graph_path
 from flowtact.inputs.limits import run_ticks_problem
-from flowtact.running.compile import Plan, compile_graph
+from flowtact.running.compile import CompiledGraph, compile_graph
 from flowtact.running.source_ends import EndWatch, default_duration
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
 
-__all__ = ["load_plan", "provenance", "resolved_graph", "run_plan", "versions"]
+__all__ = ["load_compiled", "provenance", "resolved_graph", "run_compiled", "versions"]
 
 
-def load_plan(
+def load_compiled(
     source: str | Path,
     *,
     overrides: Iterable[str] = (),
     replays: Mapping[str, str] | None = None,
     allow_modules: Iterable[str] = (),
-) -> Plan:
+) -> CompiledGraph:
     """Load and compile a graph file, or the graph stored in a recording (``.h5``).
 
     ``allow_modules`` (``--allow-module``) are the modules whose ``module:Class`` blocks may be
@@ -55,26 +55,30 @@ def load_plan(
 def _stored_graph(path: Path) -> str:
     """The resolved graph a recording stores; a file refused as input (not a regular file, not a
     recording, beyond the reader's bounds, no stored graph) is a located graph error (exit 2)."""
-    from flowtact.graphfile.located import GraphError, GraphErrors, Loc
+    from flowtact.errors import GraphFileError, NotARecording, RecordingRefused
+    from flowtact.graphfile.located import GraphProblem, Loc
     from flowtact.graphfile.safe_yaml import MAX_GRAPH_BYTES
     from flowtact.inputs.safe_text import shown
     from flowtact.recording.hdf5 import read_recording
-    from flowtact.recording.integrity import NotARecording, RecordingRefused
 
     where = shown(path)
     try:
         text = read_recording(path, streams=()).provenance.get("graph_yaml")
     except (RecordingRefused, NotARecording) as e:
         msg = str(e)
-        raise GraphErrors([GraphError(Loc(where), msg.removeprefix(f"{where}: "))]) from None
+        raise GraphFileError([GraphProblem(Loc(where), msg.removeprefix(f"{where}: "))]) from None
     if not isinstance(text, str):
-        raise GraphErrors([GraphError(Loc(where), "the recording stores no graph (no 'graph_yaml' text)")])
+        raise GraphFileError(
+            [GraphProblem(Loc(where), "the recording stores no graph (no 'graph_yaml' text)")]
+        )
     if len(text.encode("utf-8", "surrogatepass")) > MAX_GRAPH_BYTES:
-        raise GraphErrors([GraphError(Loc(where), f"stored graph larger than {MAX_GRAPH_BYTES >> 20} MiB")])
+        raise GraphFileError(
+            [GraphProblem(Loc(where), f"stored graph larger than {MAX_GRAPH_BYTES >> 20} MiB")]
+        )
     return text
 
 
-def resolved_graph(plan: Plan) -> dict[str, Any]:
+def resolved_graph(plan: CompiledGraph) -> dict[str, Any]:
     """The graph with every parameter (defaults included) and every node's seed written out."""
     g = plan.graph
     doc: dict[str, Any] = {"name": g.name, "seed": g.seed}
@@ -134,7 +138,7 @@ def versions() -> dict[str, str]:
     return {**package_versions(), "flowtact": flowtact.__version__}
 
 
-def provenance(plan: Plan, argv: list[str] | None = None) -> dict[str, Any]:
+def provenance(plan: CompiledGraph, argv: list[str] | None = None) -> dict[str, Any]:
     """Everything needed to re-create a run exactly."""
     resolved = resolved_graph(plan)
     return {
@@ -154,14 +158,14 @@ def provenance(plan: Plan, argv: list[str] | None = None) -> dict[str, Any]:
     }
 
 
-def has_feedback(plan: Plan) -> bool:
+def has_feedback(plan: CompiledGraph) -> bool:
     """Whether the graph closes a loop (an edge into a delayed input): then the tick shapes its
     dynamics, so a ``--fast`` run keeps the real-time tick to behave as the live graph does."""
     g = plan.graph
     return any(g.nodes[e.dst].cls.inputs[e.dst_port].delay for e in g.edges)
 
 
-def check_run_length(plan: Plan, duration_s: float | None, tick_s: float | None, fast: bool) -> None:
+def check_run_length(plan: CompiledGraph, duration_s: float | None, tick_s: float | None, fast: bool) -> None:
     """Refuse, before anything starts, a run of more than :data:`~flowtact.inputs.limits.MAX_RUN_TICKS`
     ticks: :class:`~flowtact.errors.UsageError` naming where the duration and the tick came from."""
     duration = default_duration(plan, duration_s)
@@ -184,8 +188,8 @@ def check_run_length(plan: Plan, duration_s: float | None, tick_s: float | None,
     raise UsageError(f"{said}: {problem}")
 
 
-def run_plan(
-    plan: Plan,
+def run_compiled(
+    plan: CompiledGraph,
     *,
     duration_s: float | None = None,
     fast: bool = True,
@@ -201,7 +205,7 @@ def run_plan(
 ) -> RunSummary:
     """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
     ``record:`` streams to ``record``. A failing worker raises
-    :class:`~flowtact.runtime.supervisor.WorkerFailed` after the recording is closed. Without
+    :class:`~flowtact.errors.WorkerFailed` after the recording is closed. Without
     ``record``, an ``inproc`` run may hand its recorded streams to ``sink`` in memory (sweeps).
     ``startup_s`` (``--startup-s``) replaces every process group's start-up window."""
     duration = default_duration(

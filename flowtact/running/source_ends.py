@@ -12,12 +12,12 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from flowtact.running.compile import Plan
+from flowtact.running.compile import CompiledGraph
 
 __all__ = ["EndWatch", "default_duration"]
 
 
-def default_duration(plan: Plan, asked: float | None) -> float | None:
+def default_duration(plan: CompiledGraph, asked: float | None) -> float | None:
     """The run's duration: ``asked`` (``--duration``), else the end of the last played-back file,
     else the graph's ``duration_s``, else None (until interrupted)."""
     if asked is not None:
@@ -31,7 +31,7 @@ class EndWatch:
     3 s; the run continues to 10 s with no input from it``)."""
 
     def __init__(
-        self, plan: Plan, duration_s: float | None, warn: Callable[[str], None] | None = None
+        self, plan: CompiledGraph, duration_s: float | None, warn: Callable[[str], None] | None = None
     ) -> None:
         self.plan = plan
         self.duration_s = duration_s
@@ -68,6 +68,6 @@ class EndWatch:
 
     def finish(self, summary: Any) -> None:
         """After the run: say what was not said yet; the notices, and the ``record:`` entries left
-        out (:attr:`Plan.record_notes`), go in the summary's notes."""
+        out (:attr:`CompiledGraph.record_notes`), go in the summary's notes."""
         self.check(summary.duration_s)
         summary.notes.extend([*self.plan.record_notes, *self.said.values()])

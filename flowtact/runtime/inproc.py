@@ -19,15 +19,15 @@ import numpy as np
 
 from flowtact.block import Block
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.errors import FlowtactError
-from flowtact.running.compile import Plan
+from flowtact.errors import NodeError
+from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
 from flowtact.runtime.sealing import sealed
 from flowtact.runtime.stats import format_factor
 from flowtact.runtime.step_plan import NodePlan, OutPlan, build_plans, takes_first, tallies
 from flowtact.runtime.warm_up import warm_up_here
 
-__all__ = ["InprocExecutor", "NodeError", "RunSummary", "block_summaries", "check_chunk", "explain_counters"]
+__all__ = ["InprocExecutor", "RunSummary", "block_summaries", "check_chunk", "explain_counters"]
 
 
 class Sink(Protocol):
@@ -36,14 +36,6 @@ class Sink(Protocol):
     def write(self, stream: str, chunk: Chunk) -> None: ...
 
     def maybe_flush(self) -> None: ...
-
-
-class NodeError(FlowtactError, RuntimeError):
-    """A block raised while stepping: names the node, its block and the graph time."""
-
-    def __init__(self, node: str, block: str, now: float, cause: BaseException) -> None:
-        self.node, self.block, self.now, self.cause = node, block, now, cause
-        super().__init__(f"node '{node}' ({block}) failed at t={now:.3f} s: {type(cause).__name__}: {cause}")
 
 
 @dataclass
@@ -197,11 +189,11 @@ class RunSummary:
 
 
 class InprocExecutor:
-    """Runs a :class:`~flowtact.running.compile.Plan` in this process."""
+    """Runs a :class:`~flowtact.running.compile.CompiledGraph` in this process."""
 
     def __init__(
         self,
-        plan: Plan,
+        plan: CompiledGraph,
         *,
         fast: bool = True,
         tick_s: float | None = None,
@@ -416,7 +408,9 @@ def block_summaries(blocks: Mapping[str, Block]) -> dict[str, str]:
     return out
 
 
-def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:
+def explain_counters(
+    plan: CompiledGraph, counters: Mapping[str, Mapping[str, int]]
+) -> dict[str, dict[str, str]]:
     """What each counter in ``counters`` (node -> name -> count) means, from its node's block class."""
     out: dict[str, dict[str, str]] = {}
     for node, cs in counters.items():

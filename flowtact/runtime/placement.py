@@ -14,9 +14,10 @@ from typing import Any
 
 from flowtact.block import Source
 from flowtact.chunk import StreamSpec
+from flowtact.errors import GraphFileError
 from flowtact.graphfile.deployment import ProcessDef
-from flowtact.graphfile.graph import GraphError, GraphErrors
-from flowtact.running.compile import Plan
+from flowtact.graphfile.located import GraphProblem
+from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.worker_plan import ticks_mergeable
 
 __all__ = ["DEFAULT_GROUP", "MAX_LOCAL_PROCESSES", "Placement", "place", "spec_from_wire", "spec_to_wire"]
@@ -59,7 +60,7 @@ def spec_from_wire(d: dict[str, Any]) -> StreamSpec:
 class Placement:
     """Which group runs each node, the cross-group streams, and every group's worker plan."""
 
-    plan: Plan
+    plan: CompiledGraph
     group_of: dict[str, str]
     groups: dict[str, list[str]]
     processes: dict[str, ProcessDef]
@@ -161,7 +162,7 @@ class Placement:
         }
 
 
-def _default_group(plan: Plan) -> dict[str, str]:
+def _default_group(plan: CompiledGraph) -> dict[str, str]:
     graph = plan.graph
     first_input: dict[str, str] = {}
     for e in plan.active_edges:
@@ -178,7 +179,7 @@ def _default_group(plan: Plan) -> dict[str, str]:
     return group_of
 
 
-def place(plan: Plan, *, fast: bool) -> Placement:
+def place(plan: CompiledGraph, *, fast: bool) -> Placement:
     """Group the plan's active nodes into processes and find the streams that cross groups.
 
     In ``fast`` mode every edge is ``block`` (lossless), whatever the graph says, so that a
@@ -193,9 +194,9 @@ def place(plan: Plan, *, fast: bool) -> Placement:
     local = [g for g in groups if processes[g].host is None]
     if len(local) > MAX_LOCAL_PROCESSES:
         first = graph.nodes[groups[local[MAX_LOCAL_PROCESSES]][0]]
-        raise GraphErrors(
+        raise GraphFileError(
             [
-                GraphError(
+                GraphProblem(
                     first.loc,
                     f"the graph places {len(local)} process groups on this host; flowtact runs at most "
                     f"{MAX_LOCAL_PROCESSES} (each is a Python process of its own)",
@@ -216,7 +217,7 @@ def place(plan: Plan, *, fast: bool) -> Placement:
         flow = ("block" if fast else e.policy, e.queue)
         if key in crossings and crossings[key] != flow:
             errors.append(
-                GraphError(
+                GraphProblem(
                     e.loc,
                     f"{e}: the edges from '{e.src}.{e.src_port}' into process '{g_dst}' disagree on policy/queue",
                     "a stream enters a process once: give its edges into that process the same policy and queue",
@@ -224,5 +225,5 @@ def place(plan: Plan, *, fast: bool) -> Placement:
             )
         crossings[key] = flow
     if errors:
-        raise GraphErrors(errors)
+        raise GraphFileError(errors)
     return Placement(plan, group_of, groups, processes, stream_ids, crossings)

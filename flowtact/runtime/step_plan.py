@@ -16,7 +16,7 @@ import numpy as np
 
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.running.compile import Plan
+from flowtact.running.compile import CompiledGraph
 
 __all__ = ["NodePlan", "OutPlan", "build_plans", "takes_first", "tallies"]
 
@@ -71,7 +71,7 @@ class NodePlan:
 
 
 def build_plans(
-    plan: Plan, blocks: dict[str, Block]
+    plan: CompiledGraph, blocks: dict[str, Block]
 ) -> tuple[list[NodePlan], list[tuple[list[Chunk], list[Chunk]]]]:
     """Node plans in execution order, and the (inbox, next-tick inbox) pairs of delay ports."""
     nodes: dict[str, NodePlan] = {}

@@ -43,8 +43,8 @@ from typing import Any
 import msgpack
 import zmq
 
-from flowtact.errors import FlowtactError
-from flowtact.running.compile import Plan
+from flowtact.errors import WorkerFailed
+from flowtact.running.compile import CompiledGraph
 from flowtact.running.python_child import python_command
 from flowtact.runtime.clock import LAG_WARN_S, tick_for
 from flowtact.runtime.compile_notice import CompileNotices
@@ -55,7 +55,7 @@ from flowtact.runtime.stats import LatencyHistogram, format_factor
 from flowtact.runtime.warm_up import warm_shared_kernels
 from flowtact.runtime.wire import recv_message
 
-__all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
+__all__ = ["ProcessExecutor", "describe_failure"]
 
 PING_S = 0.25
 WATCH_S = 0.02
@@ -75,18 +75,6 @@ SILENT_PROBE_S = 0.3
 """How long a worker without progress has its CPU time watched, to tell a hung process from a busy one."""
 IDLE_CPU = 0.05
 """A worker without progress that uses less than this share of a core is not working: it has stalled."""
-
-
-class WorkerFailed(FlowtactError, RuntimeError):
-    """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause.
-
-    ``traceback`` is the failing block's Python traceback as the worker formatted it (None when
-    no Python exception caused the failure: a death, a stall); ``flowtact --debug`` prints it.
-    """
-
-    def __init__(self, message: str, traceback: str | None = None) -> None:
-        super().__init__(message)
-        self.traceback = traceback
 
 
 @dataclass
@@ -134,11 +122,11 @@ class _Proc:
 
 
 class ProcessExecutor:
-    """Runs a :class:`~flowtact.running.compile.Plan` across worker processes joined by ZeroMQ."""
+    """Runs a :class:`~flowtact.running.compile.CompiledGraph` across worker processes joined by ZeroMQ."""
 
     def __init__(
         self,
-        plan: Plan,
+        plan: CompiledGraph,
         *,
         fast: bool = True,
         tick_s: float | None = None,
@@ -430,7 +418,7 @@ class ProcessExecutor:
 
     def _report_refusals(self) -> None:
         """Say so when a host tries to join with another key (ZAP refusal or a failed handshake)."""
-        from flowtact.runtime.security import SecurityError
+        from flowtact.errors import SecurityError
 
         seen = self.refused_seen
         for refused in self.auth.refused[seen:]:  # type: ignore[union-attr]

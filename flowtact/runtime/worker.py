@@ -113,7 +113,7 @@ INF = math.inf
 FOREVER = 2**62
 
 
-class Stop(Exception):
+class _Stop(Exception):
     """The supervisor asked this worker to abort at once."""
 
 
@@ -246,16 +246,16 @@ class Worker:
             if msg["op"] == op:
                 return msg
             if msg["op"] in ("abort", "exit"):
-                raise Stop
+                raise _Stop
             if msg["op"] == "stop":
                 self.stop_k = min(self.stop_k, int(msg["k"]))
 
     def _check_orphan(self) -> None:
         if self.parent is not None:
             if os.getppid() != self.parent:
-                raise Stop("the supervisor is gone")
+                raise _Stop("the supervisor is gone")
         elif time.monotonic() - self.last_ping > ORPHAN_S:
-            raise Stop("the supervisor is gone")
+            raise _Stop("the supervisor is gone")
 
     def _service(self) -> None:
         """Handle pending control messages (pings, stop, abort) without blocking; send statistics."""
@@ -333,7 +333,7 @@ class Worker:
                 self._close_blocks()
             self._expect("exit")
             return 0
-        except Stop:
+        except _Stop:
             self._salvage_records()
             return 0
         except _NodeFailure as f:
@@ -629,7 +629,7 @@ class Worker:
         if msg["op"] == "stop":
             self.stop_k = min(self.stop_k, int(msg["k"]))
         elif msg["op"] in ("abort", "exit"):
-            raise Stop
+            raise _Stop
 
     def _wait_latest(self) -> bool:
         """A worker fed only by ``latest`` streams waits for any of them; False once all ended."""
@@ -1015,7 +1015,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the supervisor coordinates a Ctrl-C
     if args.child and sys.platform.startswith("linux"):
         _die_with_parent()
-    from flowtact.runtime.security import SecurityError
+    from flowtact.errors import SecurityError
 
     try:
         allow = None if args.child else tuple(args.allow_modules)  # on another host: this host's own word

@@ -13,14 +13,10 @@ import numpy as np
 
 from flowtact.block import BadDataPolicy, Block, screen_nonfinite
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.errors import FlowtactError
+from flowtact.errors import MisalignedError
 from flowtact.finite import all_finite
 
-__all__ = ["Aligner", "MisalignedError", "screen_aligned"]
-
-
-class MisalignedError(FlowtactError, ValueError):
-    """Samples that should describe the same instant carry different timestamps."""
+__all__ = ["Aligner", "screen_aligned"]
 
 
 class Aligner:

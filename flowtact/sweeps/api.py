@@ -21,8 +21,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from flowtact.errors import SweepSpecError
 from flowtact.inputs.limits import positive_seconds
-from flowtact.sweeps.grid import Axis, Row, SweepSpecError, expand_replays, parse_grid, read_table, rows
+from flowtact.sweeps.grid import Axis, Row, expand_replays, parse_grid, read_table, rows
 from flowtact.sweeps.metrics import MetricSpec, parse_metrics
 from flowtact.sweeps.progress import SweepProgress
 from flowtact.sweeps.runs import RunTask
@@ -60,8 +61,9 @@ def _graph_text(graph: str | Path) -> tuple[str, str]:
         from flowtact.recording.hdf5 import read_recording
 
         return f"{path}#graph", read_recording(path, streams=()).provenance["graph_yaml"]
+    from flowtact.errors import SafeYamlError
     from flowtact.graphfile.graph import resolve_graph_path
-    from flowtact.graphfile.safe_yaml import SafeYamlError, read_graph_text
+    from flowtact.graphfile.safe_yaml import read_graph_text
 
     source = resolve_graph_path(graph)
     try:
@@ -188,7 +190,7 @@ def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: 
            metrics: MetricSpec, duration_s: float | None,
            allow_modules: Sequence[str]) -> tuple[Any, float]:  # fmt: skip
     """Load the graph as the first row would run it (without the swept values): graph problems
-    raise GraphErrors (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too.
+    raise GraphFileError (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too.
     Returns the graph and the run's graph seconds."""
     from flowtact.graphfile.graph import load_graph
     from flowtact.running.compile import compile_graph

@@ -84,7 +84,7 @@ def _positive_int(text: str) -> int:
 def run_sweep_command(args: argparse.Namespace) -> int:
     """Run the sweep the arguments describe; return the exit status."""
     from flowtact.cli import _replays
-    from flowtact.sweeps.grid import SweepSpecError
+    from flowtact.errors import SweepSpecError
 
     def on_term(_signum: int, _frame: Any) -> None:
         raise KeyboardInterrupt
@@ -119,14 +119,14 @@ def _report(df: Any, args: argparse.Namespace) -> int:
         shown = df.drop(columns=[c for c in ("key", "provenance", "notes", "graph") if c in df.columns])
         print(shown.to_string(index=False))
     if args.plot:
-        from flowtact.graphfile.graph import GraphErrors
-        from flowtact.running.launch import load_plan
+        from flowtact.errors import GraphFileError
+        from flowtact.running.launch import load_compiled
         from flowtact.sweeps.plot import plot_rates
 
         try:
-            plan = load_plan(args.graph, overrides=args.overrides, allow_modules=args.allow_modules)
+            plan = load_compiled(args.graph, overrides=args.overrides, allow_modules=args.allow_modules)
             graph = plan.graph  # parameter docs: axis units
-        except GraphErrors:
+        except GraphFileError:
             graph = None
         plot_rates(df, args.plot, graph)
     kept = df.attrs.get("kept", 0)

@@ -24,16 +24,11 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, InvalidStateError
 from typing import Any
 
-from flowtact.errors import FlowtactError
+from flowtact.errors import SweepSpecError, WorkerDied
 from flowtact.running.python_child import safe_path_env
-from flowtact.sweeps.grid import SweepSpecError
 from flowtact.sweeps.schedule import WORKER_DIED
 
-__all__ = ["DaskRows", "RowPool", "WorkerDied", "dask_executor", "local_cluster", "local_pool_factory"]
-
-
-class WorkerDied(FlowtactError, RuntimeError):
-    """The process running a row died before it answered (killed, out of memory, timed out)."""
+__all__ = ["DaskRows", "RowPool", "dask_executor", "local_cluster", "local_pool_factory"]
 
 
 def local_pool_factory(workers: int | None, preload: Sequence[str] = ()) -> Callable[[], Executor]:

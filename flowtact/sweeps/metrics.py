@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.sweeps.grid import SweepSpecError
+from flowtact.errors import SweepSpecError
 
 __all__ = ["BUILTINS", "MetricSpec", "compute_metrics", "parse_metrics", "resolve_user_metric", "rmse"]
 

@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from flowtact.sweeps.grid import SweepSpecError
+from flowtact.errors import SweepSpecError
 
 __all__ = ["check_plot_extra", "param_label", "plot_rates"]
 

@@ -108,7 +108,7 @@ def _plan(task: RunTask) -> Any:
 
 def run_task(task: RunTask) -> dict[str, Any]:
     """Run one row; return its row: key, seed, status, error, provenance, duration, metrics, run_s."""
-    from flowtact.running.launch import run_plan
+    from flowtact.running.launch import run_compiled
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"key": task.key, "seed": task.seed}
@@ -116,7 +116,7 @@ def run_task(task: RunTask) -> dict[str, Any]:
         plan = _plan(task)
         row["provenance"] = provenance_hash(plan)
         sink = MemorySink(plan)
-        summary = run_plan(plan, duration_s=task.duration_s, fast=True, inproc=True, sink=sink)
+        summary = run_compiled(plan, duration_s=task.duration_s, fast=True, inproc=True, sink=sink)
         if summary.stopped_by == "interrupted":  # Ctrl-C reached this run: it did not finish
             raise KeyboardInterrupt
         row["duration_s"] = summary.duration_s

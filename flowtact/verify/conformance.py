@@ -15,21 +15,14 @@ import numpy as np
 
 from flowtact.block import Block, Example, Source
 from flowtact.chunk import Chunk
+from flowtact.errors import ConformanceError
 
-__all__ = ["ConformanceError", "differing_rows", "example_of", "first_difference", "value_text"]
+__all__ = ["differing_rows", "example_of", "first_difference", "value_text"]
 
 EXAMPLE_TEMPLATE = """\
     @classmethod
     def example(cls) -> Example:  # from flowtact import Example
         return Example(params={...}, inputs={"PORT": np.array(...)}, units={"PORT": "UNITS"})"""
-
-
-class ConformanceError(AssertionError):
-    """A block failed a conformance check: ``"<block>: <check>: expected …; <what happened>"``."""
-
-    def __init__(self, block: str, check: str, expected: str, happened: str) -> None:
-        self.block, self.check, self.expected, self.happened = block, check, expected, happened
-        super().__init__(f"{block}: {check}: expected {expected}; {happened}")
 
 
 def example_of(cls: type[Block]) -> Example:

@@ -16,14 +16,13 @@ import pytest
 
 import flowtact.blocks.signal.csv_log as csv_log
 import flowtact.blocks.signal.replay as replay
-from flowtact.block import SpecError
 from flowtact.blocks.signal.csv_log import CsvError, read_csv_log
 from flowtact.blocks.signal.replay import Replay
 from flowtact.blocks.signal.replay_limits import MAX_COLUMNS, listing
 from flowtact.blocks.signal.replay_ports import stand_in_class
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.inputs.bounded_files import HDF5_SIGNATURE, FileRefused, has_hdf5_signature, open_regular
-from flowtact.params import ConfigError
+from flowtact.errors import ConfigError, FileRefused, SpecError
+from flowtact.inputs.bounded_files import HDF5_SIGNATURE, has_hdf5_signature, open_regular
 from flowtact.recording.hdf5 import Recorder
 
 

@@ -20,7 +20,7 @@ from flowtact.blocks.signal.savgol import (
 )
 from flowtact.blocks.signal.weighted_sum import WeightedSum
 from flowtact.blocks.touch.presets import table_i_weights
-from flowtact.streams.align import MisalignedError
+from flowtact.errors import MisalignedError
 from flowtact.testing import assert_same, run_offline
 
 signal = pytest.importorskip("scipy.signal")

@@ -22,7 +22,7 @@ from flowtact.blocks.teleop.exo import (
     finger_forward,
     phi_from_theta,
 )
-from flowtact.streams.align import MisalignedError
+from flowtact.errors import MisalignedError
 from flowtact.testing import assert_same, run_offline
 
 ADC = {"x": "ADC"}

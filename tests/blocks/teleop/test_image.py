@@ -22,7 +22,7 @@ from flowtact.blocks.teleop.image import (
     blob_mask_numpy,
 )
 from flowtact.blocks.teleop.tactip_sim import pins_px, pressed_frames
-from flowtact.streams.align import MisalignedError
+from flowtact.errors import MisalignedError
 from flowtact.testing import run_offline
 
 RATE = 40.0
