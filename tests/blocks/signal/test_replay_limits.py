@@ -1,7 +1,7 @@
 """Replay readers are bounded before they allocate: every size, count and number a replayed file
 declares is checked against blocks/signal/replay_limits.py, and a refusal names the file (and the
 line of a .csv). The files too large to keep are in bench/hostile_cases.py (``replay_*``), measured
-in a child by tests/test_hostile_input.py; these are the small, exact cases."""
+in a child by tests/inputs/test_hostile_input.py; these are the small, exact cases."""
 
 from __future__ import annotations
 

@@ -72,7 +72,7 @@ def test_the_factor_is_over_the_running_time_with_the_start_up_apart():
     assert d["realtime_factor"] == pytest.approx(0.9991, abs=1e-4)
 
 
-TOUCH = str(Path(__file__).parent.parent / "graphs" / "touch.yaml")
+TOUCH = str(Path(__file__).parents[2] / "graphs" / "touch.yaml")
 
 
 @pytest.mark.parametrize("where", [[], ["--inproc"]], ids=["processes", "inproc"])

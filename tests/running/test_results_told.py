@@ -13,7 +13,7 @@ from runs import allow_args, env
 from flowtact.recording.hdf5 import read_recording
 from flowtact.runtime.inproc import RunSummary
 
-ROOT = Path(__file__).parent.parent
+ROOT = Path(__file__).parents[2]
 BRAILLE = str(ROOT / "graphs" / "braille.yaml")
 TOUCH = str(ROOT / "graphs" / "touch.yaml")
 

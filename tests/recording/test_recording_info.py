@@ -15,7 +15,7 @@ import pytest
 from flowtact.cli import main
 from flowtact.recording.info import format_info, inspect_recording
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 TOUCH = str(ROOT / "graphs" / "touch.yaml")
 
 

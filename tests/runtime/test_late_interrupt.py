@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 #: The console script's own shape (``sys.exit(main())``), with SIGINT sent once main has returned:
 #: the moment a user's Ctrl-C meets a run that has printed its summary and is exiting.

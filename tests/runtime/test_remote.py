@@ -21,7 +21,7 @@ from flowtact.recording.hdf5 import read_recording
 from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.runtime.security import generate_keys
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.slow
 
 

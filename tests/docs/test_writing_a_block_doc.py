@@ -16,7 +16,7 @@ from doc_pages import clean_env
 from flowtact import ConfigError
 from flowtact.testing import CHECKS, check_chunking_invariance
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "writing-a-block.md"
 FENCE = re.compile(r"^```(\w+)\n(.*?)^```", re.S | re.M)
 

@@ -12,7 +12,7 @@ import pytest
 from flowtact.recording.hdf5 import read_recording
 from flowtact.testing import run_graph
 
-ROOT = Path(__file__).parent.parent
+ROOT = Path(__file__).parents[2]
 TOUCH = str(ROOT / "graphs" / "touch.yaml")
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from flowtact.cli import main
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "recordings.md"
 #: Attributes the MATLAB snippets may read as JSON text, through jsondecode.
 JSON_ATTRS = {"summary", "params", "seeds", "versions", "overrides", "pruned"}

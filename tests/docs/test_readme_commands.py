@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from doc_pages import clean_env
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 
 #: Run by .ci/run itself (installing into a fresh venv; the suite this test belongs to).

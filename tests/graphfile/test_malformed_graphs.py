@@ -1,6 +1,6 @@
 """Every malformed graph of the corpus yields its `path:line:col: message`, exit 2, no traceback.
 
-Each file in tests/graphs/bad/ starts with `# expect: LINE:COL: text`; the text must appear in
+Each file in tests/graphfile/graphs/bad/ starts with `# expect: LINE:COL: text`; the text must appear in
 the error printed for that location.
 """
 
@@ -49,7 +49,7 @@ def test_the_command_line_prints_no_traceback():
 
 
 def test_a_bad_override_is_located_and_rejected(capsys):
-    graph = Path(__file__).parent.parent / "graphs" / "touch.yaml"
+    graph = Path(__file__).parents[2] / "graphs" / "touch.yaml"
     assert main(["validate", str(graph), "--set", "sa1.tau_s=-1"]) == 2
     err = capsys.readouterr().err
     assert "--set:1:1: sa1 (nlif): 'tau_s' must be > 0; got -1" in err

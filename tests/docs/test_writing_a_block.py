@@ -13,7 +13,7 @@ import pytest
 from flowtact import Block, ConfigError, SpecError, StreamSpec
 from flowtact.testing import CHECKS, run_offline
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+README = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def _readme_block() -> type[Block]:

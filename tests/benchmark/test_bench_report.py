@@ -20,7 +20,7 @@ from flowtact.benchmark.runner import estimate_minutes
 from flowtact.benchmark.suite import Context
 from flowtact.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ISSUE = re.compile(r"\bissues?\s*#?\d+|\bthe issue\b", re.IGNORECASE)
 """An internal issue reference: 'issue 14', 'issues 3', 'the issue's range'."""
 OTHER_CONVENTIONS = re.compile(

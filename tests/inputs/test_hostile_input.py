@@ -1,7 +1,7 @@
 """Hostile graphs and command-line misuse are refused at their place, exit 2, without a traceback,
 within a bounded time and memory; missing optional packages are refused before anything starts.
 
-The static corpus is tests/graphs/bad/ (test_malformed_graphs.py); the cases here are generated
+The static corpus is tests/graphfile/graphs/bad/ (test_malformed_graphs.py); the cases here are generated
 (too large to keep), command lines, or need a changed environment.
 """
 

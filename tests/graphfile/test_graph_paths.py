@@ -13,7 +13,7 @@ from flowtact.errors import GraphFileError
 from flowtact.graphfile.graph import load_graph
 from flowtact.graphfile.param_paths import package_file
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BRAILLE = ROOT / "graphs" / "braille.yaml"
 MODEL = "braille_first.npz"
 

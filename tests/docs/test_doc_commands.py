@@ -18,9 +18,9 @@ from doc_pages import ROOT, bash_blocks, commands, pages, run_in_clean_shell
 
 #: Pages run, block by block in a clean shell, by their own test (which also checks quoted outputs).
 RUN_ELSEWHERE = {
-    "README.md": "tests/test_readme_commands.py",
-    "docs/writing-a-block.md": "tests/test_writing_a_block_doc.py",
-    "docs/your-own-data.md": "tests/test_docs_your_own_data.py",
+    "README.md": "tests/docs/test_readme_commands.py",
+    "docs/writing-a-block.md": "tests/docs/test_writing_a_block_doc.py",
+    "docs/your-own-data.md": "tests/docs/test_docs_your_own_data.py",
     "docs/sweeps.md": "tests/sweeps/test_sweeps_doc.py",
 }
 #: Pages whose commands this test runs, in page order.

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from doc_pages import bash_blocks, run_in_clean_shell
 
-ROOT = Path(__file__).parent.parent
+ROOT = Path(__file__).parents[2]
 DOC = ROOT / "docs" / "your-own-data.md"
 
 
