@@ -38,8 +38,7 @@ from flowtact.errors import (
     WorkerFailed,
 )
 from flowtact.params import Config, param
-
-__version__ = "0.1.0"
+from flowtact.version import __version__
 
 
 def sweep(graph, **kwargs):  # type: ignore[no-untyped-def]

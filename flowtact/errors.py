@@ -11,12 +11,8 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from flowtact.inputs.safe_text import shown
-
-if TYPE_CHECKING:
-    from flowtact.graphfile.located import GraphProblem, Loc
 
 __all__ = [
     "BadDataError",
@@ -110,9 +106,12 @@ class ConformanceError(FlowtactError, AssertionError):
 
 class GraphFileError(FlowtactError):
     """Raised with every :class:`~flowtact.graphfile.located.GraphProblem` found in a graph (each
-    at its ``file:line:col``); ``str()`` lists them one per line, ``errors`` holds them."""
+    at its ``file:line:col``); ``str()`` lists them one per line, ``errors`` holds them.
 
-    def __init__(self, errors: Iterable[GraphProblem]) -> None:
+    Typed loosely (``object``, shown with ``str``) so that this module imports none of the modules
+    whose errors it holds: they all import it."""
+
+    def __init__(self, errors: Iterable[object]) -> None:
         self.errors = list(errors)
         super().__init__("\n".join(map(str, self.errors)))
 
@@ -127,9 +126,10 @@ class SafeYamlError(FlowtactError, ValueError):
 
 class BlockSpecsFailed(FlowtactError, RuntimeError):
     """A block's ``specs()`` raised something other than a SpecError: a bug in the block, not in
-    the graph. Names the node and keeps the exception (``cause``) for ``--debug``."""
+    the graph. Names the node (``loc`` is its graph-file place) and keeps the exception (``cause``)
+    for ``--debug``."""
 
-    def __init__(self, loc: Loc, node: str, block: str, cause: BaseException) -> None:
+    def __init__(self, loc: object, node: str, block: str, cause: BaseException) -> None:
         self.node, self.block, self.cause = node, block, cause
         super().__init__(f"{loc}: node '{node}' ({block}): specs() raised {type(cause).__name__}: {cause}")
 

@@ -125,7 +125,7 @@ def package_versions() -> dict[str, str]:
 
 
 def _default_provenance() -> dict[str, Any]:
-    from flowtact import __version__
+    from flowtact.version import __version__
 
     return {
         "flowtact_version": __version__,

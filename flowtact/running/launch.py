@@ -15,7 +15,6 @@ from typing import Any
 
 import yaml
 
-import flowtact
 from flowtact.errors import UsageError
 from flowtact.graphfile.deployment import DEFAULT_QUEUE, STOP_GRACE_S
 from flowtact.graphfile.graph import load_graph, resolve_graph_path
@@ -24,6 +23,7 @@ from flowtact.running.compile import CompiledGraph, compile_graph
 from flowtact.running.source_ends import EndWatch, default_duration
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
 from flowtact.runtime.inproc import InprocExecutor, RunSummary
+from flowtact.version import __version__
 
 __all__ = ["load_compiled", "provenance", "resolved_graph", "run_compiled", "versions"]
 
@@ -135,14 +135,14 @@ def versions() -> dict[str, str]:
     """Python, flowtact, HDF5 and dependency versions (:func:`flowtact.recording.hdf5.package_versions`)."""
     from flowtact.recording.hdf5 import package_versions
 
-    return {**package_versions(), "flowtact": flowtact.__version__}
+    return {**package_versions(), "flowtact": __version__}
 
 
 def provenance(plan: CompiledGraph, argv: list[str] | None = None) -> dict[str, Any]:
     """Everything needed to re-create a run exactly."""
     resolved = resolved_graph(plan)
     return {
-        "flowtact_version": flowtact.__version__,
+        "flowtact_version": __version__,
         "graph_name": plan.graph.name,
         "graph_path": plan.graph.path,
         "graph_yaml": yaml.safe_dump(resolved, sort_keys=False),

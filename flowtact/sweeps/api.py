@@ -80,7 +80,7 @@ def setup(
     """What makes every row of a sweep what it is besides its own values: the graph text's hash,
     the fixed ``--set`` overrides, ``--duration``, the metrics, flowtact's version and the seed
     policy. Recorded in the table; a table with another setup is not resumed."""
-    import flowtact
+    from flowtact.version import __version__
 
     return {
         "graph": hashlib.sha256(text.encode()).hexdigest()[:16],
@@ -88,7 +88,7 @@ def setup(
         "duration_s": duration_s,
         "metrics": [*metrics.builtins, *metrics.user],
         "rmse": [f"{a}={b}" for a, b in metrics.rmse_pairs],
-        "flowtact": flowtact.__version__,
+        "flowtact": __version__,
         "seeds": SEED_POLICY,
     }
 

@@ -98,7 +98,7 @@ def test_the_child_entry_point_writes_raw_samples(toy_module, tmp_path):
     import subprocess
 
     out = tmp_path / "f.json"
-    cmd = [sys.executable, "-m", "flowtact.benchmark.process_rounds", toy_module, "--part", "0", "--parts", "2",
+    cmd = [sys.executable, "-m", "flowtact.benchmark.round_child", toy_module, "--part", "0", "--parts", "2",
            "--out", str(out), "--quick"]  # fmt: skip
     subprocess.run(cmd, check=True, capture_output=True, timeout=120)
     figs = json.loads(out.read_text())
