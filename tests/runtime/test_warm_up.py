@@ -9,9 +9,11 @@ what the run prints: a compile announced while warming, and one after the start 
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -137,8 +139,10 @@ def main() -> None:
 def test_no_blocks_example_calls_a_kernel_signature_its_warm_up_missed():
     # in a fresh process: kernels loaded by earlier tests in this one would hide a miss
     code = "import test_warm_up as t; t.main()"
+    child_env = env()
+    child_env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).resolve().parent), child_env["PYTHONPATH"]])
     done = subprocess.run(
-        [sys.executable, "-c", code], env=env(), capture_output=True, text=True, timeout=900
+        [sys.executable, "-c", code], env=child_env, capture_output=True, text=True, timeout=900
     )
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout.strip().splitlines()[-1]) == {}
@@ -146,6 +150,7 @@ def test_no_blocks_example_calls_a_kernel_signature_its_warm_up_missed():
 
 SHARED = """
 import sys
+from pathlib import Path
 import numpy as np
 from flowtact.chunk import StreamSpec
 from flowtact.finite import all_finite
