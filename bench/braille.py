@@ -306,7 +306,7 @@ def _fastest_constant(curve: list[tuple[float, float]], accuracy: float) -> floa
 
 def shipped_control() -> dict[str, Any]:
     """The controller parameters graphs/braille.yaml ships (what the check holds to the bar)."""
-    from flowtact.graph import resolve_graph_path
+    from flowtact.graphfile.graph import resolve_graph_path
 
     doc = yaml.safe_load(resolve_graph_path("braille").read_text())
     return dict(doc["nodes"]["control"]["params"])

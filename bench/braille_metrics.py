@@ -9,7 +9,7 @@ confusion matrix has positive plug-in information even for a random decoder) is 
 quadratic extrapolation to infinitely many trials (Strong et al. 1998; Panzeri et al. 2007): the
 plug-in information of random halves and quarters of the (letter, decision) pairs, fitted as
 ``I(N) = I∞ + a/N + b/N²``. Tried and measured on responses that carry 0 bits, 26 letters
-(tests/test_bench_braille.py): with 10 trials per letter Panzeri–Treves' first-order correction
+(tests/benchmark/test_bench_braille.py): with 10 trials per letter Panzeri–Treves' first-order correction
 still leaves 1.1 bits and the extrapolation 0.7; with 40 trials the extrapolation leaves < 0.1
 (Panzeri–Treves 0.2); a shuffle correction over-corrects a good decoder (3.7 of 4.7 bits for a
 perfect one). So the suite uses 40 trials per letter (10 with ``--quick``: read its early values

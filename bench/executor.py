@@ -22,8 +22,8 @@ import numpy as np
 
 from flowtact import Block, Chunk, Config, Example, Port, Source, StreamSpec, param
 from flowtact.benchmark import Context, Suite
-from flowtact.compile import compile_graph
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
+from flowtact.running.compile import compile_graph
 from flowtact.runtime.inproc import InprocExecutor
 
 

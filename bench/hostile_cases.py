@@ -3,7 +3,7 @@
 Each case writes its file(s) into a folder and returns the ``flowtact`` arguments and the
 ``file:line:col: text`` the refusal must show. :func:`run_measured` runs ``flowtact`` in a child
 Python that reports its own peak RSS, under a generous timeout that only catches hangs.
-Used by tests/test_hostile_input.py (through tests/hostile.py) and by the ``hostile_input`` suite
+Used by tests/inputs/test_hostile_input.py (through tests/hostile.py) and by the ``hostile_input`` suite
 (wall time, peak RSS); it lives here so that the suite runs from an installed wheel.
 """
 

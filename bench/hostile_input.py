@@ -2,7 +2,7 @@
 (50 MB file, alias bomb, 5 000 nested lists, /dev/zero, a FIFO, a population of 1e14 neurons, ...).
 
 Each case runs in a fresh child Python (interpreter start and flowtact's imports included), which
-reports its own peak resident set size. The cases are those of tests/test_hostile_input.py
+reports its own peak resident set size. The cases are those of tests/inputs/test_hostile_input.py
 (bench/hostile_cases.py), where the refusal, its place and the 500 MiB bound are asserted. The
 baseline is the same child validating the shipped graphs/touch.yaml: what any `flowtact validate`
 costs.
@@ -57,7 +57,7 @@ SUITE = Suite(
     name="hostile_input",
     title="Hostile inputs: time and memory of a refusal",
     measures="Wall time and peak RSS of `flowtact validate` (a fresh child Python) refusing each hostile "
-    "input of tests/test_hostile_input.py, and whether each was refused with exit 2 at its place.",
+    "input of tests/inputs/test_hostile_input.py, and whether each was refused with exit 2 at its place.",
     baseline="the same child validating the shipped graphs/touch.yaml",
     run=run,
     minutes_quick=0.7,

@@ -1,7 +1,7 @@
 """Suite ``record``: cost of HDF5 recording, Recorder.write per call and Recorder.flush per second of data.
 
 A flush makes one second of data durable: it appends to a hidden full copy of the file and swaps
-it in with an atomic rename (flowtact/record.py explains why plain HDF5 is not crash-safe). The
+it in with an atomic rename (flowtact/recording/hdf5.py explains why plain HDF5 is not crash-safe). The
 baseline writes the same chunks with plain h5py (resizable datasets, ``file.flush()``), which is
 neither checksummed nor crash-safe: the ratio is the price of those guarantees.
 """
@@ -16,7 +16,7 @@ import numpy as np
 
 from flowtact.benchmark import Context, Suite
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.record import Recorder
+from flowtact.recording.hdf5 import Recorder
 
 
 class PlainH5:

@@ -61,7 +61,7 @@ class _Keep(_Discard):
 
 
 def _tick(plan: Any) -> float | None:
-    from flowtact.launch import has_feedback
+    from flowtact.running.launch import has_feedback
     from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S
 
     return plan.graph.tick_s or (DEFAULT_TICK_REALTIME_S if has_feedback(plan) else None)
@@ -145,15 +145,16 @@ def _variants(name: str, quick: bool) -> list[tuple[str, float, float | None]]:
 
 
 def pruning(ctx: Context) -> list[dict[str, Any]]:
-    from flowtact.compile import compile_graph
-    from flowtact.graph import GraphErrors, load_graph, resolve_graph_path
+    from flowtact.errors import GraphFileError
+    from flowtact.graphfile.graph import load_graph, resolve_graph_path
+    from flowtact.running.compile import compile_graph
 
     rows = []
     for name in GRAPHS:
         graph = load_graph(resolve_graph_path(name), overrides=FAST_OVERRIDES.get(name, ()))
         try:
             pruned, full = compile_graph(graph), compile_graph(graph, prune=False)
-        except GraphErrors as e:  # a missing extra (torch for teleop_cnn)
+        except GraphFileError as e:  # a missing extra (torch for teleop_cnn)
             ctx.note(f"`{name}` not measured: {str(e).splitlines()[0]}")
             continue
         for label, seconds, tick in _variants(name, ctx.quick):
@@ -246,7 +247,7 @@ CNN_EDGES = "  - cams.frames -> cnn.x"
 
 def vision_graph(est: str, scenario: str, noise: float = 3.0) -> Any:
     """tactip_sim (``taps``: busy, ``rest``: quiet) into the SSIM + linear fit or the CNN estimator."""
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
 
     nodes, edges, out = (
         (SSIM_NODES, SSIM_EDGES, "ssim.y, force.y") if est == "ssim" else (CNN_NODES, CNN_EDGES, "cnn.y")
@@ -279,8 +280,8 @@ def _ssim_share(ctx: Context, seconds: float) -> dict[str, float]:
     """CPU of the ssim block alone on the quiet scene's cropped frames, per graph second (the most
     an SSIM gate could save), and the gate figures with and without sensor noise."""
     from flowtact.blocks.teleop.ssim import Ssim
-    from flowtact.compile import compile_graph
-    from flowtact.graph import GraphErrors
+    from flowtact.errors import GraphFileError
+    from flowtact.running.compile import compile_graph
     from flowtact.testing import run_offline
 
     out: dict[str, float] = {}
@@ -303,14 +304,15 @@ def _ssim_share(ctx: Context, seconds: float) -> dict[str, float]:
         rec = _Keep()
         cpu_per_graph_second(compile_graph(vision_graph("cnn", "rest")), seconds, rec)
         out["cnn_rest_force_n"] = float(np.abs(rec.joined("cnn.y")[1]).mean())
-    except GraphErrors:  # no torch: the CNN half of the verdict is left out
+    except GraphFileError:  # no torch: the CNN half of the verdict is left out
         out["cnn_rest_force_n"] = float("nan")
     return out
 
 
 def quiet_busy(ctx: Context) -> tuple[list[dict[str, Any]], dict[str, float]]:
-    from flowtact.compile import compile_graph
-    from flowtact.graph import GraphErrors, load_graph, resolve_graph_path
+    from flowtact.errors import GraphFileError
+    from flowtact.graphfile.graph import load_graph, resolve_graph_path
+    from flowtact.running.compile import compile_graph
 
     cases: list[tuple[str, Any, Any, float]] = []
     touch = resolve_graph_path("touch")
@@ -326,7 +328,7 @@ def quiet_busy(ctx: Context) -> tuple[list[dict[str, Any]], dict[str, float]]:
         ctx.step(f"quiet vs busy: {label}")
         try:
             busy, quiet = compile_graph(busy_g), compile_graph(quiet_g)
-        except GraphErrors as e:
+        except GraphFileError as e:
             ctx.note(f"{label}: not measured: {str(e).splitlines()[0]}")
             continue
         cpu = paired_cpu({"busy": busy, "quiet": quiet}, seconds, ctx.share(ctx.repeats))

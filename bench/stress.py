@@ -1,8 +1,8 @@
-"""Suite ``stress``: every numerical stress case (flowtact.stress) run on the real blocks, one verdict each.
+"""Suite ``stress``: every numerical stress case (flowtact.verify.stress) run on the real blocks, one verdict each.
 
 The cases live next to their blocks, registered in the entry-point group ``flowtact.stress_cases``; ``--quick`` runs the
 short variants (1e7-step long runs), the full run the 1e8-step ones. A case that crashes is a failed
-check with the exception in its detail (``flowtact.stress.run_case``), never a crashed suite. The
+check with the exception in its detail (``flowtact.verify.stress.run_case``), never a crashed suite. The
 same table is docs/numerical-stress.md (``python scripts/stress_outcomes.py``).
 """
 
@@ -14,7 +14,7 @@ from flowtact.benchmark import Context, Suite
 
 
 def run(ctx: Context) -> None:
-    from flowtact.stress import collect, run_case
+    from flowtact.verify.stress import collect, run_case
 
     cases = collect()
     rows, raw = [], []

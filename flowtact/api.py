@@ -8,24 +8,21 @@ framework's own (this module only gathers them), so ``flowtact.block.Block is ft
 
 from __future__ import annotations
 
-from flowtact.align import Aligner, MisalignedError, screen_aligned
 from flowtact.block import (
     BadDataConfig,
-    BadDataError,
     BadDataPolicy,
     Block,
     Example,
     Port,
     Source,
-    SpecError,
     example_folder,
     nonfinite_counter_docs,
     screen_nonfinite,
 )
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.errors import FlowtactError
+from flowtact.errors import BadDataError, ConfigError, FlowtactError, MisalignedError, SpecError
 from flowtact.finite import all_finite
-from flowtact.limits import (
+from flowtact.inputs.limits import (
     MAX_SEED,
     MAX_TICK_S,
     NOMINAL_FRAME_BYTES,
@@ -33,7 +30,8 @@ from flowtact.limits import (
     STATE_BUDGET_BYTES,
     format_bytes,
 )
-from flowtact.params import Config, ConfigError, param
+from flowtact.params import Config, param
+from flowtact.streams.align import Aligner, screen_aligned
 
 __all__ = [
     "MAX_SEED",

@@ -20,24 +20,22 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 
+from flowtact.catalog.presets import apply_preset
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.errors import FlowtactError
+from flowtact.errors import BadDataError, SpecError
 from flowtact.finite import all_finite
 from flowtact.params import Config, param
-from flowtact.presets import apply_preset
 
 if TYPE_CHECKING:
     from flowtact.runtime.rundir import RunFolder
 
 __all__ = [
     "BadDataConfig",
-    "BadDataError",
     "BadDataPolicy",
     "Block",
     "Example",
     "Port",
     "Source",
-    "SpecError",
     "example_folder",
     "nonfinite_counter_docs",
     "screen_nonfinite",
@@ -164,23 +162,6 @@ def _names(config: Config, v: tuple[str, ...] | str) -> tuple[str, ...] | None:
     return names or None
 
 
-class SpecError(FlowtactError, ValueError):
-    """An input stream does not fit what a block expects (``port`` names the input, if any).
-
-    ``where`` is (file, line, column) when the problem sits in a data file the block reads (a
-    replayed CSV log): the graph compiler then reports it there instead of at the node.
-    """
-
-    def __init__(self, port: str | None, message: str, where: tuple[str, int, int] | None = None) -> None:
-        self.port = port
-        self.where = where
-        super().__init__(message)
-
-
-class BadDataError(FlowtactError, ValueError):
-    """Non-finite samples reached a block whose policy is ``raise``."""
-
-
 @dataclass(frozen=True)
 class BadDataConfig(Config):
     """Base of the config of a block that screens its input for NaN/inf: the one policy field.
@@ -251,7 +232,7 @@ class Block:
     #: Optional heavy modules this block imports in ``open``/``reset`` (never at module import):
     #: import name -> the pip extra that installs it (``{"serial": "serial"}``); a plain tuple of
     #: names when no extra provides them. ``validate`` and ``run`` refuse a graph whose active
-    #: blocks need one that is missing (:mod:`flowtact.extras`).
+    #: blocks need one that is missing (:mod:`flowtact.graphfile.extras`).
     requires: ClassVar[Mapping[str, str] | tuple[str, ...]] = ()
     #: Registry name; defaults to the snake_case class name.
     name: ClassVar[str] = ""
@@ -476,7 +457,7 @@ class Source(Block):
         """Graph time after which this source emits nothing more (a played-back file's end), or None
         when it never ends. ``inputs`` are the specs of its connected inputs, as ``specs`` gets them
         (a scan steered by a speed input ends later). A run without a duration lasts until its
-        sources' ends (:mod:`flowtact.source_ends`); called after ``specs``."""
+        sources' ends (:mod:`flowtact.running.source_ends`); called after ``specs``."""
         return None
 
     @staticmethod

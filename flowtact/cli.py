@@ -3,13 +3,13 @@
 
 Every command, the built-in ones included, is a :class:`flowtact.commands.Command` found through
 the entry-point group ``flowtact.commands`` (:mod:`flowtact.commands`); only the one being run is
-imported. Every command fails the same way (:func:`flowtact.command.run_command`): ONE line on
+imported. Every command fails the same way (:func:`flowtact.console.command.run_command`): ONE line on
 stderr naming the place (``file:line:col``, the flag, or the file), control characters escaped,
 no traceback unless ``--debug`` (``flowtact --debug CMD ...`` or ``FLOWTACT_DEBUG=1``). Exit status:
 
 - 0: done;
 - 2: bad usage or bad input, refused before the work starts: an unknown command or flag, a flag
-  value out of its documented range (:mod:`flowtact.limits`), a graph's problems, a file the user
+  value out of its documented range (:mod:`flowtact.inputs.limits`), a graph's problems, a file the user
   named that is missing, a folder, unreadable or not what was asked for;
 - 1: the command ran and failed: a block failed (its node named), a worker died, memory ran out;
 - 130: interrupted.
@@ -25,9 +25,9 @@ import threading
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from flowtact.command import CommandParser, run_command
 from flowtact.commands import Command, entry_point_summary, find_commands, load_command, one_line_summary
 from flowtact.commands.graph_args import add_allow_module
+from flowtact.console.command import CommandParser, run_command
 
 __all__ = ["add_allow_module", "build_parser", "entry_point_summary", "main", "one_line_summary"]
 
@@ -40,7 +40,7 @@ def build_parser(
     """The ``flowtact`` parser: one sub-parser per command of ``commands`` (default: the entry-point
     group); those in ``loaded`` with their own arguments, the others listed by name and help line
     only. ``loaded`` None: every command loaded (the whole parser, for completion and tests)."""
-    from flowtact.rst_text import inline_text
+    from flowtact.help.rst_text import inline_text
 
     commands = find_commands() if commands is None else commands
     if loaded is None:
@@ -88,7 +88,7 @@ def _chosen(argv: Sequence[str], commands: Mapping[str, Any]) -> str | None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``flowtact`` command: its exit status (see the module notes)."""
-    from flowtact.debug import debug_enabled
+    from flowtact.console.debug import debug_enabled
 
     as_program = argv is None  # the process's own command line: its exit status is ours to keep
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -128,7 +128,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _own_argv(cmd: Command, name: str, argv: list[str]) -> int:
     """Run a command that parses its own arguments: ``main(argv after NAME)``; ``flowtact --debug
     NAME ...`` sets ``FLOWTACT_DEBUG`` while it runs (the command reads it)."""
-    from flowtact.debug import ENV
+    from flowtact.console.debug import ENV
 
     debug = argv[:1] == ["--debug"]
     rest = argv[2:] if debug else argv[1:]

@@ -16,31 +16,10 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, Self, get_args, get_origin
 
-from flowtact.errors import FlowtactError
-from flowtact.limits import budget_problem
+from flowtact.errors import ConfigError
+from flowtact.inputs.limits import budget_problem
 
 __all__ = ["Config", "ConfigError", "FieldInfo", "Rules", "did_you_mean", "param"]
-
-
-class ConfigError(FlowtactError, ValueError):
-    """A parameter broke a rule: ``"<owner>: 'field' must be <rule>; got <value>"``. ``unknown``:
-    the parameter given that the config does not have (so a caller can locate it without reading
-    the message)."""
-
-    def __init__(
-        self,
-        owner: str,
-        field: str | None,
-        message: str,
-        *,
-        type_error: bool = False,
-        unknown: str | None = None,
-    ) -> None:
-        self.owner, self.field, self.rule = owner, field, message
-        self.type_error = type_error  # the value had the wrong type (vs. broke a rule)
-        self.unknown = unknown
-        where = f"'{field}' " if field else ""
-        super().__init__(f"{owner}: {where}{message}")
 
 
 def did_you_mean(name: str, options: typing.Iterable[str]) -> str:
@@ -113,7 +92,7 @@ def param(
 
     ``kw_only`` lets a base config's field (with a default) precede a subclass's required fields.
     ``path`` marks a file or folder name (a string, or strings in a list): a relative one written in
-    a graph file is resolved against the graph file's folder (:mod:`flowtact.param_paths`).
+    a graph file is resolved against the graph file's folder (:mod:`flowtact.graphfile.param_paths`).
     """
     if isinstance(default, list):
         default = _freeze(default)
@@ -150,7 +129,7 @@ class Config:
         field -> estimate, computed from the field values alone (never by allocating).
 
         ``build`` refuses a value whose estimate exceeds
-        :data:`flowtact.limits.STATE_BUDGET_BYTES`, before ``check()`` or anything else runs.
+        :data:`flowtact.inputs.limits.STATE_BUDGET_BYTES`, before ``check()`` or anything else runs.
         Override it in every config whose state grows with a parameter (a population size, a
         window length, a sample shape).
         """

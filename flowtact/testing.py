@@ -17,8 +17,8 @@ import yaml
 
 from flowtact.block import Block, Example, Source
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.conformance import ConformanceError, differing_rows, example_of, first_difference, value_text
-from flowtact.params import ConfigError
+from flowtact.errors import ConfigError, ConformanceError
+from flowtact.verify.conformance import differing_rows, example_of, first_difference, value_text
 
 __all__ = [
     "CHECKS",
@@ -212,18 +212,18 @@ def run_graph(
     ``duration_s`` the run lasts until the fed samples end (one sample period after the last).
     ``allow_modules``: the modules whose ``module:Class`` blocks may be imported (``--allow-module``).
     """
-    from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph, resolve_graph_path
+    from flowtact.graphfile.graph import load_graph, resolve_graph_path
     from flowtact.params import did_you_mean
+    from flowtact.running.compile import compile_graph
+    from flowtact.running.source_ends import default_duration
     from flowtact.runtime.inproc import InprocExecutor
     from flowtact.runtime.rundir import make_run_folder
-    from flowtact.source_ends import default_duration
 
     replays: dict[str, str] = {}
     with make_run_folder("feed") as folder:  # swept by a later start if this process is killed
         tmp = folder.path
         if feed:
-            from flowtact.record import Recorder
+            from flowtact.recording.hdf5 import Recorder
 
             base = compile_graph(
                 load_graph(resolve_graph_path(graph), overrides=overrides, allow_modules=allow_modules)

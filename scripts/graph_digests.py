@@ -23,7 +23,7 @@ from pathlib import Path
 
 import yaml
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 
 ROOT = Path(__file__).resolve().parent.parent
 DURATION_S = 3.0

@@ -22,8 +22,8 @@ from collections import defaultdict
 from collections.abc import Callable
 from typing import Any
 
-from flowtact.compile import compile_graph
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
+from flowtact.running.compile import compile_graph
 from flowtact.runtime.inproc import InprocExecutor
 from flowtact.runtime.placement import place
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from flowtact.stress import collect, markdown_table, run_case
+from flowtact.verify.stress import collect, markdown_table, run_case
 
 HEADER = """# Numerical stress: what each block does with hostile numbers
 

@@ -2,7 +2,7 @@
 
 A page works as written when its ```bash blocks run in a shell holding only what any shell has:
 ``PATH`` (the venv's ``bin`` first, as after ``. .venv/bin/activate``) and ``HOME``. No
-``PYTHONPATH`` or other variable the page does not set itself; tests/test_doc_commands.py checks
+``PYTHONPATH`` or other variable the page does not set itself; tests/docs/test_doc_commands.py checks
 that every page with commands is run this way by some test.
 """
 

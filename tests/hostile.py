@@ -1,4 +1,4 @@
-"""The hostile cases of tests/test_hostile_input.py: they live in bench/hostile_cases.py (installed as
+"""The hostile cases of tests/inputs/test_hostile_input.py: they live in bench/hostile_cases.py (installed as
 flowtact.bench.hostile_cases) so that ``flowtact bench hostile_input`` runs from a wheel too."""
 
 from pathlib import Path

@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.runtime.forked import comm_name
 
 ROOT = Path(__file__).resolve().parent.parent

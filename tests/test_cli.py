@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from flowtact.cli import main
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 
 ROOT = Path(__file__).parent.parent
 TOUCH = str(ROOT / "graphs" / "touch.yaml")

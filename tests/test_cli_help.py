@@ -10,7 +10,7 @@ import pytest
 
 from flowtact.cli import build_parser, main, one_line_summary
 from flowtact.commands.run import RUN_EXAMPLES
-from flowtact.graph import shipped_graphs
+from flowtact.graphfile.graph import shipped_graphs
 from flowtact.pictures.graph_figure import FORMATS
 
 
@@ -42,7 +42,7 @@ def test_top_level_help_has_no_rest_markup(capsys):
     ],
 )
 def test_one_line_summary(doc, line):
-    from flowtact.rst_text import inline_text
+    from flowtact.help.rst_text import inline_text
 
     assert one_line_summary(inline_text(doc)) == line
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from flowtact.graph import shipped_graphs
+from flowtact.graphfile.graph import shipped_graphs
 
 FLOWTACT = Path(sys.executable).parent / "flowtact"
 

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from flowtact.block import Block, Port, Source, nonfinite_counter_docs, screen_nonfinite
+from flowtact.catalog.blocks import block_names, load_block
 from flowtact.chunk import Chunk
-from flowtact.compile import compile_graph
-from flowtact.describe import describe_block
-from flowtact.graph import load_graph
-from flowtact.registry import block_names, load_block
+from flowtact.graphfile.graph import load_graph
+from flowtact.help.describe import describe_block
+from flowtact.running.compile import compile_graph
 from flowtact.runtime.inproc import InprocExecutor, RunSummary, explain_counters
 from flowtact.testing import run_offline, run_source
 

@@ -16,8 +16,8 @@ import pytest
 from runs import TEST_BLOCKS
 
 from flowtact.chunk import Chunk
-from flowtact.compile import compile_graph
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
+from flowtact.running.compile import compile_graph
 from flowtact.runtime.inproc import InprocExecutor
 from flowtact.runtime.links import LINKS, Link, link_kind, register_link
 
@@ -152,7 +152,7 @@ class CopyingExecutor(InprocExecutor):
 
 
 def test_run_plan_finds_its_executor_by_name_in_the_registry():
-    from flowtact.launch import run_plan
+    from flowtact.running.launch import run_compiled
     from flowtact.runtime.executors import EXECUTORS, executor_for, register_executor
 
     register_executor("toy_copying", CopyingExecutor)
@@ -160,10 +160,10 @@ def test_run_plan_finds_its_executor_by_name_in_the_registry():
         plan = compile_graph(load_graph("g.yaml", text=LOOP, allow_modules=TEST_BLOCKS))
         CopyingLink.made.clear()
         toy, local = Memory(), Memory()
-        run_plan(plan, duration_s=0.5, tick_s=0.01, executor="toy_copying", sink=toy)
+        run_compiled(plan, duration_s=0.5, tick_s=0.01, executor="toy_copying", sink=toy)
         assert len(CopyingLink.made) == 5  # the run went through the registered executor
         plan = compile_graph(load_graph("g.yaml", text=LOOP, allow_modules=TEST_BLOCKS))
-        run_plan(plan, duration_s=0.5, tick_s=0.01, inproc=True, sink=local)
+        run_compiled(plan, duration_s=0.5, tick_s=0.01, inproc=True, sink=local)
         assert toy.joined() == local.joined() and len(local.joined()["b.y"][0]) == 500 * 8
         assert executor_for("inproc") is InprocExecutor
         with pytest.raises(

@@ -13,7 +13,7 @@ import threading
 import pytest
 from runs import ROOT, children, wait_children
 
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.runtime.forked import NO_FORK_ENV, ForkedWorker, can_fork, comm_name
 
 TOUCH = str(ROOT / "graphs" / "touch.yaml")

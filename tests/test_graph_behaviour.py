@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
 from flowtact.testing import run_graph
 
 GRAPHS = Path(__file__).parent.parent / "graphs"
@@ -83,7 +83,7 @@ def test_slip_drives_sa1_and_fa1_differently(slip):
 
 
 def test_the_second_derivative_is_never_computed():
-    from flowtact.compile import compile_graph
+    from flowtact.running.compile import compile_graph
 
     plan = compile_graph(load_graph(GRAPHS / "touch.yaml"))
     assert "ddforce" in plan.pruned and "ddforce" not in plan.order

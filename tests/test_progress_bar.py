@@ -1,4 +1,4 @@
-"""One progress bar (issue 32, Deliver 4): run, bench and sweep draw flowtact.terminal_bar.TerminalBar
+"""One progress bar (issue 32, Deliver 4): run, bench and sweep draw flowtact.console.terminal_bar.TerminalBar
 on a terminal and keep their own plain lines (or silence) elsewhere."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import io
 
 from flowtact.benchmark.progress import Progress
 from flowtact.commands.run import run_progress
+from flowtact.console.terminal_bar import TerminalBar
 from flowtact.sweeps.progress import SweepProgress
-from flowtact.terminal_bar import TerminalBar
 
 
 class _Tty(io.StringIO):

@@ -9,9 +9,9 @@ import msgpack
 import pytest
 from runs import TEST_BLOCKS
 
-from flowtact.compile import compile_graph
-from flowtact.deployment import Flow
-from flowtact.graph import load_graph
+from flowtact.graphfile.deployment import Flow
+from flowtact.graphfile.graph import load_graph
+from flowtact.running.compile import compile_graph
 from flowtact.runtime.placement import place
 from flowtact.runtime.protocol import Op, WorkerPlan, decode, encode
 

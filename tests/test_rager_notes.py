@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from flowtact.blocks.touch.presets import NEURON_PRESETS, TABLE_I
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
 from flowtact.testing import run_graph
 
 GRAPHS = Path(__file__).parent.parent / "graphs"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from touchsim_dev import EPS, prefilter_bound, touchsim_traces
 
-from flowtact.graph import load_graph
+from flowtact.graphfile.graph import load_graph
 from flowtact.testing import run_graph
 
 pytest.importorskip("scipy.signal")

@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 
 from flowtact import Block, Chunk, Config, Example, Port, Source, StreamSpec, param
-from flowtact.block import SpecError
+from flowtact.errors import SpecError
 
 
 @dataclass(frozen=True)

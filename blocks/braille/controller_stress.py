@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flowtact.stress import Outcome, StressCase
 from flowtact.testing import run_offline
+from flowtact.verify.stress import Outcome, StressCase
 
 from .speed_controller import SpeedController
 

@@ -77,9 +77,10 @@ def graph_text(
 ) -> tuple[Path, str]:
     """The graph file's path and its YAML with the seed, the scan's text and speed, node
     parameters (node → {param: value}), the tick and the recorded streams replaced."""
-    from flowtact.graph import resolve_graph_path
-    from flowtact.safe_text import shown
-    from flowtact.safe_yaml import SafeYamlError, load_value, read_graph_text
+    from flowtact.errors import SafeYamlError
+    from flowtact.graphfile.graph import resolve_graph_path
+    from flowtact.graphfile.safe_yaml import load_value, read_graph_text
+    from flowtact.inputs.safe_text import shown
 
     path = resolve_graph_path(graph)
     if not path.exists():
@@ -126,10 +127,10 @@ def read_line(
     """Run ``graph`` in process, fast, and return what a decoder sees. An open-loop graph keeps
     nothing of its tick (its blocks are chunking-invariant), so a long ``tick_s`` only saves
     time; a closed loop must keep its own (pass ``tick_s=0`` to keep the graph's)."""
-    from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
+    from flowtact.running.source_ends import default_duration
     from flowtact.runtime.inproc import InprocExecutor
-    from flowtact.source_ends import default_duration
     from flowtact.testing import MemoryRecorder
 
     streams = ["scan.char", *(f"{LAYERS[k]}.spikes" for k in layers), *extra]

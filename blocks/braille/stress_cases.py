@@ -1,6 +1,6 @@
 """Numerical stress cases for ``braille_scan``: hostile speed and lateral commands (NaN, inf, 0, < 0, huge).
 
-Each function runs the real block and returns a :class:`flowtact.stress.Outcome`; ``CASES`` lists
+Each function runs the real block and returns a :class:`flowtact.verify.stress.Outcome`; ``CASES`` lists
 them for the tests (tests/blocks/braille/test_scan_stress.py), the outcome table
 (scripts/stress_outcomes.py) and the benchmark suite.
 """
@@ -12,8 +12,8 @@ from functools import partial
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.stress import Outcome, StressCase
 from flowtact.testing import run_source
+from flowtact.verify.stress import Outcome, StressCase
 
 from .controller_stress import CASES as CONTROLLER_STRESS
 from .scan import BrailleScan

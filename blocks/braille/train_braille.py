@@ -34,11 +34,11 @@ from flowtact.blocks.spiking.nb_model import (
     save_model,
 )
 from flowtact.blocks.spiking.window_features import window_features
-from flowtact.command import CommandParser, run_command
 from flowtact.commands import Command
+from flowtact.console.command import CommandParser, run_command
+from flowtact.console.terminal_bar import TerminalBar
 from flowtact.errors import UsageError
-from flowtact.limits import cli_float, cli_int
-from flowtact.terminal_bar import TerminalBar
+from flowtact.inputs.limits import cli_float, cli_int
 
 from .cells import LETTERS
 from .reading import LAYERS, OPEN_GRAPH, graph_text, prefix_windows, read_line
@@ -155,8 +155,8 @@ def train_layers(
     missing = sorted(set(LETTERS) - set(ys))
     if missing:
         raise ValueError(f"letters {''.join(missing)} never came up in the training text: raise --letters")
-    from flowtact.graph import resolve_graph_path
-    from flowtact.launch import versions
+    from flowtact.graphfile.graph import resolve_graph_path
+    from flowtact.running.launch import versions
 
     common = {
         "graph": str(graph),
@@ -213,8 +213,8 @@ def _check_size(
             f"--letters {letters} × {n_runs} runs (--speeds × --repeats) is {windows} letters; "
             f"at most {MAX_WINDOWS} in all"
         )
-    from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
 
     path, yml = graph_text(graph, seed=0, speed_mm_s=speeds[0], letters=letters, record=[])
     plan = compile_graph(load_graph(path, text=yml))
@@ -300,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``flowtact train-braille``: returns the exit status (:func:`flowtact.command.run_command`:
+    """``flowtact train-braille``: returns the exit status (:func:`flowtact.console.command.run_command`:
     0 ok, 2 a bad flag or a training set over its bounds, 1 failed)."""
     return run_command(
         lambda: _train(list(sys.argv[1:] if argv is None else argv)), prog="flowtact train-braille"

@@ -10,8 +10,8 @@ from collections.abc import Sequence
 from importlib.metadata import entry_points
 from typing import Any
 
-from flowtact.command import run_command
 from flowtact.commands import Command
+from flowtact.console.command import run_command
 from flowtact.errors import UsageError
 
 __all__ = ["COMMAND", "GROUP", "main"]
@@ -21,7 +21,7 @@ GROUP = "flowtact.emulators"
 
 def main(argv: Sequence[str]) -> int:
     """Dispatch ``flowtact sim DEVICE ...`` to the device's emulator; its exit status (an unknown
-    device: one line, 2), through :func:`flowtact.command.run_command` like every command."""
+    device: one line, 2), through :func:`flowtact.console.command.run_command` like every command."""
     return run_command(lambda: _dispatch(list(argv)), prog="flowtact sim")
 
 

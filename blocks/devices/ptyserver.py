@@ -32,7 +32,7 @@ from typing import Protocol
 
 import numpy as np
 
-from flowtact.bounded_files import file_kind
+from flowtact.inputs.bounded_files import file_kind
 
 __all__ = ["LineDevice", "LinkError", "PtyServer", "link_problem"]
 

@@ -6,7 +6,7 @@ spaces (whichever the header uses), ``#`` comments and blank lines, ``nan``/``in
 Refused, each with ``file:line:col``: a binary or non-UTF-8 file, a header without ``t``, duplicate
 or empty column names, a row with too few or too many values, a cell that is not a number, a time
 that is not finite or that goes back; and, before they are read (:mod:`.replay_limits`,
-:func:`flowtact.bounded_files.open_regular`), anything but a regular file, a file over ``MAX_TEXT_BYTES``, a line over ``MAX_LINE_BYTES``, a header of
+:func:`flowtact.inputs.bounded_files.open_regular`), anything but a regular file, a file over ``MAX_TEXT_BYTES``, a line over ``MAX_LINE_BYTES``, a header of
 more than ``MAX_COLUMNS`` columns. The text is streamed: checked a block at a time, then parsed
 by numpy line by line, so memory is the table plus a block.
 """
@@ -27,7 +27,8 @@ import numpy as np
 
 import flowtact.api as ft
 from flowtact.blocks.signal.replay_limits import MAX_COLUMNS, MAX_LINE_BYTES, MAX_TEXT_BYTES, listing
-from flowtact.bounded_files import FileRefused, open_regular, refusal
+from flowtact.errors import FileRefused
+from flowtact.inputs.bounded_files import open_regular, refusal
 
 __all__ = ["CsvError", "CsvLog", "read_csv_log", "row_place"]
 

@@ -27,9 +27,10 @@ from flowtact.blocks.signal.replay_limits import (
     rate_problem,
     time_problem,
 )
-from flowtact.bounded_files import FileRefused, NpyHeader, NpzArchive, check_hdf5_signature, open_npz, refusal
+from flowtact.errors import FileRefused
+from flowtact.inputs.bounded_files import NpyHeader, NpzArchive, check_hdf5_signature, open_npz, refusal
+from flowtact.inputs.safe_text import shown
 from flowtact.params import did_you_mean
-from flowtact.safe_text import shown
 
 __all__ = ["Replay", "ReplayConfig"]
 
@@ -419,7 +420,7 @@ class Replay(ft.Source):
         self._src = src
         path = Path(self.config.path)
         if src.h5_stream is not None and src.h5_file is None:
-            from flowtact.record import open_stream
+            from flowtact.recording.hdf5 import open_stream
 
             try:  # the file as inspected: bounded, no declared size beyond what it stores
                 check_h5_file(path)
@@ -526,7 +527,7 @@ def _period(src: _Source, t: np.ndarray) -> float:
 
 def _h5_tail(path: Path, stream: str) -> tuple[float | None, float | None]:
     """The last time stamp of a recorded stream and its recorded end watermark (None if absent)."""
-    from flowtact.record import open_recording, stream_header
+    from flowtact.recording.hdf5 import open_recording, stream_header
 
     with open_recording(path) as f:  # checked reads: damage is refused naming the dataset
         h = stream_header(f, stream)
@@ -571,8 +572,8 @@ def check_h5_file(path: Path) -> None:
 
 def h5_streams(path: Path) -> dict[str, tuple[ft.StreamSpec, int]]:
     """The streams of a recording to replay, from its header (:func:`check_h5_file`, then
-    :func:`flowtact.record.stream_specs`); any refusal a :class:`FileRefused` naming the file once."""
-    from flowtact.record import stream_specs
+    :func:`flowtact.recording.hdf5.stream_specs`); any refusal a :class:`FileRefused` naming the file once."""
+    from flowtact.recording.hdf5 import stream_specs
 
     check_h5_file(path)
     try:
@@ -584,7 +585,7 @@ def h5_streams(path: Path) -> dict[str, tuple[ft.StreamSpec, int]]:
 def _check_h5_stream(path: Path, name: str, spec: ft.StreamSpec, offset: float) -> None:
     """The played stream's datasets: sizes within the budget and the file (every declared sample
     stored), its sample shape as its spec says, its first and last time stamps playable."""
-    from flowtact.record import open_recording, stream_header
+    from flowtact.recording.hdf5 import open_recording, stream_header
 
     with open_recording(path) as f:
         h = stream_header(f, name)

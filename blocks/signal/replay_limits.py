@@ -1,8 +1,8 @@
 """The documented bounds of every replay reader (the ``replay`` block and ``--replay NODE=FILE``):
 a replayed file is data from someone else, so every size, count and number it declares is checked
 against these bounds before anything is allocated or played. The file checks themselves (regular
-files only, the HDF5 signature, .npz members' headers and sizes) are :mod:`flowtact.bounded_files`,
-whose :class:`~flowtact.bounded_files.FileRefused` every replay reader raises.
+files only, the HDF5 signature, .npz members' headers and sizes) are :mod:`flowtact.inputs.bounded_files`,
+whose :class:`~flowtact.errors.FileRefused` every replay reader raises.
 
 The bounds are generous for real logs and recordings and small enough that a refusal, and a run
 over a file within them, fits in memory: each player holds at most :data:`REPLAY_BUDGET_BYTES`

@@ -20,10 +20,11 @@ import flowtact.api as ft
 from flowtact.blocks.signal.csv_log import CsvError, display, read_csv_log
 from flowtact.blocks.signal.replay import SUFFIXES, Replay, h5_streams
 from flowtact.blocks.signal.replay_limits import MAX_STREAMS, listing
-from flowtact.bounded_files import FileRefused, open_npz, refusal
+from flowtact.catalog.blocks import load_block
+from flowtact.errors import FileRefused, UnknownBlockError
+from flowtact.graphfile.replay_spec import parse_port_map
+from flowtact.inputs.bounded_files import open_npz, refusal
 from flowtact.params import did_you_mean
-from flowtact.registry import UnknownBlockError, load_block
-from flowtact.replay_spec import parse_port_map
 
 __all__ = ["ReplayPorts", "ReplayPortsConfig", "stand_in_class"]
 

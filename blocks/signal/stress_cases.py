@@ -14,8 +14,8 @@ from functools import partial
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.stress import EPS, Outcome, StressCase
 from flowtact.testing import run_offline
+from flowtact.verify.stress import EPS, Outcome, StressCase
 
 from .savgol import SavGol, savgol_coeffs
 from .weighted_sum import WeightedSum

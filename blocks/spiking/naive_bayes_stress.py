@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.stress import Outcome, StressCase
 from flowtact.testing import run_offline
+from flowtact.verify.stress import Outcome, StressCase
 
 from .naive_bayes import NaiveBayes, example_model_path
 

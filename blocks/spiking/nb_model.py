@@ -33,8 +33,9 @@ from typing import Any, Literal
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.bounded_files import FileRefused, read_npz_bounded
-from flowtact.safe_text import shown
+from flowtact.errors import FileRefused
+from flowtact.inputs.bounded_files import read_npz_bounded
+from flowtact.inputs.safe_text import shown
 
 __all__ = [
     "FORMAT",
@@ -244,7 +245,7 @@ def save_model(path: str | Path, model: NaiveBayesModel, provenance: Mapping[str
 def load_model(path: str | Path) -> NaiveBayesModel:
     """Read and check a model file; raise :class:`ModelError` saying what is wrong with it.
 
-    The file is read within bounds (:func:`flowtact.bounded_files.read_npz_bounded`: a regular
+    The file is read within bounds (:func:`flowtact.inputs.bounded_files.read_npz_bounded`: a regular
     file, members checked against :data:`MAX_MODEL_BYTES` from their headers, no pickles), then
     every field is range-checked (classes, units, bins, finite probabilities) before use.
     """

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from flowtact.presets import presets_for
+from flowtact.catalog.presets import presets_for
 
 __all__ = ["PER_UNIT", "per_unit_models", "resolve_model"]
 

@@ -1,6 +1,6 @@
 """Numerical stress cases for ``nlif`` (issue 12, item 4): extreme τ, extreme drives, NaN/inf, long runs.
 
-Each function runs the real block and returns a :class:`flowtact.stress.Outcome`; ``CASES`` lists
+Each function runs the real block and returns a :class:`flowtact.verify.stress.Outcome`; ``CASES`` lists
 them for the tests (tests/blocks/spiking/test_nlif_stress.py), the outcome table
 (scripts/stress_outcomes.py) and the benchmark suite.
 """
@@ -13,8 +13,8 @@ from functools import partial
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.stress import EPS, Outcome, StressCase
 from flowtact.testing import run_offline
+from flowtact.verify.stress import EPS, Outcome, StressCase
 
 from .naive_bayes_stress import CASES as NAIVE_BAYES_STRESS
 from .nlif import Nlif

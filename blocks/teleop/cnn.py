@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.bounded_files import open_regular, regular_file
-from flowtact.safe_text import shown
+from flowtact.inputs.bounded_files import open_regular, regular_file
+from flowtact.inputs.safe_text import shown
 
 from .hand import FINGERS
 from .image import example_frames

@@ -613,7 +613,7 @@ class FingertipForce(ft.Block):
     perpendicular to the last link); ``form`` picks one, the printed equation by default (it is also
     the only one defined for the thumb, whose a3 = 0). With the default geometry the gain |w| stays
     within 0.7–1.35 over the working range (MCP −10…80°, PIP 0…100°). Inputs come from one device packet: paired by arrival order with
-    :class:`flowtact.align.Aligner` (timestamps must agree to ``tol_s``); ``drop`` removes the
+    :class:`flowtact.streams.align.Aligner` (timestamps must agree to ``tol_s``); ``drop`` removes the
     instant from both. The output watermark is the lower of the inputs' watermarks.
 
     Example

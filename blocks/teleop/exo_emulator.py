@@ -15,9 +15,9 @@ from flowtact.blocks.teleop.exo_device import ExoDevice, ExoParams
 from flowtact.blocks.teleop.exo_protocol import (
     N_FINGERS,
 )
-from flowtact.command import CommandParser, run_command
+from flowtact.console.command import CommandParser, run_command
 from flowtact.errors import UsageError
-from flowtact.limits import cli_float, cli_int
+from flowtact.inputs.limits import cli_float, cli_int
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 # -- the emulator process -----------------------------------------------------------------------
@@ -212,7 +212,7 @@ def _parser() -> _Parser:
 
 def main(argv: list[str] | None = None) -> int:
     """``flowtact sim exo``: serve an emulated exoskeleton on a pty until SIGTERM/SIGINT; its exit
-    status (:func:`flowtact.command.run_command`: 2 for a bad flag, one line, no traceback)."""
+    status (:func:`flowtact.console.command.run_command`: 2 for a bad flag, one line, no traceback)."""
     return run_command(lambda: _serve(argv), prog="flowtact sim exo")
 
 

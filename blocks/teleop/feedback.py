@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.merge import LatestMerger
+from flowtact.streams.merge import LatestMerger
 
 from .hand import FINGERS, N_FINGERS
 
@@ -143,7 +143,7 @@ class ForceFeedback(ft.Block):
     extra all-disengaged row at t_last + ``stall_s`` as soon as either input's watermark passes
     that time; if the stream resumes, its next row follows normally.
 
-    **Merging** (:class:`flowtact.merge.LatestMerger`): each ``finger`` sample is paired with the
+    **Merging** (:class:`flowtact.streams.merge.LatestMerger`): each ``finger`` sample is paired with the
     latest ``target`` sample at or before its time, and released once the target's watermark
     passes it — chunking-invariant. A ``finger`` sample waits at most ``max_wait_s`` of graph time
     (the larger input watermark) for that; then it is computed with the target known so far, so a

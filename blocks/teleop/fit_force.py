@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.command import CommandParser, run_command
 from flowtact.commands import Command
+from flowtact.console.command import CommandParser, run_command
 from flowtact.errors import UsageError
-from flowtact.limits import cli_float
+from flowtact.inputs.limits import cli_float
 
 from .hand import FINGERS
 
@@ -81,7 +81,7 @@ def fit_from_recording(
     ``intercept_n`` (lists, ready for ``linear_force``'s parameters), ``mae_n``, ``pairs`` (number
     of paired samples), ``sensors`` (labels), the stream names and the path.
     """
-    from flowtact.record import read_recording, stream_specs
+    from flowtact.recording.hdf5 import read_recording, stream_specs
 
     specs = stream_specs(path)
     for name in (ssim_stream, force_stream):
@@ -138,7 +138,7 @@ def _pair_by_time(ta: np.ndarray, tb: np.ndarray, tol_s: float) -> tuple[np.ndar
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``flowtact fit-force REC.h5``: fit the SSIM→force lines of a recording; its exit status
-    (:func:`flowtact.command.run_command`: 0 ok, 2 a bad flag or a recording without the streams
+    (:func:`flowtact.console.command.run_command`: 0 ok, 2 a bad flag or a recording without the streams
     asked for, 1 failed)."""
     return run_command(lambda: _fit(list(sys.argv[1:] if argv is None else argv)), prog="flowtact fit-force")
 

@@ -30,7 +30,7 @@ from flowtact.blocks.teleop.exo_protocol import (
     parse_line,
 )
 from flowtact.blocks.teleop.hand import FINGERS, N_FINGERS
-from flowtact.python_child import python_command
+from flowtact.running.python_child import python_command
 from flowtact.runtime.rundir import RunFolder, make_run_folder
 
 __all__ = ["SerialIo", "SerialIoConfig"]

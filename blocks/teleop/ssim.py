@@ -308,7 +308,7 @@ class Ssim(ft.Block):
     ``recapture`` connected a frame is released only once the recapture stream has reached its
     time (a recapture sample with time >= the frame's, or a watermark ``end`` beyond it), so the
     output does not depend on how the two streams are chunked; the latency is then that of the
-    recapture stream. Without it, latency 0. (This is :class:`flowtact.merge.LatestMerger`'s
+    recapture stream. Without it, latency 0. (This is :class:`flowtact.streams.merge.LatestMerger`'s
     release rule; the merger itself is not used because it pairs each frame with the *latest*
     recapture sample only, which would lose a pulse followed by a 0 before the next frame, and
     because it carries the driving stream as float64.)

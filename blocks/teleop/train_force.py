@@ -35,11 +35,11 @@ from typing import Any
 import numpy as np
 
 import flowtact.api as ft
-from flowtact.command import CommandParser, run_command
 from flowtact.commands import Command
+from flowtact.console.command import CommandParser, run_command
+from flowtact.console.terminal_bar import TerminalBar
 from flowtact.errors import UsageError
-from flowtact.limits import cli_float, cli_int
-from flowtact.terminal_bar import TerminalBar
+from flowtact.inputs.limits import cli_float, cli_int
 
 from .cnn import ARCHS, TORCH_HINT, Arch, Preprocess, build_model, import_torch, n_parameters, save_checkpoint
 from .hand import FINGERS
@@ -203,7 +203,7 @@ class Dataset:
 
 def _provenance(path: Path) -> dict[str, Any]:
     """The recording's command, graph seed, creation time, flowtact version and graph name (those it has)."""
-    from flowtact.record import read_recording
+    from flowtact.recording.hdf5 import read_recording
 
     bundle = read_recording(path, streams=()).provenance
     out = {
@@ -228,7 +228,7 @@ def load_recording_pairs(
 
     Frames are read and cropped slice by slice, so the whole-frame stream never sits in memory.
     """
-    from flowtact.record import open_verified, stream_specs
+    from flowtact.recording.hdf5 import open_verified, stream_specs
 
     path = Path(path)
     specs = stream_specs(path)
@@ -767,7 +767,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``flowtact train-force``: returns the exit status (:func:`flowtact.command.run_command`:
+    """``flowtact train-force``: returns the exit status (:func:`flowtact.console.command.run_command`:
     0 ok, 2 a bad flag or input, 1 failed)."""
     return run_command(
         lambda: _command(list(sys.argv[1:] if argv is None else argv)), prog="flowtact train-force"

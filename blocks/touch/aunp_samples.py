@@ -12,15 +12,13 @@ samples do not depend on the chunking.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from flowtact.blocks.signal.shapes import raised_cosine
 
-if TYPE_CHECKING:
-    from .aunp_sensor import AunpSensorConfig
+from .aunp_config import AunpSensorConfig
 
 __all__ = ["SCENARIOS", "sensor_samples", "trial_constants"]
 

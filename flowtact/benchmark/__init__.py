@@ -3,8 +3,9 @@
 plots and REPORT.md. It knows nothing of what the suites measure (they live in bench/)."""
 
 from flowtact.benchmark.registry import GROUP, register, suites, unregister
-from flowtact.benchmark.suite import Context, Figure, Suite, SuiteSkipped, Tradeoff
+from flowtact.benchmark.suite import Context, Figure, Suite, Tradeoff
 from flowtact.benchmark.timing import spread, time_call
+from flowtact.errors import SuiteSkipped
 
 __all__ = [
     "GROUP",

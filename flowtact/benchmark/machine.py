@@ -9,12 +9,19 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-__all__ = ["THREAD_VARS", "load_average", "machine_info"]
+__all__ = ["THREAD_VARS", "load_average", "machine_info", "pin_threads"]
 
 THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 """Pinned to 1 by the runner before any suite imports numba or BLAS: every figure is one core's."""
 
 _VERSIONS = ("flowtact", "numpy", "numba", "pyzmq", "scipy", "scikit-image", "torch", "matplotlib")
+
+
+def pin_threads() -> None:
+    """One thread per kernel (numba, BLAS) for every suite: figures are one core's. Set before any
+    suite imports numba (the runner imports suites lazily); an explicit environment wins."""
+    for var in THREAD_VARS:
+        os.environ.setdefault(var, "1")
 
 
 def load_average() -> list[float] | None:

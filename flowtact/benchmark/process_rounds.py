@@ -12,18 +12,15 @@ says how many processes measured each figure.
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import json
 import os
 import subprocess
-import sys
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from flowtact.python_child import python_command
+from flowtact.running.python_child import python_command
 from flowtact.runtime.rundir import make_run_folder
 
 __all__ = ["STEP_MARK", "Prior", "measure_children", "share"]
@@ -50,7 +47,7 @@ def measure_children(
     for part in range(parts - 1):
         with make_run_folder("bench") as folder:  # swept by a later start if this process is killed
             out = Path(folder.path) / "figures.json"
-            cmd = python_command("-m", __name__, name, "--part", str(part), "--parts", str(parts), "--out",
+            cmd = python_command("-m", "flowtact.benchmark.round_child", name, "--part", str(part), "--parts", str(parts), "--out",
                                  str(out), *(["--quick"] if quick else []), *(["--peers"] if peers else []))  # fmt: skip
             tail = _run_child(cmd, lambda text, p=part: on_step(f"process {p + 1}/{parts}: {text}"))
             if tail is not None or not out.exists():
@@ -85,41 +82,3 @@ def _merge(prior: Prior, figures: dict[str, dict[str, Any]]) -> None:
         p["seconds"] += f.get("seconds") or []
         p["pairs"] += f.get("pairs") or []
         p["processes"] += 1
-
-
-def main(argv: list[str] | None = None) -> int:
-    """A child: run one part of a suite and write its figures' raw samples as JSON."""
-    from flowtact.benchmark.registry import Unavailable, suites
-    from flowtact.benchmark.runner import pin_threads
-    from flowtact.benchmark.suite import Context, SuiteSkipped
-
-    ap = argparse.ArgumentParser(prog="python -m flowtact.benchmark.process_rounds")
-    ap.add_argument("suite", help="a registered suite's name, or module:attribute of a Suite")
-    ap.add_argument("--part", type=int, required=True)
-    ap.add_argument("--parts", type=int, required=True)
-    ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--peers", action="store_true")
-    a = ap.parse_args(argv)
-    pin_threads()
-    if ":" in a.suite:
-        module, attr = a.suite.split(":", 1)
-        suite = getattr(importlib.import_module(module), attr)
-    else:
-        suite = suites().get(a.suite)
-    if suite is None or isinstance(suite, Unavailable):
-        print(f"suite {a.suite!r} is not available here", flush=True)
-        return 1
-    ctx = Context(suite, a.quick, a.peers, on_step=lambda t: print(STEP_MARK + t, flush=True),
-                  part=a.part, parts=a.parts)  # fmt: skip
-    try:
-        suite.run(ctx)
-    except SuiteSkipped as e:
-        print(f"skipped: {e}", flush=True)
-        return 1
-    a.out.write_text(json.dumps(ctx.raw_samples()))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

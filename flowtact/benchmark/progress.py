@@ -1,4 +1,4 @@
-"""Progress of a bench run: the one bar (:class:`flowtact.terminal_bar.TerminalBar`) on a terminal,
+"""Progress of a bench run: the one bar (:class:`flowtact.console.terminal_bar.TerminalBar`) on a terminal,
 one line per suite otherwise."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from typing import TextIO
 
-from flowtact.terminal_bar import TerminalBar
+from flowtact.console.terminal_bar import TerminalBar
 
 __all__ = ["Progress"]
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import os
 import shlex
 import sys
 import time
@@ -13,21 +12,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from flowtact.benchmark.machine import THREAD_VARS, load_average, machine_info
+from flowtact.benchmark.machine import load_average, machine_info, pin_threads
 from flowtact.benchmark.plots import draw_tradeoff, save_plot
 from flowtact.benchmark.process_rounds import measure_children
 from flowtact.benchmark.progress import Progress
 from flowtact.benchmark.registry import Unavailable, in_process_only, suites
-from flowtact.benchmark.suite import Context, Suite, SuiteSkipped
+from flowtact.benchmark.suite import Context, Suite
+from flowtact.errors import SuiteSkipped
 
 __all__ = ["command_line", "list_suites", "run_suites"]
-
-
-def pin_threads() -> None:
-    """One thread per kernel (numba, BLAS) for every suite: figures are one core's. Set before any
-    suite imports numba (the runner imports suites lazily); an explicit environment wins."""
-    for var in THREAD_VARS:
-        os.environ.setdefault(var, "1")
 
 
 def command_line(names: Sequence[str], quick: bool, peers: bool) -> str:

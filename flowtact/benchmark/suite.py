@@ -23,6 +23,7 @@ from typing import Any, Literal
 
 from flowtact.benchmark.process_rounds import Prior, share
 from flowtact.benchmark.timing import spread, time_call, time_paired
+from flowtact.errors import SuiteSkipped
 
 __all__ = [
     "MIN_RATIO_SAMPLES",
@@ -31,7 +32,6 @@ __all__ = [
     "Figure",
     "Plot",
     "Suite",
-    "SuiteSkipped",
     "Table",
     "Tradeoff",
     "TradeoffPoint",
@@ -41,10 +41,6 @@ Better = Literal["higher", "lower"]
 MIN_RATIO_SAMPLES = 3
 """Samples a figure and its baseline each need before a ratio between them is recorded: a single
 run's ratio has no spread, so a rerun could never be held to it."""
-
-
-class SuiteSkipped(Exception):
-    """Raised by ``ctx.skip(reason)``: the suite cannot run here (a missing package, no --peers)."""
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ class Command:
     """One ``flowtact NAME`` command: either ``add_arguments`` + ``run(args)`` (``flowtact`` parses
     its arguments, its ``--help`` and usage errors as every command's), or ``main(argv)`` alone (a
     command that parses its own arguments, e.g. one dispatching further). Either returns the exit
-    status (None: 0) and raises what went wrong (:func:`flowtact.command.run_command` says it)."""
+    status (None: 0) and raises what went wrong (:func:`flowtact.console.command.run_command` says it)."""
 
     run: Callable[[argparse.Namespace], int | None] | None = None
     add_arguments: Callable[[argparse.ArgumentParser], None] | None = None
@@ -58,14 +58,14 @@ def load_command(ep: Any) -> Command:
 
 def entry_point_summary(ep: Any) -> str:
     """An entry point's one-line summary for help lists: the first sentence of its module's
-    docstring as plain text (reST markup gone, :func:`flowtact.rst_text.inline_text`), without a
+    docstring as plain text (reST markup gone, :func:`flowtact.help.rst_text.inline_text`), without a
     leading ``flowtact NAME ...:`` or trailing ``: flowtact NAME`` that repeats the name beside
     it. Cheap: the module is parsed, not imported."""
     import ast
     import importlib.util
     from pathlib import Path
 
-    from flowtact.rst_text import inline_text
+    from flowtact.help.rst_text import inline_text
 
     try:
         spec = importlib.util.find_spec(ep.value.partition(":")[0])

@@ -15,7 +15,8 @@ def add_arguments(blocks: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flowtact.registry import UnknownBlockError, block_names, load_block
+    from flowtact.catalog.blocks import block_names, load_block
+    from flowtact.errors import UnknownBlockError
 
     if not args.name:
         for name in block_names():
@@ -26,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
         cls = load_block(args.name, [args.name.partition(":")[0]])  # named on the command line: allowed
     except UnknownBlockError as e:  # a usage error: the name given is not a block
         raise UsageError(str(e)) from e
-    from flowtact.describe import describe_block
+    from flowtact.help.describe import describe_block
 
     print(describe_block(cls))
     return 0

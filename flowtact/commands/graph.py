@@ -20,12 +20,12 @@ def add_arguments(draw: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flowtact.pictures.graph_figure import FORMATS, draw_plan
+    from flowtact.pictures.graph_figure import FORMATS, draw_compiled
 
     suffix = Path(args.output).suffix
     if suffix not in FORMATS:  # a usage error: say so before loading anything
         raise UsageError(f"-o {args.output}: cannot draw to '{suffix}'; use {', '.join(FORMATS)}")
-    out = draw_plan(load_graph_plan(args), args.output)
+    out = draw_compiled(load_graph_plan(args), args.output)
     print(f"wrote {out}")
     return 0
 

@@ -45,14 +45,14 @@ def complete_graph(prefix: str, **_kwargs: Any) -> list[str]:
     folders under the prefix (argcomplete's file completer)."""
     from argcomplete.completers import FilesCompleter
 
-    from flowtact.graph import shipped_graphs
+    from flowtact.graphfile.graph import shipped_graphs
 
     names = [n for n in shipped_graphs() if n.startswith(prefix)]
     return names + list(FilesCompleter(allowednames=("yaml", "yml", "h5"))(prefix))
 
 
 def _module_name(text: str) -> str:
-    from flowtact.registry import check_module_name
+    from flowtact.catalog.blocks import check_module_name
 
     try:
         return check_module_name(text)
@@ -78,7 +78,9 @@ def add_allow_module(sp: argparse.ArgumentParser) -> None:
 def parse_replays(items: Sequence[str]) -> dict[str, str]:
     """``--replay NODE=FILE[:MAP]`` items as node -> FILE[:MAP]; a located GraphErrors (``--replay:1:I``)
     for a malformed item or a node replayed twice."""
-    from flowtact.graph import GraphError, GraphErrors, Loc
+    from flowtact.errors import GraphFileError
+    from flowtact.graphfile.graph import Loc
+    from flowtact.graphfile.located import GraphProblem
 
     out: dict[str, str] = {}
     for i, item in enumerate(items):
@@ -87,7 +89,7 @@ def parse_replays(items: Sequence[str]) -> dict[str, str]:
         why = "expected NODE=FILE[:PORT=COLUMN,...;PORT=...]" if not sep or not node or not path else ""
         why = why or (f"node '{node}' is replayed twice" if node in out else "")
         if why:
-            raise GraphErrors([GraphError(Loc("--replay", 1, i + 1), f"--replay '{item}': {why}")])
+            raise GraphFileError([GraphProblem(Loc("--replay", 1, i + 1), f"--replay '{item}': {why}")])
         out[node] = path
     return out
 
@@ -97,7 +99,7 @@ def _import_beside_graph(graph: str, modules: Sequence[str]) -> None:
     ``--allow-module envelope``): the graph's real folder goes at the END of ``sys.path`` (an
     installed module of the same name still wins), and workers inherit it. Nothing happens without
     ``--allow-module``: a graph alone never makes its folder importable."""
-    from flowtact.graph import local_module_folder
+    from flowtact.graphfile.graph import local_module_folder
 
     folder = local_module_folder(graph, modules) if modules else None
     if folder is not None and str(folder) not in sys.path:
@@ -106,10 +108,10 @@ def _import_beside_graph(graph: str, modules: Sequence[str]) -> None:
 
 def load_graph_plan(args: argparse.Namespace) -> Any:
     """The plan the graph arguments (:func:`add_graph_arguments`) describe."""
-    from flowtact.launch import load_plan
+    from flowtact.running.launch import load_compiled
 
     _import_beside_graph(args.graph, args.allow_modules)
-    return load_plan(
+    return load_compiled(
         args.graph,
         overrides=args.overrides,
         replays=parse_replays(args.replays),

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from flowtact.command import EXIT_RUN_ERROR
 from flowtact.commands import Command
+from flowtact.console.command import EXIT_RUN_ERROR
 from flowtact.errors import UsageError
 
 __all__ = ["COMMAND"]
@@ -18,8 +18,8 @@ def add_arguments(info: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flowtact.record_integrity import NotARecording, RecordingRefused
-    from flowtact.recording_info import format_info, inspect_recording
+    from flowtact.errors import NotARecording, RecordingRefused
+    from flowtact.recording.info import format_info, inspect_recording
 
     try:
         info = inspect_recording(args.recording)

@@ -6,7 +6,7 @@ import argparse
 
 from flowtact.commands import Command
 from flowtact.errors import UsageError
-from flowtact.limits import cli_finite_seconds
+from flowtact.inputs.limits import cli_finite_seconds
 
 __all__ = ["COMMAND"]
 
@@ -43,8 +43,8 @@ def check(args: argparse.Namespace) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from flowtact.errors import NotARecording, RecordingRefused
     from flowtact.pictures.recording_figure import plot_recording
-    from flowtact.record_integrity import NotARecording, RecordingRefused
 
     t_range = None if args.t0 is None and args.t1 is None else (args.t0, args.t1)
     try:

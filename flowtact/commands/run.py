@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING, Any
 
 from flowtact.commands import Command
 from flowtact.commands.graph_args import add_graph_arguments, load_graph_plan
-from flowtact.deployment import MAX_STARTUP_S
-from flowtact.limits import MAX_TICK_S, MIN_TICK_S, cli_duration_seconds, cli_float, cli_tick_seconds
+from flowtact.graphfile.deployment import MAX_STARTUP_S
+from flowtact.inputs.limits import MAX_TICK_S, MIN_TICK_S, cli_duration_seconds, cli_float, cli_tick_seconds
 
 if TYPE_CHECKING:
-    from flowtact.terminal_bar import TerminalBar
+    from flowtact.console.terminal_bar import TerminalBar
 
 __all__ = ["COMMAND", "RUN_EXAMPLES", "run_progress"]
 
@@ -72,10 +72,10 @@ def add_arguments(run: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from flowtact.launch import run_plan
+    from flowtact.console.terminal_bar import TerminalBar
+    from flowtact.running.launch import run_compiled
     from flowtact.runtime.clock import process_started_at
     from flowtact.runtime.live import LiveView
-    from flowtact.terminal_bar import TerminalBar
 
     plan = load_graph_plan(args)
     quiet = args.quiet or args.json
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_term)
     try:
         with live:
-            summary = run_plan(
+            summary = run_compiled(
                 plan,
                 duration_s=args.duration,
                 fast=args.fast,

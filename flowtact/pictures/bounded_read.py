@@ -17,9 +17,9 @@ import h5py
 import numpy as np
 
 from flowtact.chunk import StreamSpec
-from flowtact.record import open_verified, spec_from_attrs
-from flowtact.record_integrity import RecordingCorrupted
-from flowtact.safe_text import shown
+from flowtact.errors import RecordingCorrupted
+from flowtact.inputs.safe_text import shown
+from flowtact.recording.hdf5 import open_verified, spec_from_attrs
 
 __all__ = [
     "BLOCK_BYTES",

@@ -11,13 +11,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from flowtact.compile import Plan
 from flowtact.pictures.graph_layout import EdgeIn, Layout, Rect, layout
+from flowtact.running.compile import CompiledGraph
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["FORMATS", "draw_plan", "graph_figure", "to_dot"]
+__all__ = ["FORMATS", "draw_compiled", "graph_figure", "to_dot"]
 
 FORMATS = (".svg", ".png", ".pdf", ".dot")
 
@@ -33,7 +33,7 @@ ARROW = (7.0, 3.0)  # arrow head length and half-width, points
 DPI = 150
 
 
-def to_dot(plan: Plan) -> str:
+def to_dot(plan: CompiledGraph) -> str:
     """The plan as a Graphviz digraph (pruned parts grey and dashed)."""
     g = plan.graph
     active_edges = {str(e) for e in plan.active_edges}
@@ -61,7 +61,7 @@ def to_dot(plan: Plan) -> str:
     return "\n".join(lines) + "\n"
 
 
-def draw_plan(plan: Plan, output: str | Path) -> Path:
+def draw_compiled(plan: CompiledGraph, output: str | Path) -> Path:
     """Write the plan as ``.dot``, ``.svg``, ``.png`` or ``.pdf`` (by the file's suffix)."""
     out = Path(output)
     if out.suffix == ".dot":
@@ -74,7 +74,7 @@ def draw_plan(plan: Plan, output: str | Path) -> Path:
     return out
 
 
-def graph_figure(plan: Plan) -> Figure:
+def graph_figure(plan: CompiledGraph) -> Figure:
     """The plan drawn on a matplotlib figure sized to its content (one data unit is one point).
 
     Artists carry ids (``node:NAME``, ``edge:I``, ``arrow:I``, ``label:I`` for the plan's i-th graph
@@ -138,16 +138,16 @@ class _Measure:
         return w / self.SCALE
 
 
-def _delayed(plan: Plan, e: Any) -> bool:
+def _delayed(plan: CompiledGraph, e: Any) -> bool:
     port = plan.graph.nodes[e.dst].cls.inputs.get(e.dst_port)
     return bool(port is not None and port.delay)
 
 
-def _edge_text(plan: Plan, e: Any) -> str:
+def _edge_text(plan: CompiledGraph, e: Any) -> str:
     return f"{e.src_port}→{e.dst_port}" + (" (delayed)" if _delayed(plan, e) else "")
 
 
-def _box_lines(plan: Plan, n: str) -> list[_Text]:
+def _box_lines(plan: CompiledGraph, n: str) -> list[_Text]:
     on = n in plan.order
     lines = [
         _Text(n, 9.0, weight="bold", color="black" if on else GREY),
@@ -159,7 +159,7 @@ def _box_lines(plan: Plan, n: str) -> list[_Text]:
     return lines
 
 
-def _groups(plan: Plan) -> dict[str, str]:
+def _groups(plan: CompiledGraph) -> dict[str, str]:
     """The process group of each active node, when the graph runs in more than one."""
     from flowtact.runtime.placement import default_groups  # the rule the runtime places by
 
@@ -186,7 +186,7 @@ def _moved(r: Rect, dx: float, dy: float) -> Rect:
 
 
 def _draw_boxes(
-    ax: Any, plan: Plan, lay: Layout, boxes: dict[str, list[_Text]], dx: float, dy: float
+    ax: Any, plan: CompiledGraph, lay: Layout, boxes: dict[str, list[_Text]], dx: float, dy: float
 ) -> None:
     from matplotlib.patches import FancyBboxPatch
 
@@ -225,7 +225,7 @@ def _draw_boxes(
             y += h
 
 
-def _draw_edges(ax: Any, plan: Plan, lay: Layout, dx: float, dy: float) -> None:
+def _draw_edges(ax: Any, plan: CompiledGraph, lay: Layout, dx: float, dy: float) -> None:
     from matplotlib.patches import PathPatch, Polygon
     from matplotlib.path import Path as MPath
 
@@ -297,7 +297,7 @@ class _Frame:
     legend_y: float
 
     @classmethod
-    def around(cls, plan: Plan, lay: Layout, measure: _Measure) -> _Frame:
+    def around(cls, plan: CompiledGraph, lay: Layout, measure: _Measure) -> _Frame:
         g = plan.graph
         wrap_at = max(lay.width - 20, 320.0)
         header = [_Text(g.name, 11.0, weight="bold")]
@@ -362,7 +362,7 @@ class _Frame:
             x += 22 + measure.width(t) + 14
 
 
-def _legend_items(plan: Plan) -> list[tuple[str, _Text]]:
+def _legend_items(plan: CompiledGraph) -> list[tuple[str, _Text]]:
     g, items = plan.graph, []
     if plan.pruned or len(plan.active_edges) < len(g.edges):
         items.append(("pruned", _Text("pruned: not computed", 7.5, color=INK)))

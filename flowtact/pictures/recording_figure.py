@@ -14,9 +14,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from flowtact.inputs.safe_text import shown
 from flowtact.pictures.bounded_read import StreamSource, label, open_recording
 from flowtact.pictures.panels import Panel, binned_rates, draw_frames, draw_panel, plan_panels
-from flowtact.safe_text import shown
 
 __all__ = ["DPI", "binned_rates", "need_matplotlib", "plot_recording", "recording_figure", "time_span"]
 
@@ -106,7 +106,7 @@ def recording_figure(
         draw = load_figure(figure)  # an unknown name is refused before the file is opened
     path = Path(source)
     if streams is None:  # refuse a figure of thousands of panels before verifying them all
-        from flowtact.record import stream_count
+        from flowtact.recording.hdf5 import stream_count
 
         _check_count(path, stream_count(path))
     f, sources, root = open_recording(path)

@@ -22,8 +22,8 @@ import numpy as np
 
 from flowtact.block import Block
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.compile import Plan
-from flowtact.errors import FlowtactError
+from flowtact.errors import NodeError
+from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.sealing import sealed
 from flowtact.runtime.step_plan import OutPlan, WiredNode, build_plans, takes_first, tallies
 
@@ -31,26 +31,23 @@ __all__ = ["Engine", "NodeError", "Sink", "check_chunk"]
 
 
 class Sink(Protocol):
-    """What the engine writes recorded streams to (a :class:`flowtact.record.Recorder`)."""
+    """What the engine writes recorded streams to (a :class:`flowtact.recording.hdf5.Recorder`)."""
 
     def write(self, stream: str, chunk: Chunk) -> None: ...
 
     def maybe_flush(self) -> None: ...
 
 
-class NodeError(FlowtactError, RuntimeError):
-    """A block raised while stepping: names the node, its block and the graph time."""
-
-    def __init__(self, node: str, block: str, now: float, cause: BaseException) -> None:
-        self.node, self.block, self.now, self.cause = node, block, now, cause
-        super().__init__(f"node '{node}' ({block}) failed at t={now:.3f} s: {type(cause).__name__}: {cause}")
-
-
 class Engine:
     """The tick schedule of a plan's nodes, joined by links of one kind (``local`` by default)."""
 
     def __init__(
-        self, plan: Plan, blocks: dict[str, Block], *, recorder: Sink | None = None, link: str = "local"
+        self,
+        plan: CompiledGraph,
+        blocks: dict[str, Block],
+        *,
+        recorder: Sink | None = None,
+        link: str = "local",
     ) -> None:
         self.recorder = recorder
         self.nodes, self.links = build_plans(plan, blocks, link)

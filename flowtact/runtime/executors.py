@@ -14,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
-from flowtact.compile import Plan
+from flowtact.running.compile import CompiledGraph
 
 if TYPE_CHECKING:
     from flowtact.runtime.inproc import RunSummary
@@ -47,7 +47,7 @@ class Executor(Protocol):
 
 
 class ExecutorClass(Protocol):
-    def for_run(self, plan: Plan, options: RunOptions) -> Executor: ...
+    def for_run(self, plan: CompiledGraph, options: RunOptions) -> Executor: ...
 
 
 DEFAULT_EXECUTOR = "processes"

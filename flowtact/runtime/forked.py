@@ -11,7 +11,7 @@ A fork copies only the calling thread: a lock another thread held stays held in 
 So a worker is forked only while the supervisor runs one Python thread and before it has made a
 ZeroMQ context (whose I/O threads are native): at the start of a run, on Linux. A group
 restarted during the run, or a process when this cannot be ensured, starts as its own interpreter
-(:func:`flowtact.python_child.python_command`), as before.
+(:func:`flowtact.running.python_child.python_command`), as before.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from flowtact.block import Block
-from flowtact.compile import Plan
+from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.clock import LAG_WARN_S, Clock, FastClock, RealtimeClock, tick_for
 from flowtact.runtime.engine import Engine, NodeError, Sink, check_chunk
 from flowtact.runtime.executors import RunOptions
@@ -192,11 +192,11 @@ class RunSummary:
 
 
 class InprocExecutor:
-    """Runs a :class:`~flowtact.compile.Plan` in this process."""
+    """Runs a :class:`~flowtact.running.compile.CompiledGraph` in this process."""
 
     def __init__(
         self,
-        plan: Plan,
+        plan: CompiledGraph,
         *,
         fast: bool = True,
         tick_s: float | None = None,
@@ -222,7 +222,7 @@ class InprocExecutor:
         self._made = time.perf_counter()  # start-up counts from here: the blocks were just made
 
     @classmethod
-    def for_run(cls, plan: Plan, options: RunOptions) -> InprocExecutor:
+    def for_run(cls, plan: CompiledGraph, options: RunOptions) -> InprocExecutor:
         """The executor ``flowtact run --inproc`` makes: warmed up as a worker is, so kernel
         loading is start-up, apart from the running time."""
         o = options
@@ -314,7 +314,9 @@ def block_summaries(blocks: Mapping[str, Block]) -> dict[str, str]:
     return out
 
 
-def explain_counters(plan: Plan, counters: Mapping[str, Mapping[str, int]]) -> dict[str, dict[str, str]]:
+def explain_counters(
+    plan: CompiledGraph, counters: Mapping[str, Mapping[str, int]]
+) -> dict[str, dict[str, str]]:
     """What each counter in ``counters`` (node -> name -> count) means, from its node's block class."""
     out: dict[str, dict[str, str]] = {}
     for node, cs in counters.items():

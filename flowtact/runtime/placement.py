@@ -13,9 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from flowtact.block import Source
-from flowtact.compile import Plan
-from flowtact.deployment import Flow, ProcessDef
-from flowtact.graph import GraphError, GraphErrors
+from flowtact.errors import GraphFileError
+from flowtact.graphfile.deployment import Flow, ProcessDef
+from flowtact.graphfile.located import GraphProblem
+from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.protocol import (
     DeadlinePlan,
     InboundStream,
@@ -39,7 +40,7 @@ MAX_LOCAL_PROCESSES = 64
 class Placement:
     """Which group runs each node, the cross-group streams, and every group's worker plan."""
 
-    plan: Plan
+    plan: CompiledGraph
     group_of: dict[str, str]
     groups: dict[str, list[str]]
     processes: dict[str, ProcessDef]
@@ -125,7 +126,7 @@ class Placement:
         )
 
 
-def default_groups(plan: Plan) -> dict[str, str]:
+def default_groups(plan: CompiledGraph) -> dict[str, str]:
     """Each active node's process group by the runtime's rule: its declared ``process``, else its
     first producer's group, else the default group."""
     graph = plan.graph
@@ -144,7 +145,7 @@ def default_groups(plan: Plan) -> dict[str, str]:
     return group_of
 
 
-def place(plan: Plan, *, fast: bool) -> Placement:
+def place(plan: CompiledGraph, *, fast: bool) -> Placement:
     """Group the plan's active nodes into processes and find the streams that cross groups.
 
     In ``fast`` mode every edge is ``block`` (lossless), whatever the graph says, so that a
@@ -159,9 +160,9 @@ def place(plan: Plan, *, fast: bool) -> Placement:
     local = [g for g in groups if processes[g].host is None]
     if len(local) > MAX_LOCAL_PROCESSES:
         first = graph.nodes[groups[local[MAX_LOCAL_PROCESSES]][0]]
-        raise GraphErrors(
+        raise GraphFileError(
             [
-                GraphError(
+                GraphProblem(
                     first.loc,
                     f"the graph places {len(local)} process groups on this host; flowtact runs at most "
                     f"{MAX_LOCAL_PROCESSES} (each is a Python process of its own)",
@@ -182,7 +183,7 @@ def place(plan: Plan, *, fast: bool) -> Placement:
         flow = Flow("block", e.queue) if fast else e.flow
         if key in crossings and crossings[key] != flow:
             errors.append(
-                GraphError(
+                GraphProblem(
                     e.loc,
                     f"{e}: the edges from '{e.src}.{e.src_port}' into process '{g_dst}' disagree on policy/queue",
                     "a stream enters a process once: give its edges into that process the same policy and queue",
@@ -190,5 +191,5 @@ def place(plan: Plan, *, fast: bool) -> Placement:
             )
         crossings[key] = flow
     if errors:
-        raise GraphErrors(errors)
+        raise GraphFileError(errors)
     return Placement(plan, group_of, groups, processes, stream_ids, crossings)

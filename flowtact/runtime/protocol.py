@@ -3,7 +3,7 @@
 What crosses processes on the control socket is a message: an :class:`Op` and its fields. A
 worker's part of the plan is a :class:`WorkerPlan` of frozen dataclasses (the nodes it builds, its
 local edges, the streams it receives and sends, what it records, its deadlines); a stream's
-:class:`~flowtact.deployment.Flow` (policy and queue bound) travels in it as one value from the
+:class:`~flowtact.graphfile.deployment.Flow` (policy and queue bound) travels in it as one value from the
 graph's edge to the socket. :func:`encode` and :func:`decode` are the only places that turn these
 into msgpack bytes and back (never pickle).
 """
@@ -18,7 +18,7 @@ import msgpack
 import numpy as np
 
 from flowtact.chunk import StreamSpec
-from flowtact.deployment import Flow
+from flowtact.graphfile.deployment import Flow
 
 __all__ = [
     "DeadlinePlan",

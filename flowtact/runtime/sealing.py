@@ -23,7 +23,7 @@ called from ``InprocExecutor._admit``: the block's output dict, the delivery loo
 _ARRAY_REFS = 4
 """The same for one of its arrays: the chunk's field, ``_admit``'s local, the parameter and the
 argument. More references than these mean the block (or something else) keeps the object.
-tests/test_inproc_sealing.py pins both: fewer would seal a kept buffer, more only costs a view."""
+tests/runtime/test_inproc_sealing.py pins both: fewer would seal a kept buffer, more only costs a view."""
 
 
 def sealed(chunk: Chunk, t: np.ndarray, d: np.ndarray) -> Chunk:

@@ -17,7 +17,7 @@ import numpy as np
 
 from flowtact.block import Block, Source
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.compile import Plan
+from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.links import Link, link_kind
 
 __all__ = ["OutPlan", "WiredNode", "build_plans", "takes_first", "tallies"]
@@ -69,7 +69,7 @@ class WiredNode:
 
 
 def build_plans(
-    plan: Plan, blocks: dict[str, Block], link: str = "local"
+    plan: CompiledGraph, blocks: dict[str, Block], link: str = "local"
 ) -> tuple[list[WiredNode], list[Link]]:
     """Node plans in execution order, every edge a link of kind ``link``, and every link made."""
     nodes: dict[str, WiredNode] = {}

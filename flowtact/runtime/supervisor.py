@@ -39,7 +39,7 @@ from typing import Any
 
 import zmq
 
-from flowtact.compile import Plan
+from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.clock import tick_for
 from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.executors import RunOptions
@@ -53,21 +53,21 @@ from flowtact.runtime.supervisor_procs import (
     PING_S,
     STOP_MARGIN_S,
     WATCH_S,
-    Failure,
     Proc,
+    ProcessFailure,
     WorkerFailed,
     describe_failure,
 )
 from flowtact.runtime.supervisor_startup import SupervisorStartup
 from flowtact.runtime.supervisor_stats import SupervisorStats
 
-__all__ = ["ProcessExecutor", "WorkerFailed", "describe_failure"]
+__all__ = ["ProcessExecutor", "describe_failure"]
 
 _EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
 
 
 class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
-    """Runs a :class:`~flowtact.compile.Plan` across worker processes joined by ZeroMQ.
+    """Runs a :class:`~flowtact.running.compile.CompiledGraph` across worker processes joined by ZeroMQ.
 
     Start-up (:mod:`~flowtact.runtime.supervisor_startup`), liveness
     (:mod:`~flowtact.runtime.supervisor_liveness`) and statistics
@@ -76,7 +76,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
 
     def __init__(
         self,
-        plan: Plan,
+        plan: CompiledGraph,
         *,
         fast: bool = True,
         tick_s: float | None = None,
@@ -107,7 +107,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
         }
 
     @classmethod
-    def for_run(cls, plan: Plan, options: RunOptions) -> ProcessExecutor:
+    def for_run(cls, plan: CompiledGraph, options: RunOptions) -> ProcessExecutor:
         """The executor ``flowtact run`` makes by default."""
         o = options
         return cls(
@@ -317,7 +317,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
             self.last_done_ns = time.monotonic_ns()
             proc.state = "done"
         elif op is Op.ERROR:
-            raise Failure(proc, msg)
+            raise ProcessFailure(proc, msg)
 
     def _supervise(self) -> str:
         while not all(p.done for p in self.procs.values()):
@@ -329,7 +329,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
                 self._check_grace()
             try:
                 self._pump(20)
-            except Failure as f:
+            except ProcessFailure as f:
                 self._failed(f)
         self._drain_until_records_end()
         return "interrupted" if self.stopped else "duration"
@@ -369,7 +369,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
                 "the recording holds what arrived until then"
             )
 
-    def _failed(self, f: Failure) -> None:
+    def _failed(self, f: ProcessFailure) -> None:
         """Restart the worker when its group asks for it and may; otherwise end the run."""
         proc, text = f.proc, describe_failure(f.proc, f.report)
         if f.report.get("stalled") and proc.popen is not None and proc.popen.poll() is None:

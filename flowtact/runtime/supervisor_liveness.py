@@ -17,8 +17,8 @@ from flowtact.runtime.supervisor_procs import (
     IDLE_CPU,
     LAST_WORDS_S,
     SILENT_PROBE_S,
-    Failure,
     Proc,
+    ProcessFailure,
 )
 
 __all__ = ["SupervisorLiveness", "proc_stat", "tick_rate"]
@@ -57,7 +57,7 @@ class SupervisorLiveness:
             if p.done:
                 continue
             cause = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exited with status {code}"
-            raise Failure(p, {"node": None, "message": cause})
+            raise ProcessFailure(p, {"node": None, "message": cause})
 
     def _check_liveness(self) -> None:
         """A running worker that shows no progress for ``stall_s`` has stalled.
@@ -86,7 +86,7 @@ class SupervisorLiveness:
                 if quiet > window
                 else f"node '{node}' has not returned from its step for {stuck:.1f} s"
             )
-            raise Failure(
+            raise ProcessFailure(
                 p,
                 {
                     "node": None,

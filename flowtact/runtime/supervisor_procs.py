@@ -10,10 +10,10 @@ from typing import Any
 
 import zmq
 
-from flowtact.errors import FlowtactError
+from flowtact.errors import ProcessFailure, WorkerFailed
 from flowtact.runtime.forked import ForkedWorker
 
-__all__ = ["Failure", "Proc", "WorkerFailed", "describe_failure"]
+__all__ = ["Proc", "ProcessFailure", "WorkerFailed", "describe_failure"]
 
 PING_S = 0.25
 WATCH_S = 0.02
@@ -32,18 +32,6 @@ SILENT_PROBE_S = 0.3
 """How long a worker without progress has its CPU time watched, to tell a hung process from a busy one."""
 IDLE_CPU = 0.05
 """A worker without progress that uses less than this share of a core is not working: it has stalled."""
-
-
-class WorkerFailed(FlowtactError, RuntimeError):
-    """A worker raised, died or stalled, or a stop overran its grace: names process, nodes, cause.
-
-    ``traceback`` is the failing block's Python traceback as the worker formatted it (None when
-    no Python exception caused the failure: a death, a stall); ``flowtact --debug`` prints it.
-    """
-
-    def __init__(self, message: str, traceback: str | None = None) -> None:
-        super().__init__(message)
-        self.traceback = traceback
 
 
 @dataclass
@@ -94,14 +82,6 @@ class Proc:
     def describe(self) -> str:
         where = f" on {self.host}" if self.host else ""
         return f"process '{self.name}'{where} (nodes {', '.join(self.nodes)})"
-
-
-class Failure(Exception):
-    """A worker reported an error or died (caught by the supervisor: restart or end the run)."""
-
-    def __init__(self, proc: Proc, report: dict[str, Any]) -> None:
-        self.proc, self.report = proc, report
-        super().__init__(report.get("message", ""))
 
 
 def describe_failure(proc: Proc, report: dict[str, Any]) -> str:

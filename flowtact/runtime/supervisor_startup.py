@@ -16,7 +16,7 @@ from pathlib import Path
 
 import zmq
 
-from flowtact.python_child import python_command
+from flowtact.running.python_child import python_command
 from flowtact.runtime.forked import ForkedWorker, can_fork, fork_worker
 from flowtact.runtime.links.zeromq.control import supervisor_sockets, supervisor_tcp_sockets
 from flowtact.runtime.links.zeromq.streams import bind_address
@@ -24,8 +24,8 @@ from flowtact.runtime.protocol import Op
 from flowtact.runtime.supervisor_liveness import proc_stat
 from flowtact.runtime.supervisor_procs import (
     WAITING_EVERY_S,
-    Failure,
     Proc,
+    ProcessFailure,
     WorkerFailed,
 )
 from flowtact.runtime.warm_up import load_shared_kernels, warm_shared_kernels
@@ -159,7 +159,7 @@ class SupervisorStartup:
                     self._say_waiting(p)
             try:
                 self._pump(50)
-            except Failure as f:
+            except ProcessFailure as f:
                 self._failed(f)  # under restart: on-failure the group starts again
             if all(p.endpoints or not self.wplans[p.name].inbound for p in self.procs.values()) and all(
                 p.state in ("ready", "wiring", "wired") for p in self.procs.values()

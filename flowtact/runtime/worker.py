@@ -52,10 +52,11 @@ import traceback
 
 import zmq
 
+from flowtact.errors import NodeFailure, WorkerStop
 from flowtact.runtime.links.zeromq.control import heartbeat_socket, worker_control_socket
 from flowtact.runtime.protocol import Op, encode
 from flowtact.runtime.warm_up import CompileWatch
-from flowtact.runtime.worker_control import ORPHAN_S, NodeFailure, Stop, WorkerControl
+from flowtact.runtime.worker_control import ORPHAN_S, WorkerControl
 from flowtact.runtime.worker_setup import WorkerSetup
 from flowtact.runtime.worker_ticks import FOREVER, WorkerTicks
 
@@ -152,7 +153,7 @@ class Worker(WorkerControl, WorkerSetup, WorkerTicks):
                 self._close_blocks()
             self._expect(Op.EXIT)
             return 0
-        except Stop:
+        except WorkerStop:
             self._salvage_records()
             return 0
         except NodeFailure as f:

@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import os
 import time
-import traceback
 from typing import Any
 
 import zmq
 
-from flowtact.block import Block
 from flowtact.chunk import concat
+from flowtact.errors import WorkerStop
 from flowtact.runtime.links.zeromq.streams import (
     POLL_MS,
 )
@@ -28,8 +27,6 @@ __all__ = [
     "ORPHAN_S",
     "RECORD_FLUSH_NS",
     "RECORD_MAX_CHUNKS",
-    "NodeFailure",
-    "Stop",
     "WorkerControl",
 ]
 
@@ -47,24 +44,6 @@ RECORD_FLUSH_NS = 50_000_000
 """Recorded chunks are coalesced and sent to the recorder this often (ns), or sooner when many."""
 RECORD_MAX_CHUNKS = 256
 """... or once this many chunks of one stream wait (a fast run's memory stays bounded)."""
-
-
-class Stop(Exception):
-    """The supervisor asked this worker to abort at once."""
-
-
-class NodeFailure(Exception):
-    """A block raised: what the worker reports (node, block, graph time, message, traceback)."""
-
-    def __init__(self, node: str, block: Block, now: float, cause: BaseException) -> None:
-        super().__init__(str(cause))
-        self.report = {
-            "node": node,
-            "block": block.name,
-            "now": now,
-            "message": f"{type(cause).__name__}: {cause}",
-            "traceback": traceback.format_exc(),
-        }
 
 
 class WorkerControl:
@@ -90,16 +69,16 @@ class WorkerControl:
             if msg["op"] is op:
                 return msg
             if msg["op"] in (Op.ABORT, Op.EXIT):
-                raise Stop
+                raise WorkerStop
             if msg["op"] is Op.STOP:
                 self.stop_k = min(self.stop_k, int(msg["k"]))
 
     def _check_orphan(self) -> None:
         if self.parent is not None:
             if os.getppid() != self.parent:
-                raise Stop("the supervisor is gone")
+                raise WorkerStop("the supervisor is gone")
         elif time.monotonic() - self.last_ping > ORPHAN_S:
-            raise Stop("the supervisor is gone")
+            raise WorkerStop("the supervisor is gone")
 
     def _service(self) -> None:
         """Handle pending control messages (pings, stop, abort) without blocking; send statistics."""
@@ -145,7 +124,7 @@ class WorkerControl:
         if msg["op"] is Op.STOP:
             self.stop_k = min(self.stop_k, int(msg["k"]))
         elif msg["op"] in (Op.ABORT, Op.EXIT):
-            raise Stop
+            raise WorkerStop
 
     def _stats(self) -> dict[str, Any]:
         return {

@@ -11,8 +11,9 @@ import traceback
 import zmq
 
 from flowtact.block import Block, Source
+from flowtact.catalog.blocks import load_block
 from flowtact.chunk import StreamSpec
-from flowtact.registry import load_block
+from flowtact.errors import NodeFailure
 from flowtact.runtime.links.zeromq.streams import (
     ZmqInbound,
     ZmqOutbound,
@@ -21,7 +22,6 @@ from flowtact.runtime.links.zeromq.streams import (
 from flowtact.runtime.protocol import DeadlinePlan, WorkerPlan
 from flowtact.runtime.stats import LatencyHistogram
 from flowtact.runtime.warm_up import settle_heap, warm_up
-from flowtact.runtime.worker_control import NodeFailure
 from flowtact.runtime.worker_plan import OutPort, WorkerNode
 
 __all__ = ["Deadline", "WorkerSetup"]

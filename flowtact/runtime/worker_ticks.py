@@ -13,6 +13,7 @@ from typing import Any
 import zmq
 
 from flowtact.chunk import Chunk
+from flowtact.errors import NodeFailure
 from flowtact.runtime.inproc import block_summaries, check_chunk
 from flowtact.runtime.links.zeromq.streams import (
     POLL_MS,
@@ -22,7 +23,7 @@ from flowtact.runtime.links.zeromq.streams import (
 )
 from flowtact.runtime.links.zeromq.wire import END
 from flowtact.runtime.protocol import Op
-from flowtact.runtime.worker_control import HEARTBEAT_S, RECORD_MAX_CHUNKS, NodeFailure
+from flowtact.runtime.worker_control import HEARTBEAT_S, RECORD_MAX_CHUNKS
 from flowtact.runtime.worker_plan import NO_ORIGINS, WorkerNode, merge_origins, take
 
 __all__ = ["COALESCE_S", "COALESCE_TICKS", "FOREVER", "MERGE_MAX_S", "STOP_MERGE_MAX_S", "WorkerTicks"]

@@ -21,8 +21,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from flowtact.limits import positive_seconds
-from flowtact.sweeps.grid import Axis, Row, SweepSpecError, expand_replays, parse_grid, read_table, rows
+from flowtact.errors import SweepSpecError
+from flowtact.inputs.limits import positive_seconds
+from flowtact.sweeps.grid import Axis, Row, expand_replays, parse_grid, read_table, rows
 from flowtact.sweeps.metrics import MetricSpec, parse_metrics
 from flowtact.sweeps.progress import SweepProgress
 from flowtact.sweeps.runs import RunTask
@@ -45,7 +46,7 @@ SEED_POLICY = "row-seed-1: SeedSequence(graph seed, sha256(row key))"
 
 def need_extras() -> None:
     """Raise :class:`SweepSpecError` naming the extra to install when pandas or pyarrow is missing."""
-    from flowtact.extras import install_hint, module_available
+    from flowtact.graphfile.extras import install_hint, module_available
 
     missing = [m for m in ("pandas", "pyarrow") if not module_available(m)]
     if missing:
@@ -57,11 +58,12 @@ def _graph_text(graph: str | Path) -> tuple[str, str]:
     """(source name, YAML text) of a graph file, a shipped graph's name, or a recording's graph."""
     path = Path(graph)
     if path.suffix in (".h5", ".hdf5"):
-        from flowtact.record import read_recording
+        from flowtact.recording.hdf5 import read_recording
 
         return f"{path}#graph", read_recording(path, streams=()).provenance["graph_yaml"]
-    from flowtact.graph import resolve_graph_path
-    from flowtact.safe_yaml import SafeYamlError, read_graph_text
+    from flowtact.errors import SafeYamlError
+    from flowtact.graphfile.graph import resolve_graph_path
+    from flowtact.graphfile.safe_yaml import read_graph_text
 
     source = resolve_graph_path(graph)
     try:
@@ -78,7 +80,7 @@ def setup(
     """What makes every row of a sweep what it is besides its own values: the graph text's hash,
     the fixed ``--set`` overrides, ``--duration``, the metrics, flowtact's version and the seed
     policy. Recorded in the table; a table with another setup is not resumed."""
-    import flowtact
+    from flowtact.version import __version__
 
     return {
         "graph": hashlib.sha256(text.encode()).hexdigest()[:16],
@@ -86,7 +88,7 @@ def setup(
         "duration_s": duration_s,
         "metrics": [*metrics.builtins, *metrics.user],
         "rmse": [f"{a}={b}" for a, b in metrics.rmse_pairs],
-        "flowtact": flowtact.__version__,
+        "flowtact": __version__,
         "seeds": SEED_POLICY,
     }
 
@@ -106,7 +108,7 @@ def _file_digest(path: str) -> str:
 def _row_setup(common: str, row: Row, digests: dict[str, str]) -> str:
     """A row's ``setup`` hash: the sweep's setup and the content of each file the row replays
     (``digests`` caches each file's hash for this sweep)."""
-    from flowtact.replay_spec import split_replay
+    from flowtact.graphfile.replay_spec import split_replay
 
     files = {}
     for node, text in row.recordings.items():
@@ -188,11 +190,11 @@ def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: 
            metrics: MetricSpec, duration_s: float | None,
            allow_modules: Sequence[str]) -> tuple[Any, float]:  # fmt: skip
     """Load the graph as the first row would run it (without the swept values): graph problems
-    raise GraphErrors (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too.
+    raise GraphFileError (exit 2); unknown swept nodes or parameters, unrecorded RMSE streams too.
     Returns the graph and the run's graph seconds."""
-    from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
-    from flowtact.source_ends import default_duration
+    from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
+    from flowtact.running.source_ends import default_duration
 
     graph = load_graph(source, text=text, overrides=overrides, replays=_abs(first.recordings),
                        allow_modules=allow_modules)  # fmt: skip
@@ -220,7 +222,7 @@ def _check(source: str, text: str, overrides: Sequence[str], first: Row, names: 
 
 def _abs(recordings: Mapping[str, str]) -> dict[str, str]:
     """Replayed files as absolute names: workers may run in another folder."""
-    from flowtact.replay_spec import split_replay
+    from flowtact.graphfile.replay_spec import split_replay
 
     out = {}
     for node, text in recordings.items():

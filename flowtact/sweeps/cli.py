@@ -19,7 +19,7 @@ from typing import Any
 
 from flowtact.commands import Command
 from flowtact.commands.graph_args import GRAPH_HELP, add_allow_module, parse_replays
-from flowtact.limits import cli_duration_seconds, cli_positive_seconds
+from flowtact.inputs.limits import cli_duration_seconds, cli_positive_seconds
 
 __all__ = ["COMMAND", "add_arguments", "run_sweep_command"]
 
@@ -76,7 +76,7 @@ def _positive_int(text: str) -> int:
 
 def run_sweep_command(args: argparse.Namespace) -> int:
     """Run the sweep the arguments describe; return the exit status."""
-    from flowtact.sweeps.grid import SweepSpecError
+    from flowtact.errors import SweepSpecError
 
     def on_term(_signum: int, _frame: Any) -> None:
         raise KeyboardInterrupt
@@ -111,14 +111,14 @@ def _report(df: Any, args: argparse.Namespace) -> int:
         shown = df.drop(columns=[c for c in ("key", "provenance", "notes", "graph") if c in df.columns])
         print(shown.to_string(index=False))
     if args.plot:
-        from flowtact.graph import GraphErrors
-        from flowtact.launch import load_plan
+        from flowtact.errors import GraphFileError
+        from flowtact.running.launch import load_compiled
         from flowtact.sweeps.plot import plot_rates
 
         try:
-            plan = load_plan(args.graph, overrides=args.overrides, allow_modules=args.allow_modules)
+            plan = load_compiled(args.graph, overrides=args.overrides, allow_modules=args.allow_modules)
             graph = plan.graph  # parameter docs: axis units
-        except GraphErrors:
+        except GraphFileError:
             graph = None
         plot_rates(df, args.plot, graph)
     kept = df.attrs.get("kept", 0)

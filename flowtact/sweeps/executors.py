@@ -24,16 +24,11 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, InvalidStateError
 from typing import Any
 
-from flowtact.errors import FlowtactError
-from flowtact.python_child import safe_path_env
-from flowtact.sweeps.grid import SweepSpecError
+from flowtact.errors import SweepSpecError, WorkerDied
+from flowtact.running.python_child import safe_path_env
 from flowtact.sweeps.schedule import WORKER_DIED
 
-__all__ = ["DaskRows", "RowPool", "WorkerDied", "dask_executor", "local_cluster", "local_pool_factory"]
-
-
-class WorkerDied(FlowtactError, RuntimeError):
-    """The process running a row died before it answered (killed, out of memory, timed out)."""
+__all__ = ["DaskRows", "RowPool", "dask_executor", "local_cluster", "local_pool_factory"]
 
 
 def local_pool_factory(workers: int | None, preload: Sequence[str] = ()) -> Callable[[], Executor]:
@@ -43,7 +38,9 @@ def local_pool_factory(workers: int | None, preload: Sequence[str] = ()) -> Call
     pool's preload list holds for later ones."""
     n = workers or os.cpu_count() or 1
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["flowtact.sweeps.runs", "flowtact.launch", "flowtact.compile", *preload])
+    ctx.set_forkserver_preload(
+        ["flowtact.sweeps.runs", "flowtact.running.launch", "flowtact.running.compile", *preload]
+    )
 
     def make() -> Executor:
         from multiprocessing import forkserver
@@ -297,7 +294,7 @@ def _temporary_security() -> Any:
     try:
         return Security.temporary()
     except ImportError:
-        from flowtact.extras import install_hint
+        from flowtact.graphfile.extras import install_hint
 
         _, how = install_hint("flowtact", "cryptography", "dask")
         raise SweepSpecError(
@@ -333,7 +330,7 @@ def local_cluster(workers: int | None) -> Iterator[Any]:
 @contextlib.contextmanager
 def dask_executor(scheduler: str | None, workers: int | None) -> Iterator[tuple[Executor, int]]:
     """A dask executor and its worker count; a :func:`local_cluster` (closed at the end) without ``scheduler``."""
-    from flowtact.extras import install_hint, module_available
+    from flowtact.graphfile.extras import install_hint, module_available
 
     if not module_available("distributed"):
         what, how = install_hint("flowtact", "distributed", "dask")

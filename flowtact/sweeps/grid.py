@@ -18,15 +18,14 @@ from typing import Any
 
 import yaml
 
-from flowtact.errors import FlowtactError
-from flowtact.graph import parse_override
-from flowtact.replay_spec import split_replay
-from flowtact.safe_yaml import SafeYamlError, load_value, read_graph_text
+from flowtact.errors import SafeYamlError, SweepSpecError
+from flowtact.graphfile.graph import parse_override
+from flowtact.graphfile.replay_spec import split_replay
+from flowtact.graphfile.safe_yaml import load_value, read_graph_text
 
 __all__ = [
     "Axis",
     "Row",
-    "SweepSpecError",
     "expand_replays",
     "override_text",
     "parse_grid",
@@ -36,10 +35,6 @@ __all__ = [
 
 MAX_ROWS = 1_000_000
 """A sweep larger than this is refused before anything runs (a typo in a grid, not an experiment)."""
-
-
-class SweepSpecError(FlowtactError, ValueError):
-    """A sweep's grid, table, replay pattern or metric is wrong: one line, exit status 2."""
 
 
 @dataclass(frozen=True)

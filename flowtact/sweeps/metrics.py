@@ -9,8 +9,8 @@ kernels) and its ``realtime_factor``, graph time over the *running* time from gr
 worker's warm-up never reads as a slow graph).
 
 A user metric is ``fn(streams) -> dict[str, float]``: ``streams`` maps each recorded stream name
-(``"force.f"``) to a :class:`flowtact.record.RecordedStream` (``t``, ``data``, ``spec``), the same
-objects :func:`flowtact.record.read_recording` returns, so a metric can be tried on a recording
+(``"force.f"``) to a :class:`flowtact.recording.hdf5.RecordedStream` (``t``, ``data``, ``spec``), the same
+objects :func:`flowtact.recording.hdf5.read_recording` returns, so a metric can be tried on a recording
 first. Its values become columns ``function:name``.
 """
 
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from flowtact.sweeps.grid import SweepSpecError
+from flowtact.errors import SweepSpecError
 
 __all__ = ["BUILTINS", "MetricSpec", "compute_metrics", "parse_metrics", "resolve_user_metric", "rmse"]
 

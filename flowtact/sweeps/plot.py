@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from flowtact.sweeps.grid import SweepSpecError
+from flowtact.errors import SweepSpecError
 
 __all__ = ["check_plot_extra", "param_label", "plot_rates"]
 
@@ -25,7 +25,7 @@ RATE_LABEL = "mean rate per unit (events/s)"
 
 def check_plot_extra() -> None:
     """Raise :class:`SweepSpecError` naming the extra when matplotlib is missing."""
-    from flowtact.extras import install_hint, module_available
+    from flowtact.graphfile.extras import install_hint, module_available
 
     if not module_available("matplotlib"):
         what, how = install_hint("flowtact", "matplotlib", "plot")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from typing import TextIO
 
-from flowtact.terminal_bar import TerminalBar
+from flowtact.console.terminal_bar import TerminalBar
 
 __all__ = ["SweepProgress"]
 

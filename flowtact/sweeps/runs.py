@@ -56,8 +56,8 @@ class MemorySink:
         """Nothing to flush: everything stays in memory."""
 
     def streams(self) -> dict[str, Any]:
-        """Each recorded stream as a :class:`flowtact.record.RecordedStream`, as read back from a file."""
-        from flowtact.record import RecordedStream
+        """Each recorded stream as a :class:`flowtact.recording.hdf5.RecordedStream`, as read back from a file."""
+        from flowtact.recording.hdf5 import RecordedStream
 
         out = {}
         for name, spec in self.specs.items():
@@ -83,7 +83,7 @@ def failed_row(task: RunTask, error: str) -> dict[str, Any]:
 
 @functools.cache
 def _versions_text() -> str:
-    from flowtact.launch import versions
+    from flowtact.running.launch import versions
 
     return json.dumps(versions(), sort_keys=True)
 
@@ -91,15 +91,15 @@ def _versions_text() -> str:
 def provenance_hash(plan: Any) -> str:
     """SHA-256 (16 hex digits) of what makes a run what it is: the resolved graph (every parameter,
     every node's seed) and the package versions."""
-    from flowtact.launch import resolved_graph
+    from flowtact.running.launch import resolved_graph
 
     doc = json.dumps(resolved_graph(plan), sort_keys=True, default=str) + _versions_text()
     return hashlib.sha256(doc.encode()).hexdigest()[:16]
 
 
 def _plan(task: RunTask) -> Any:
-    from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
 
     graph = load_graph(task.source, text=task.text, overrides=task.overrides, replays=task.replays,
                        allow_modules=task.allow_modules)  # fmt: skip
@@ -108,7 +108,7 @@ def _plan(task: RunTask) -> Any:
 
 def run_task(task: RunTask) -> dict[str, Any]:
     """Run one row; return its row: key, seed, status, error, provenance, duration, metrics, run_s."""
-    from flowtact.launch import run_plan
+    from flowtact.running.launch import run_compiled
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"key": task.key, "seed": task.seed}
@@ -116,7 +116,7 @@ def run_task(task: RunTask) -> dict[str, Any]:
         plan = _plan(task)
         row["provenance"] = provenance_hash(plan)
         sink = MemorySink(plan)
-        summary = run_plan(plan, duration_s=task.duration_s, fast=True, inproc=True, sink=sink)
+        summary = run_compiled(plan, duration_s=task.duration_s, fast=True, inproc=True, sink=sink)
         if summary.stopped_by == "interrupted":  # Ctrl-C reached this run: it did not finish
             raise KeyboardInterrupt
         row["duration_s"] = summary.duration_s

@@ -23,7 +23,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from flowtact.sweeps.grid import MAX_ROWS, SweepSpecError
+from flowtact.errors import SweepSpecError
+from flowtact.sweeps.grid import MAX_ROWS
 
 __all__ = [
     "FIRST_COLUMNS",

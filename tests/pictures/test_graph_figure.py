@@ -13,10 +13,10 @@ from matplotlib.transforms import Bbox
 from runs import TEST_BLOCKS
 
 from flowtact.cli import main
-from flowtact.compile import compile_graph
-from flowtact.graph import load_graph
-from flowtact.launch import load_plan
+from flowtact.graphfile.graph import load_graph
 from flowtact.pictures.graph_figure import FEEDBACK, GREY, graph_figure
+from flowtact.running.compile import compile_graph
+from flowtact.running.launch import load_compiled
 
 GRAPH_DIR = Path(__file__).resolve().parents[2] / "graphs"
 GRAPHS = sorted(p.stem for p in GRAPH_DIR.glob("*.yaml"))
@@ -99,12 +99,12 @@ def check_picture(plan):
 
 @pytest.mark.parametrize("graph", GRAPHS)
 def test_every_shipped_graph_draws_readably(graph):
-    plan = load_plan(GRAPH_DIR / f"{graph}.yaml")
+    plan = load_compiled(GRAPH_DIR / f"{graph}.yaml")
     check_picture(plan)
 
 
 def test_touch_greys_what_the_compiler_pruned():
-    plan = load_plan(GRAPH_DIR / "touch.yaml")
+    plan = load_compiled(GRAPH_DIR / "touch.yaml")
     assert "ddforce" in plan.pruned
     fig, *_ = check_picture(plan)
     patch = by_gid(fig, "node:ddforce")["node:ddforce"]
@@ -112,7 +112,7 @@ def test_touch_greys_what_the_compiler_pruned():
 
 
 def test_teleops_feedback_arc_is_drawn_backwards_into_the_exoskeleton():
-    plan = load_plan(GRAPH_DIR / "teleop.yaml")
+    plan = load_compiled(GRAPH_DIR / "teleop.yaml")
     fig, r, boxes, arrows, edges = check_picture(plan)
     (i,) = [i for i, e in enumerate(plan.graph.edges) if (e.src, e.dst) == ("control", "exo")]
     tip, *wings = arrows[f"arrow:{i}"].get_verts()[:3]
@@ -154,7 +154,7 @@ def test_svg_names_every_edge_and_node(tmp_path):
     out = tmp_path / "teleop.svg"
     assert main(["graph", str(GRAPH_DIR / "teleop.yaml"), "-o", str(out)]) == 0
     svg = out.read_text()
-    plan = load_plan(GRAPH_DIR / "teleop.yaml")
+    plan = load_compiled(GRAPH_DIR / "teleop.yaml")
     for n in plan.graph.nodes:
         assert f'id="node:{n}"' in svg
     for i in range(len(plan.graph.edges)):

@@ -11,7 +11,7 @@ import pytest
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.cli import main
 from flowtact.pictures.recording_figure import DPI, binned_rates, plot_recording, recording_figure
-from flowtact.record import Recorder
+from flowtact.recording.hdf5 import Recorder
 
 pytest.importorskip("matplotlib")
 
@@ -416,7 +416,7 @@ def test_plot_memory_is_bounded_whatever_the_file_size(tmp_path):
 def test_categories_are_stored_in_the_recording_and_cross_processes(recording):
     import h5py
 
-    from flowtact.record import stream_specs
+    from flowtact.recording.hdf5 import stream_specs
     from flowtact.runtime.protocol import spec_from_wire, spec_to_wire
 
     with h5py.File(recording) as f:

@@ -55,10 +55,10 @@ def test_usage_errors_are_one_line_and_exit_2(toy: Path, args: list[str], says: 
 
 
 def test_without_pandas_it_names_the_extra(toy: Path, monkeypatch, capsys) -> None:
-    import flowtact.extras
+    import flowtact.graphfile.extras
 
-    real = flowtact.extras.module_available
-    monkeypatch.setattr(flowtact.extras, "module_available", lambda m: m != "pandas" and real(m))
+    real = flowtact.graphfile.extras.module_available
+    monkeypatch.setattr(flowtact.graphfile.extras, "module_available", lambda m: m != "pandas" and real(m))
     assert main(allow_args(["sweep", str(toy), "--set-grid", "src.noise=0,1"])) == 2
     assert 'flowtact sweep needs pandas: pip install "flowtact[sweep]"' in capsys.readouterr().err
 

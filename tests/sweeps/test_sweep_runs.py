@@ -73,7 +73,7 @@ def test_touch_sweep_is_independent_of_worker_count_and_matches_a_direct_run() -
     assert spikes.nunique() > 6, "τ, σ and the scenario must change SA1's spike count"
     # a row run directly in this process (no pool) gives the pooled row's numbers exactly
     r = one.iloc[5]
-    from flowtact.graph import resolve_graph_path
+    from flowtact.graphfile.graph import resolve_graph_path
 
     src = str(resolve_graph_path("touch"))
     params = {k: r[k] for k in GRID}

@@ -14,8 +14,8 @@ from sweepblocks import TOY_GRAPH_SCALED
 
 import flowtact
 from flowtact.cli import main as cli_main
+from flowtact.errors import SweepSpecError
 from flowtact.sweeps import store
-from flowtact.sweeps.grid import SweepSpecError
 
 
 def main(argv: list[str]) -> int:

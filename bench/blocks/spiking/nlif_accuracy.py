@@ -161,9 +161,9 @@ def measure_cost(ctx: Context, integrator: str, dt_ms: float) -> float:
 
 
 def float32_note(ctx: Context) -> None:
-    from flowtact.block import SpecError
     from flowtact.blocks.spiking.nlif import Nlif
     from flowtact.chunk import StreamSpec
+    from flowtact.errors import SpecError
 
     try:
         Nlif(n=2).bind({"x": StreamSpec(rate_hz=1000.0, dtype="float32")})

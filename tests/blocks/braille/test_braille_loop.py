@@ -7,8 +7,8 @@ from runs import ROOT
 from flowtact.blocks.braille.reading import char_windows
 from flowtact.blocks.braille.train_braille import HELDOUT_SEED
 from flowtact.blocks.spiking.nb_model import load_model
-from flowtact.launch import load_plan, run_plan
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
+from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.runtime.placement import place
 
 GRAPH = ROOT / "graphs" / "braille.yaml"
@@ -16,7 +16,7 @@ SHORT = ["scan.random_letters=6"]
 
 
 def test_the_loop_closes_through_the_scan_s_delayed_speed_input():
-    plan = load_plan(GRAPH)
+    plan = load_compiled(GRAPH)
     edges = {(e.src, e.src_port, e.dst, e.dst_port) for e in plan.active_edges}
     assert ("control", "speed", "scan", "speed") in edges
     assert plan.graph.nodes["scan"].cls.inputs["speed"].delay
@@ -34,8 +34,8 @@ def test_the_shipped_model_is_the_first_layer_s_and_held_out_seeds_were_not_trai
 
 @pytest.mark.slow
 def test_fast_closed_loop_runs_are_bit_identical_in_process_and_across_processes(tmp_path):
-    run_plan(load_plan(GRAPH, overrides=SHORT), fast=True, inproc=True, record=tmp_path / "inproc.h5")
-    summary = run_plan(load_plan(GRAPH, overrides=SHORT), fast=True, record=tmp_path / "procs.h5")
+    run_compiled(load_compiled(GRAPH, overrides=SHORT), fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    summary = run_compiled(load_compiled(GRAPH, overrides=SHORT), fast=True, record=tmp_path / "procs.h5")
     assert set(summary.processes) == {"finger", "neurons", "brain"}
     a, b = read_recording(tmp_path / "inproc.h5"), read_recording(tmp_path / "procs.h5")
     assert set(a.streams) == set(b.streams)
@@ -55,8 +55,8 @@ def test_recording_only_the_text_keeps_the_loop_closed():
     """Demand flows back through the delayed speed input: the controller runs though nothing records
     it (a single backward pass of the compiler once left the loop open, silently)."""
     from flowtact.blocks.braille.reading import graph_text
-    from flowtact.compile import compile_graph
-    from flowtact.graph import load_graph
+    from flowtact.graphfile.graph import load_graph
+    from flowtact.running.compile import compile_graph
 
     path, text = graph_text(GRAPH, seed=1, text="ab", record=["scan.char"])
     plan = compile_graph(load_graph(path, text=text))

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.launch import load_plan, run_plan
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
+from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.runtime.placement import place
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -17,10 +17,10 @@ GRAPH = ROOT / "graphs" / "braille_open.yaml"
 
 @pytest.mark.slow
 def test_fast_recordings_are_bit_identical_in_process_and_across_processes(tmp_path):
-    plan = load_plan(GRAPH)
+    plan = load_compiled(GRAPH)
     assert len(place(plan, fast=True).groups) == 2  # finger and neurons: really two processes
-    run_plan(plan, fast=True, inproc=True, record=tmp_path / "inproc.h5")
-    summary = run_plan(load_plan(GRAPH), fast=True, record=tmp_path / "procs.h5")
+    run_compiled(plan, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    summary = run_compiled(load_compiled(GRAPH), fast=True, record=tmp_path / "procs.h5")
     assert set(summary.processes) == {"finger", "neurons"}
     a, b = read_recording(tmp_path / "procs.h5"), read_recording(tmp_path / "inproc.h5")
     assert set(a.streams) == set(b.streams) == {
@@ -58,11 +58,11 @@ def test_a_speed_loop_steers_the_next_sample_and_is_identical_across_processes(t
     one process and in two."""
     path = tmp_path / "loop.yaml"
     path.write_text(LOOP)
-    plan = load_plan(path)
+    plan = load_compiled(path)
     lo, hi = plan.graph.nodes["scan"].make().config.track()
     assert plan.ends["scan"] == pytest.approx((hi - lo) / 10.0, abs=0.005)  # bound at min speed
-    run_plan(plan, fast=True, inproc=True, record=tmp_path / "inproc.h5")
-    run_plan(load_plan(path), fast=True, record=tmp_path / "procs.h5")
+    run_compiled(plan, fast=True, inproc=True, record=tmp_path / "inproc.h5")
+    run_compiled(load_compiled(path), fast=True, record=tmp_path / "procs.h5")
     a, b = read_recording(tmp_path / "inproc.h5"), read_recording(tmp_path / "procs.h5")
     for name in ("scan.position", "ctl.y"):
         assert np.array_equal(a.streams[name].t, b.streams[name].t), name

@@ -5,7 +5,7 @@ import numpy as np
 from flowtact.blocks.braille.presets import AFFERENT, CUNEATE_SYNAPSE
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.spiking.synapse import Synapse, grid_connectivity
-from flowtact.presets import presets_for
+from flowtact.catalog.presets import presets_for
 
 
 def test_the_braille_domain_publishes_its_neuron_and_synapse_presets():

@@ -3,7 +3,7 @@
 import pytest
 
 from flowtact.blocks.braille import stress_cases as sc
-from flowtact.stress import run_case
+from flowtact.verify.stress import run_case
 
 
 @pytest.mark.parametrize("case", sc.CASES, ids=[c.name for c in sc.CASES])

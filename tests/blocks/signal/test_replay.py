@@ -3,11 +3,10 @@
 import numpy as np
 import pytest
 
-from flowtact.block import SpecError
 from flowtact.blocks.signal.replay import Replay
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.params import ConfigError
-from flowtact.record import Recorder
+from flowtact.errors import ConfigError, SpecError
+from flowtact.recording.hdf5 import Recorder
 from flowtact.testing import assert_same, run_source
 
 FORCE = StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz"))

@@ -1,7 +1,7 @@
 """Replay readers are bounded before they allocate: every size, count and number a replayed file
 declares is checked against blocks/signal/replay_limits.py, and a refusal names the file (and the
 line of a .csv). The files too large to keep are in bench/hostile_cases.py (``replay_*``), measured
-in a child by tests/test_hostile_input.py; these are the small, exact cases."""
+in a child by tests/inputs/test_hostile_input.py; these are the small, exact cases."""
 
 from __future__ import annotations
 
@@ -16,15 +16,14 @@ import pytest
 
 import flowtact.blocks.signal.csv_log as csv_log
 import flowtact.blocks.signal.replay as replay
-from flowtact.block import SpecError
 from flowtact.blocks.signal.csv_log import CsvError, read_csv_log
 from flowtact.blocks.signal.replay import Replay
 from flowtact.blocks.signal.replay_limits import MAX_COLUMNS, listing
 from flowtact.blocks.signal.replay_ports import stand_in_class
-from flowtact.bounded_files import HDF5_SIGNATURE, FileRefused, has_hdf5_signature, open_regular
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.params import ConfigError
-from flowtact.record import Recorder
+from flowtact.errors import ConfigError, FileRefused, SpecError
+from flowtact.inputs.bounded_files import HDF5_SIGNATURE, has_hdf5_signature, open_regular
+from flowtact.recording.hdf5 import Recorder
 
 
 def _npy(array: np.ndarray) -> bytes:
@@ -235,7 +234,7 @@ def _forged(path, samples: int, *, stored: int = 0, rate: float = 100.0, end_s: 
 
 
 def test_a_stream_declaring_more_samples_than_it_stores_is_refused(tmp_path):
-    # the recording reader (flowtact/record.py) refuses these first: located at the file, named once
+    # the recording reader (flowtact/recording/hdf5.py) refuses these first: located at the file, named once
     Replay(path=_forged(tmp_path / "ok.h5", 200, stored=200)).bind({})
     hollow = _forged(tmp_path / "hollow.h5", 1 << 20, stored=200)
     e = _refusal(Replay(path=hollow))

@@ -9,7 +9,6 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from flowtact import BadDataError, Chunk, ConfigError, SpecError, StreamSpec, concat
-from flowtact.align import MisalignedError
 from flowtact.blocks.signal.delay import Delay
 from flowtact.blocks.signal.savgol import (
     SavGol,
@@ -21,6 +20,7 @@ from flowtact.blocks.signal.savgol import (
 )
 from flowtact.blocks.signal.weighted_sum import WeightedSum
 from flowtact.blocks.touch.presets import table_i_weights
+from flowtact.errors import MisalignedError
 from flowtact.testing import assert_same, run_offline
 
 signal = pytest.importorskip("scipy.signal")

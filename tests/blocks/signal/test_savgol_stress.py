@@ -7,8 +7,8 @@ import pytest
 
 from flowtact.blocks.signal import stress_cases as sc
 from flowtact.blocks.signal.savgol import SavGol
-from flowtact.stress import run_case
 from flowtact.testing import run_offline
+from flowtact.verify.stress import run_case
 
 CASES = [c for c in sc.CASES if c.block == "savgol"]
 

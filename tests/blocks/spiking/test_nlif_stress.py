@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from flowtact.blocks.spiking import stress_cases as sc
-from flowtact.stress import EPS, run_case
+from flowtact.verify.stress import EPS, run_case
 
 FAST = [c for c in sc.CASES if not c.slow]
 LONG = [c for c in sc.CASES if c.slow]

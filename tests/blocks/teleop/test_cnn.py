@@ -32,7 +32,7 @@ from flowtact.blocks.teleop.train_force import (
     split_indices,
     train_on_arrays,
 )
-from flowtact.record import Recorder
+from flowtact.recording.hdf5 import Recorder
 from flowtact.testing import run_offline
 
 torch = pytest.importorskip("torch")

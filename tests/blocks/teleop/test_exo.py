@@ -9,7 +9,6 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from flowtact import BadDataError, Chunk, ConfigError, SpecError, StreamSpec
-from flowtact.align import MisalignedError
 from flowtact.blocks.teleop.exo import (
     EXO_A_MM,
     EXO_S_A_MM,
@@ -23,6 +22,7 @@ from flowtact.blocks.teleop.exo import (
     finger_forward,
     phi_from_theta,
 )
+from flowtact.errors import MisalignedError
 from flowtact.testing import assert_same, run_offline
 
 ADC = {"x": "ADC"}

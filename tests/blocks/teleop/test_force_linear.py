@@ -12,7 +12,7 @@ from flowtact import BadDataError, Chunk, ConfigError, SpecError, StreamSpec
 from flowtact.blocks.teleop.fit_force import fit_from_recording, fit_linear_force, main
 from flowtact.blocks.teleop.force_linear import LinearForce
 from flowtact.blocks.teleop.hand import FINGERS
-from flowtact.record import Recorder
+from flowtact.recording.hdf5 import Recorder
 from flowtact.testing import run_offline
 
 RATE = 40.0

@@ -11,7 +11,6 @@ from numpy.testing import assert_array_equal
 
 import flowtact.blocks.teleop.image as image_module
 from flowtact import Chunk, ConfigError, SpecError, StreamSpec
-from flowtact.align import MisalignedError
 from flowtact.blocks.teleop.hand import FINGERS
 from flowtact.blocks.teleop.image import (
     TABLE_3_1,
@@ -23,6 +22,7 @@ from flowtact.blocks.teleop.image import (
     blob_mask_numpy,
 )
 from flowtact.blocks.teleop.tactip_sim import pins_px, pressed_frames
+from flowtact.errors import MisalignedError
 from flowtact.testing import run_offline
 
 RATE = 40.0

@@ -13,7 +13,7 @@ import pytest
 
 from flowtact.blocks.teleop.exo_emulator import main as sim_exo
 from flowtact.blocks.teleop.serial_io import SerialIo, SerialIoConfig
-from flowtact.params import ConfigError
+from flowtact.errors import ConfigError
 
 PRECIOUS = "t,x\n0,1\n"
 

@@ -8,10 +8,10 @@ import time
 import numpy as np
 import pytest
 
-from flowtact.block import SpecError
 from flowtact.blocks.teleop.exo_protocol import Command, parse_line
 from flowtact.blocks.teleop.serial_io import SerialIo
 from flowtact.chunk import Chunk, StreamSpec, concat
+from flowtact.errors import SpecError
 from flowtact.testing import run_source
 
 CMD_SPEC = StreamSpec("float64", (3, 2), "us", 100.0)

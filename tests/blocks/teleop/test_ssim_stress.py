@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from flowtact.blocks.teleop import stress_cases as sc
-from flowtact.stress import run_case
+from flowtact.verify.stress import run_case
 
 CASES = [c for c in sc.CASES if c.block == "ssim"]
 

@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from flowtact import ConfigError
-from flowtact.block import BadDataError, SpecError
 from flowtact.blocks.teleop.hand import FINGERS
 from flowtact.blocks.teleop.tactip_sim import (
     HEIGHT,
@@ -19,6 +18,7 @@ from flowtact.blocks.teleop.tactip_sim import (
     scenario_contacts,
 )
 from flowtact.chunk import Chunk, StreamSpec
+from flowtact.errors import BadDataError, SpecError
 from flowtact.testing import assert_same, run_source
 
 cv2 = pytest.importorskip("cv2")

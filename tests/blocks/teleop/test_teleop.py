@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowtact.launch import load_plan, run_plan
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
+from flowtact.running.launch import load_compiled, run_compiled
 
 ROOT = Path(__file__).resolve().parents[3]
 TELEOP = ROOT / "graphs" / "teleop.yaml"
@@ -85,8 +85,8 @@ def test_a_soft_object_lets_the_fingers_deviate_more_than_a_firm_one(tmp_path, s
     """White 2023 Fig. 4.6: the strawberry gives a much wider spread of servo deviations than the bottle."""
     graph = tmp_path / "teleop.yaml"
     graph.write_text(TELEOP.read_text().replace("\nseed: 4\n", f"\nseed: {seed}\n"))
-    plan = load_plan(graph, overrides=["exo.port=sim"])
-    run_plan(plan, duration_s=20.0, fast=True, inproc=True, record=tmp_path / "t.h5")
+    plan = load_compiled(graph, overrides=["exo.port=sim"])
+    run_compiled(plan, duration_s=20.0, fast=True, inproc=True, record=tmp_path / "t.h5")
     rec = read_recording(tmp_path / "t.h5")
     _check_commands(rec.streams["control.cmd"].data)
     spread = _deviation_spread(rec)
@@ -96,9 +96,9 @@ def test_a_soft_object_lets_the_fingers_deviate_more_than_a_firm_one(tmp_path, s
 def test_the_ssim_graph_never_imports_torch():
     code = (
         "import sys\n"
-        "from flowtact.launch import load_plan, run_plan\n"
-        f"plan = load_plan({str(TELEOP)!r}, overrides=['exo.port=sim'])\n"
-        "run_plan(plan, duration_s=1.0, fast=True, inproc=True)\n"
+        "from flowtact.running.launch import load_compiled, run_compiled\n"
+        f"plan = load_compiled({str(TELEOP)!r}, overrides=['exo.port=sim'])\n"
+        "run_compiled(plan, duration_s=1.0, fast=True, inproc=True)\n"
         "assert 'torch' not in sys.modules, 'torch was imported'\n"
         "print('ok')\n"
     )
@@ -108,8 +108,8 @@ def test_the_ssim_graph_never_imports_torch():
 
 def test_the_cnn_graph_runs_out_of_the_box_with_the_shipped_checkpoint(tmp_path):
     pytest.importorskip("torch")  # the cnn extra; the README's dev install includes it
-    plan = load_plan(ROOT / "graphs" / "teleop_cnn.yaml", overrides=["exo.port=sim"])
-    run_plan(plan, duration_s=4.0, fast=True, inproc=True, record=tmp_path / "c.h5")
+    plan = load_compiled(ROOT / "graphs" / "teleop_cnn.yaml", overrides=["exo.port=sim"])
+    run_compiled(plan, duration_s=4.0, fast=True, inproc=True, record=tmp_path / "c.h5")
     s = read_recording(tmp_path / "c.h5").streams
     truth, est = s["gripper.force"], s["cnn.y"]
     idx = np.clip(np.searchsorted(truth.t, est.t) - 1, 0, None)
@@ -118,8 +118,8 @@ def test_the_cnn_graph_runs_out_of_the_box_with_the_shipped_checkpoint(tmp_path)
 
 
 def test_the_training_set_graph_records_frames_with_their_true_force(tmp_path):
-    plan = load_plan(ROOT / "graphs" / "tactip_dataset.yaml")
-    run_plan(plan, duration_s=2.0, fast=True, inproc=True, record=tmp_path / "d.h5")
+    plan = load_compiled(ROOT / "graphs" / "tactip_dataset.yaml")
+    run_compiled(plan, duration_s=2.0, fast=True, inproc=True, record=tmp_path / "d.h5")
     s = read_recording(tmp_path / "d.h5").streams
     assert s["sim.frames"].data.shape == (80, 3, 240, 320) and s["sim.frames"].data.dtype == np.uint8
     assert np.array_equal(s["sim.force"].t, s["sim.frames"].t) and s["sim.force"].data.max() > 0.3

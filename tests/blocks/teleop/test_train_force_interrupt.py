@@ -12,7 +12,7 @@ import pytest
 from flowtact import Chunk, StreamSpec
 from flowtact.blocks.teleop.cnn import CnnForce, load_checkpoint, read_meta
 from flowtact.blocks.teleop.train_force import StopOnInterrupt, TrainConfig, TrainingInterrupted, train_force
-from flowtact.record import Recorder, read_recording
+from flowtact.recording.hdf5 import Recorder, read_recording
 from flowtact.testing import run_offline
 
 pytest.importorskip("torch")

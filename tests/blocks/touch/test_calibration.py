@@ -7,9 +7,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from flowtact import BadDataError, Chunk, ConfigError, SpecError, StreamSpec, concat
-from flowtact.align import MisalignedError
 from flowtact.blocks.touch.aunp import SENSITIVITY_PER_N, reduced_matrix
 from flowtact.blocks.touch.calibration import GaugeForce, ShearAngle
+from flowtact.errors import MisalignedError
 from flowtact.testing import run_offline
 
 RATE = 1000.0

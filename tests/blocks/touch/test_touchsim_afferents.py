@@ -15,7 +15,7 @@ import numpy as np
 
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.touchsim import TOUCHSIM_PRESETS, TOUCHSIM_RATE_HZ, touchsim_models
-from flowtact.record import read_recording
+from flowtact.recording.hdf5 import read_recording
 from flowtact.testing import run_offline
 
 DATA = Path(__file__).parent / "data" / "touchsim_dev_currents.npz"

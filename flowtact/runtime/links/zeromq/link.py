@@ -14,7 +14,7 @@ import itertools
 import zmq
 
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.deployment import DEFAULT_QUEUE
+from flowtact.graphfile.deployment import DEFAULT_QUEUE
 from flowtact.runtime.links import Link, register_link
 from flowtact.runtime.links.zeromq.streams import stream_socket
 from flowtact.runtime.links.zeromq.wire import recv_message, send_message

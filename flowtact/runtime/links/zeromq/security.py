@@ -49,7 +49,7 @@ from zmq.auth.thread import ThreadAuthenticator
 from zmq.utils import z85
 from zmq.utils.monitor import recv_monitor_message
 
-from flowtact.errors import FlowtactError
+from flowtact.errors import SecurityError
 
 __all__ = [
     "ENV_VAR",
@@ -58,7 +58,6 @@ __all__ = [
     "Authenticator",
     "CurveKeys",
     "HandshakeWatch",
-    "SecurityError",
     "generate_keys",
     "is_loopback",
     "load_keys",
@@ -83,10 +82,6 @@ HINT = (
 )
 _SAME_KEYS = "both hosts must use the same `flowtact keys` directory"
 _MAX_REFUSED = 100
-
-
-class SecurityError(FlowtactError, RuntimeError):
-    """CURVE keys are missing or malformed, or a peer was refused (or refused us)."""
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ A ``block`` stream is lossless: a full queue makes the sender wait (hearing its 
 meanwhile) and carries one message per tick, so the receiver knows when it has all of a tick. A
 ``latest`` stream carries only data: the sender drops what the queue cannot hold, the receiver
 takes the newest ``queue`` messages and counts the older ones as dropped. The high-water mark of
-both sockets is the stream's queue bound (:attr:`flowtact.deployment.Flow.queue`).
+both sockets is the stream's queue bound (:attr:`flowtact.graphfile.deployment.Flow.queue`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 import zmq
 
 from flowtact.chunk import Chunk, StreamSpec
-from flowtact.deployment import Flow
+from flowtact.graphfile.deployment import Flow
 from flowtact.runtime.links.zeromq.wire import Message, recv_message, send_message
 from flowtact.runtime.protocol import InboundStream, OutboundStream
 from flowtact.runtime.stats import LatencyHistogram

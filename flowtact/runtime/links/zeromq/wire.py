@@ -24,8 +24,9 @@ import numpy as np
 import zmq
 
 from flowtact.chunk import Chunk
+from flowtact.errors import WireError
 
-__all__ = ["COPY_THRESHOLD", "END", "Message", "WireError", "recv_message", "send_message"]
+__all__ = ["COPY_THRESHOLD", "END", "Message", "recv_message", "send_message"]
 
 END = 1
 """Flag: the producer has finished; this message carries its end-of-stream output."""
@@ -39,10 +40,6 @@ MAGIC = 0xF7
 _FIXED = struct.Struct("<BBBBBxxxiqqd")  # magic, flags, ndim, n_origins, dtype len; stream seq tick end
 _EMPTY_T = np.empty(0, np.float64)
 _NAN = math.nan
-
-
-class WireError(ValueError):
-    """A frame that is not a flowtact stream message (another version, a stray sender, corruption)."""
 
 
 @dataclass(slots=True)

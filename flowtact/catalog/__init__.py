@@ -1,0 +1,1 @@
+"""Entry-point registries: blocks by name and the presets domains publish."""

@@ -1,0 +1,55 @@
+"""Presets: named parameter sets for blocks, owned by the packages whose science they carry.
+
+A package publishes presets through the ``flowtact.presets`` entry-point group: the entry point's
+name is the domain and its object a mapping ``block name -> preset name -> parameters``. A graph
+(or ``Block(preset=...)``) names one as ``DOMAIN.NAME``, e.g. ``preset: touch.SA1``; parameters
+given beside it override the preset's. Generic blocks so never import a paper's numbers.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Mapping
+from functools import cache
+from importlib.metadata import entry_points
+from typing import Any
+
+from flowtact.errors import ConfigError
+from flowtact.params import did_you_mean
+
+__all__ = ["GROUP", "apply_preset", "presets_for"]
+
+GROUP = "flowtact.presets"
+
+
+@cache
+def _all() -> dict[str, Mapping[str, Mapping[str, Mapping[str, Any]]]]:
+    return {ep.name: ep.load() for ep in entry_points(group=GROUP)}
+
+
+def presets_for(block: str) -> dict[str, Mapping[str, Any]]:
+    """Every preset of the block registered as ``block``: ``"DOMAIN.NAME"`` -> parameters."""
+    return {
+        f"{domain}.{name}": params
+        for domain, table in _all().items()
+        for name, params in table.get(block, {}).items()
+    }
+
+
+def apply_preset(block: str, params: Mapping[str, Any], owner: str) -> dict[str, Any]:
+    """``params`` with its ``preset`` entry replaced by that preset's values (given ones win)."""
+    if "preset" not in params:
+        return dict(params)
+    name = params["preset"]
+    known = presets_for(block)
+    if not isinstance(name, str) or name not in known:
+        short = {k.split(".", 1)[1]: k for k in known}  # spellings from before presets had domains
+        close = difflib.get_close_matches(str(name).rsplit(".", 1)[-1], list(short), n=1, cutoff=0.6)
+        hint = f" (did you mean '{short[close[0]]}'?)" if close else did_you_mean(str(name), known)
+        if not known:
+            hint = f" (block {block} has no presets)"
+        raise ConfigError(
+            owner, "preset", f"must name a preset of {block} as DOMAIN.NAME; got {name!r}{hint}"
+        )
+    rest = {k: v for k, v in params.items() if k != "preset"}
+    return {**known[name], **rest}

@@ -1,0 +1,1 @@
+"""Docs and help rendering: reStructuredText docstrings as terminal text, and `flowtact blocks NAME`."""
