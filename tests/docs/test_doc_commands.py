@@ -40,6 +40,10 @@ CHECKED_ONLY = {
     "python scripts/braille_controller_validation.py": "python -m py_compile scripts/braille_controller_validation.py",
     # three fresh numba compiles of the normal generator under different CPU tunings: minutes under load
     "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",
+    # installs TouchSim from GitHub into a throw-away venv, then 400 noisy runs: minutes, and a network
+    "python scripts/touchsim_noise_reference.py --repeats 400": "python scripts/touchsim_noise_reference.py --help",
+    # the TouchSim benchmark with its peer (a throw-away venv from GitHub): a minute and more
+    "flowtact bench touchsim --quick --peers --out bench-touchsim": "flowtact bench --list",
 }
 
 

@@ -1,0 +1,88 @@
+"""TouchSim's per-afferent model as flowtact's chain (iir → rectified_gain → nlif), run in process.
+
+The same blocks and wiring as graphs/touchsim_afferents.yaml, for any number of afferents, each with
+its own model: s and d (samples × afferents, 5 kHz) through the Butterworth prefilters at 10·p0 Hz,
+the rectified gains p1–p6 with noise p8 before saturation p7, and nlif's TouchSim neuron
+(``models:``). Used by `flowtact bench touchsim` and by tests/test_touchsim_noise.py; the dev set
+and TouchSim's parameters come from the caller.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flowtact.blocks.signal.iir import Iir
+from flowtact.blocks.signal.rectified_gain import RectifiedGain
+from flowtact.blocks.spiking.nlif import Nlif
+from flowtact.blocks.touch.touchsim import TOUCHSIM_RATE_HZ, touchsim_models
+from flowtact.chunk import Chunk, StreamSpec
+
+__all__ = ["CLASSES", "TouchSimChain", "model_params"]
+
+CLASSES = ("SA1", "RA", "PC")
+"""TouchSim's class order (its ``gid``): 0 SA1, 1 RA, 2 PC."""
+
+
+def model_params(models: list[str]) -> np.ndarray:
+    """The 13 parameters of each named model (``"SA1.0"`` … ``"PC.3"``), one row per afferent."""
+    table = touchsim_models()
+    return np.array([table[m] for m in models], np.float64)
+
+
+class TouchSimChain:
+    """The three blocks for afferents ``models`` (one per column), bound and seeded; ``run`` feeds
+    whole arrays in ``chunk``-sample chunks and returns each afferent's spikes as sample indices.
+    ``noise_scale`` multiplies TouchSim's noise s.d. p8 (1: TouchSim's model; else a wrong one, to
+    show that a comparison notices)."""
+
+    def __init__(
+        self, models: list[str], *, noise: bool = True, seed: int = 0, noise_scale: float = 1.0
+    ) -> None:
+        p = model_params(models)
+        n = len(models)
+        cut = (10.0 * p[:, 0]).tolist()
+        self.prefilter_s = Iir(family="butter", order=3, cutoff_hz=cut)
+        self.prefilter_d = Iir(family="butter", order=3, cutoff_hz=cut)
+        col = lambda k: p[:, k].tolist()  # noqa: E731
+        self.current = RectifiedGain(
+            pos1=col(1), neg1=col(2), pos2=col(3), neg2=col(4), ahead="x2", ahead_pos=col(5),
+            ahead_neg=col(6), saturation=col(7), noise_sd=(noise_scale * p[:, 8]).tolist() if noise else [0.0],
+        )  # fmt: skip
+        self.afferents = Nlif(models=list(models))
+        spec = StreamSpec(dtype="float64", shape=(n,), rate_hz=TOUCHSIM_RATE_HZ)
+        self.prefilter_s.bind({"x": spec}, seed=seed)
+        self.prefilter_d.bind({"x": spec}, seed=seed + 1)
+        self.current.bind({"x1": spec, "x2": spec}, seed=seed + 2)
+        self.afferents.bind({"x": spec}, seed=seed + 3, demanded=frozenset({"spikes"}))
+        self.n = n
+
+    def run(
+        self, s: np.ndarray, d: np.ndarray, chunk: int = 50, keep_current: bool = False
+    ) -> list[np.ndarray]:
+        """Spikes of each afferent (sample indices: nlif stamps sample n at n/fs) for s, d from rest;
+        with ``keep_current`` the current (samples × afferents) is left in ``self.current_out``."""
+        t_all = np.arange(len(s)) / TOUCHSIM_RATE_HZ
+        parts, currents = [], []
+        for i in range(0, len(s), chunk):
+            t = t_all[i : i + chunk]
+            ys = self.prefilter_s(x=Chunk(t, s[i : i + chunk]))["y"]
+            yd = self.prefilter_d(x=Chunk(t, d[i : i + chunk]))["y"]
+            cur = self.current(x1=ys, x2=yd)["y"]
+            if keep_current:
+                currents.append(cur.data)
+            parts.append(self.afferents(x=cur)["spikes"])
+        last = self.current.flush().get("y")  # the held last sample (Δd = 0)
+        if last is not None:
+            parts.append(self.afferents(x=last)["spikes"])
+            if keep_current:
+                currents.append(last.data)
+        if keep_current:
+            self.current_out = np.concatenate(currents)
+        tail = self.afferents.flush().get("spikes")
+        if tail is not None:
+            parts.append(tail)
+        t = np.concatenate([c.t for c in parts])
+        unit = np.concatenate([c.data for c in parts]).astype(np.int64)
+        idx = np.rint(t * TOUCHSIM_RATE_HZ).astype(np.int64)
+        order = np.argsort(unit, kind="stable")  # by unit, each unit's spikes in time order
+        return np.split(idx[order], np.cumsum(np.bincount(unit, minlength=self.n))[:-1])
