@@ -65,7 +65,7 @@ def run_agreement(ctx: Context, dev) -> None:
     ctx.table("Spike agreement on the development set (68 traces, noise off)",
               ["path", "same count", "every spike within one sample", "identical", "spikes flowtact / TouchSim"],
               rows, note=f"Chain's current against TouchSim's: largest difference {rel:.1e} of its largest value "
-              "(tests/test_touchsim_graph.py holds it to a derived float64 bound).")  # fmt: skip
+              "(tests/blocks/touch/test_touchsim_graph.py holds it to a derived float64 bound).")  # fmt: skip
     ctx.data["agreement"] = {"from_current": from_current, "from_s_d": from_sd, "current_rel_diff": rel}
     for name, r in (("from TouchSim's current", from_current), ("from s and d through the chain", from_sd)):
         ctx.check(f"every dev trace: TouchSim's spike count, every spike within one sample ({name})",

@@ -3,7 +3,7 @@
 The same blocks and wiring as graphs/touchsim_afferents.yaml, for any number of afferents, each with
 its own model: s and d (samples × afferents, 5 kHz) through the Butterworth prefilters at 10·p0 Hz,
 the rectified gains p1–p6 with noise p8 before saturation p7, and nlif's TouchSim neuron
-(``models:``). Used by `flowtact bench touchsim` and by tests/test_touchsim_noise.py; the dev set
+(``models:``). Used by `flowtact bench touchsim` and by tests/blocks/touch/test_touchsim_noise.py; the dev set
 and TouchSim's parameters come from the caller.
 """
 

@@ -4,7 +4,7 @@ A chunk put on the link is sent through a real ZeroMQ socket (``inproc://`` with
 in the wire format and received at once into the consumer's inbox (or, through a delay port,
 held until the tick ends). The engine's schedule needs nothing else: ``InprocExecutor(plan,
 link="zmq")`` runs a graph over ZeroMQ framing and sockets, and its recordings are bit-identical
-to the local link's (tests/test_engine_links.py). Its high-water mark is the default queue bound.
+to the local link's (tests/runtime/test_engine_links.py). Its high-water mark is the default queue bound.
 """
 
 from __future__ import annotations

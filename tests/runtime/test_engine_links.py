@@ -21,7 +21,7 @@ from flowtact.running.compile import compile_graph
 from flowtact.runtime.inproc import InprocExecutor
 from flowtact.runtime.links import LINKS, Link, link_kind, register_link
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _copy(c: Chunk) -> Chunk:

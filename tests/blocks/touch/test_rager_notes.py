@@ -10,7 +10,7 @@ from flowtact.blocks.touch.presets import NEURON_PRESETS, TABLE_I
 from flowtact.graphfile.graph import load_graph
 from flowtact.testing import run_graph
 
-GRAPHS = Path(__file__).parent.parent / "graphs"
+GRAPHS = Path(__file__).parents[3] / "graphs"
 
 
 def rate(t, start, stop, n):

@@ -11,7 +11,7 @@ from flowtact.testing import run_graph
 
 pytest.importorskip("scipy.signal")
 
-GRAPH = Path(__file__).parent.parent / "graphs" / "touchsim_afferents.yaml"
+GRAPH = Path(__file__).parents[3] / "graphs" / "touchsim_afferents.yaml"
 COLUMNS = ("SA1|0", "RA|0", "PC|0")  # the graph's afferents, in column order
 
 

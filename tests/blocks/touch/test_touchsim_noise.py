@@ -22,7 +22,7 @@ from flowtact.bench.touchsim_noise import ALPHA, STATS, compare, spike_stats
 
 pytest.importorskip("scipy.stats")
 
-REF = Path(__file__).parent / "data" / "touchsim_noise_ref.npz"
+REF = Path(__file__).parents[3] / "tests" / "data" / "touchsim_noise_ref.npz"
 REPEATS = 200
 
 
