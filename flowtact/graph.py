@@ -447,18 +447,22 @@ def _split_shards(
     """Every node with ``shards: K`` (K > 1) split into K shard nodes and a merge named as the node
     (:mod:`flowtact.shards`); bad ``shards:`` values are reported where they are written."""
     from flowtact.compile import node_seed
-    from flowtact.shards import check_shards, expand_shards
+    from flowtact.shards import check_shards, expand_shards, plan_bounds
 
-    bounds = {}
+    split = {}
     for name, node in nodes.items():
         if node.shards is None:
             continue
-        b, errs = check_shards(node, node.shards, y.loc("nodes", name, "shards"))
+        got, errs = check_shards(node, node.shards, y.loc("nodes", name, "shards"))
         errors.extend(errs)
-        if b is not None and len(b) > 2:
-            bounds[name] = b
-        elif b is not None and isinstance(node.process, list):
-            node.process = node.process[0]
+        if got is not None:
+            split[name] = got
+    bounds, why = plan_bounds(split, edges)
+    for name, reason in why.items():
+        errors.append(GraphError(y.loc("nodes", name, "shards"), f"node '{name}': {reason}"))
+    for name, node in nodes.items():
+        if name in split and name not in bounds and isinstance(node.process, list):
+            node.process = node.process[0]  # shards: 1
     if errors or not bounds:
         return nodes, edges
     recorded = {(n, p) for n, p, _ in record}

@@ -32,6 +32,7 @@ import numpy as np
 from flowtact.block import Block, Port, SpecError
 from flowtact.chunk import Chunk, StreamSpec
 from flowtact.params import Config, param
+from flowtact.presets import apply_preset
 
 if TYPE_CHECKING:
     from flowtact.graph import Edge, GraphError, NodeDef
@@ -300,8 +301,8 @@ def shard_groups(node: NodeDef, k: int) -> list[str]:
     return [f"{node.name}_s{i}" for i in range(k)]
 
 
-def check_shards(node: NodeDef, shards: Any, loc: Any) -> tuple[list[int] | None, list[GraphError]]:
-    """The unit bounds of a node's ``shards:``, or the located errors that forbid it."""
+def check_shards(node: NodeDef, shards: Any, loc: Any) -> tuple[tuple[int, int, int] | None, list[GraphError]]:
+    """``(units, shards, alignment)`` of a node's ``shards:``, or the located errors that forbid it."""
     from flowtact.graph import GraphError
 
     where = f"node '{node.name}'"
@@ -318,14 +319,43 @@ def check_shards(node: NodeDef, shards: Any, loc: Any) -> tuple[list[int] | None
         ]
     n = cls.shard_units(node.config)
     if n is None:
-        return None, [GraphError(loc, f"{where}: shards need the unit count in its parameters (n or models)")]
-    bounds = shard_bounds(n, shards, cls.shard_align(node.config))
-    if isinstance(bounds, str):
-        return None, [GraphError(loc, f"{where}: {bounds}")]
+        return None, [
+            GraphError(loc, f"{where}: shards need the unit count in its parameters (n, models or per-unit lists)")
+        ]
     procs = node.process
     if isinstance(procs, list) and len(procs) != shards:
         return None, [GraphError(loc, f"{where}: 'process' lists {len(procs)} groups for {shards} shards")]
-    return bounds, []
+    return (n, shards, cls.shard_align(node.config)), []
+
+
+def plan_bounds(
+    split: Mapping[str, tuple[int, int, int]], edges: list[Edge]
+) -> tuple[dict[str, list[int]], dict[str, str]]:
+    """Unit bounds of every node in ``split`` (name -> (units, shards, alignment)), and why a node
+    cannot be split. Nodes joined by an edge with the same units and shards are cut alike, at the
+    coarsest alignment among them, so they connect shard to shard."""
+    root = {n: n for n in split}
+
+    def find(n: str) -> str:
+        while root[n] != n:
+            n = root[n]
+        return n
+
+    for e in edges:
+        a, b = split.get(e.src), split.get(e.dst)
+        if a is not None and b is not None and a[:2] == b[:2]:
+            root[find(e.src)] = find(e.dst)
+    align: dict[str, int] = {}
+    for n, (_, _, al) in split.items():
+        align[find(n)] = max(align.get(find(n), 1), al)
+    bounds, why = {}, {}
+    for n, (units, k, _) in split.items():
+        b = shard_bounds(units, k, align[find(n)])
+        if isinstance(b, str):
+            why[n] = b
+        elif k > 1:
+            bounds[n] = b
+    return bounds, why
 
 
 def expand_shards(
@@ -353,7 +383,8 @@ def expand_shards(
         seed = node.seed if node.seed is not None else node_seed(name)
         groups = shard_groups(node, k)
         for i in range(k):
-            params = node.cls.shard_params(dict(node.params), b[i], b[i + 1], n)
+            owner = f"{name}__s{i} ({node.cls.name})"
+            params = node.cls.shard_params(apply_preset(node.cls.name, node.params, owner), b[i], b[i + 1], n)
             sname = f"{name}__s{i}"
             out[sname] = replace(
                 node,
@@ -386,6 +417,12 @@ def expand_shards(
             out[sl] = _slice_node(nodes[e.dst], sl, bd[i], bd[i + 1])
             new_edges.append(replace(e, dst=sl, dst_port="x"))
             new_edges.append(replace(e, src=sl, src_port="y", dst=f"{e.dst}__s{i}"))
+    for e in new_edges:  # fed shard to shard: run with that shard unless the node names groups
+        if e.src.rpartition("__s")[0] in bounds and not isinstance(nodes[e.dst.rpartition("__s")[0]].process, list):
+            out[e.dst] = replace(out[e.dst], process=None)
+    for name in bounds:  # a merge nothing reads: not made
+        if not any(n == name for n, _ in merged):
+            del out[name]
     return out, new_edges + _merge_edges(nodes, bounds, merged)
 
 
