@@ -22,6 +22,7 @@ sharded or not and a ``--fast`` recording is bit-identical). docs/sharding.md.
 from __future__ import annotations
 
 import functools
+import itertools
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -138,7 +139,7 @@ class ShardMergeConfig(Config):
 
     def check(self) -> None:
         b = self.bounds
-        if b[0] != 0 or any(x >= y for x, y in zip(b, b[1:], strict=False)):
+        if b[0] != 0 or any(x >= y for x, y in itertools.pairwise(b)):
             raise self.error("bounds", f"must start at 0 and increase; got {list(b)}")
 
 
@@ -205,7 +206,10 @@ class ShardMerge(Block):
 
     def flush(self) -> dict[str, Chunk]:
         none: list[Chunk | None] = [None] * self._k
-        return {p: self._events(p, none, True) if p in self._ev else self._samples(p, none, True) for p in self._ports}
+        return {
+            p: self._events(p, none, True) if p in self._ev else self._samples(p, none, True)
+            for p in self._ports
+        }
 
     def _events(self, port: str, chunks: list[Chunk | None], last: bool) -> Chunk:
         held, b = self._ev[port], self.config.bounds
@@ -301,13 +305,17 @@ def shard_groups(node: NodeDef, k: int) -> list[str]:
     return [f"{node.name}_s{i}" for i in range(k)]
 
 
-def check_shards(node: NodeDef, shards: Any, loc: Any) -> tuple[tuple[int, int, int] | None, list[GraphError]]:
+def check_shards(
+    node: NodeDef, shards: Any, loc: Any
+) -> tuple[tuple[int, int, int] | None, list[GraphError]]:
     """``(units, shards, alignment)`` of a node's ``shards:``, or the located errors that forbid it."""
     from flowtact.graph import GraphError
 
     where = f"node '{node.name}'"
     if isinstance(shards, bool) or not isinstance(shards, int) or not 1 <= shards <= MAX_SHARDS:
-        return None, [GraphError(loc, f"{where}: 'shards' must be an integer from 1 to {MAX_SHARDS}; got {shards!r}")]
+        return None, [
+            GraphError(loc, f"{where}: 'shards' must be an integer from 1 to {MAX_SHARDS}; got {shards!r}")
+        ]
     cls = node.cls
     if not getattr(cls, "shardable", False):
         return None, [
@@ -320,7 +328,9 @@ def check_shards(node: NodeDef, shards: Any, loc: Any) -> tuple[tuple[int, int, 
     n = cls.shard_units(node.config)
     if n is None:
         return None, [
-            GraphError(loc, f"{where}: shards need the unit count in its parameters (n, models or per-unit lists)")
+            GraphError(
+                loc, f"{where}: shards need the unit count in its parameters (n, models or per-unit lists)"
+            )
         ]
     procs = node.process
     if isinstance(procs, list) and len(procs) != shards:
@@ -368,8 +378,6 @@ def expand_shards(
     """Nodes and edges with every sharded node split (see the module's docstring); ``bounds`` maps
     each sharded node to its unit boundaries, ``recorded`` holds the recorded (node, port) streams
     and ``node_seed(name)`` is a node's seed."""
-    from flowtact.graph import Edge
-
     if not bounds:
         return nodes, edges
     out: dict[str, NodeDef] = {}
@@ -418,7 +426,9 @@ def expand_shards(
             new_edges.append(replace(e, dst=sl, dst_port="x"))
             new_edges.append(replace(e, src=sl, src_port="y", dst=f"{e.dst}__s{i}"))
     for e in new_edges:  # fed shard to shard: run with that shard unless the node names groups
-        if e.src.rpartition("__s")[0] in bounds and not isinstance(nodes[e.dst.rpartition("__s")[0]].process, list):
+        if e.src.rpartition("__s")[0] in bounds and not isinstance(
+            nodes[e.dst.rpartition("__s")[0]].process, list
+        ):
             out[e.dst] = replace(out[e.dst], process=None)
     for name in bounds:  # a merge nothing reads: not made
         if not any(n == name for n, _ in merged):

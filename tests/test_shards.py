@@ -63,8 +63,14 @@ def test_the_whole_touchsim_chain_sharded_alike_joins_shard_to_shard_and_stays_b
     n = 4200
     models = [["SA1.0", "RA.3", "PC.1", "RA.0", "SA1.2"][i % 5] for i in range(n)]
     nodes = {
-        "probe": {"block": "touchsim_probe", "params": {"n": n, "s_peak": [0.02], "d_peak": [4.0], "onset_s": 0.0}},
-        "pre": {"block": "iir", "params": {"family": "butter", "order": 3, "cutoff_hz": [100.0 + i % 7 for i in range(n)]}},
+        "probe": {
+            "block": "touchsim_probe",
+            "params": {"n": n, "s_peak": [0.02], "d_peak": [4.0], "onset_s": 0.0},
+        },
+        "pre": {
+            "block": "iir",
+            "params": {"family": "butter", "order": 3, "cutoff_hz": [100.0 + i % 7 for i in range(n)]},
+        },
         "current": {
             "block": "rectified_gain",
             "params": {"pos1": [1.0 + (i % 3) for i in range(n)], "noise_sd": [0.05], "saturation": [0.0]},
@@ -73,7 +79,9 @@ def test_the_whole_touchsim_chain_sharded_alike_joins_shard_to_shard_and_stays_b
     }
     edges = ["probe.s -> pre.x", "pre.y -> current.x1", "current.y -> aff.x"]
     record = ["aff.spikes", "current.y"]
-    both = {k: _graph(tmp_path, f"chain{k}", dict(nodes), edges, record, dict.fromkeys(nodes, k)) for k in (1, 2)}
+    both = {
+        k: _graph(tmp_path, f"chain{k}", dict(nodes), edges, record, dict.fromkeys(nodes, k)) for k in (1, 2)
+    }
     plan = load_plan(both[2])
     assert {n for n in plan.graph.nodes if "__in_" in n} == set()  # shard to shard
     assert set(place(plan, fast=True).groups) == {"probe_s0", "probe_s1"}
@@ -102,7 +110,10 @@ def test_sample_outputs_are_joined_column_wise_and_the_node_keeps_its_name(tmp_p
     unsharded v, its spikes carry the whole population's unit numbers, named 'pop.*'."""
     nodes = {
         "probe": {"block": "touchsim_probe", "params": {"n": 7, "onset_s": 0.0, "ramp_s": 0.02}},
-        "pop": {"block": "nlif", "params": {"n": 7, "gain": [40.0 * (i + 1) for i in range(7)], "tau_s": 0.01}},
+        "pop": {
+            "block": "nlif",
+            "params": {"n": 7, "gain": [40.0 * (i + 1) for i in range(7)], "tau_s": 0.01},
+        },
     }
     rec = ["pop.spikes", "pop.v"]
     one = run_graph(_graph(tmp_path, "v1", nodes, ["probe.s -> pop.x"], rec, {}))

@@ -140,6 +140,7 @@ class Iir(ft.Block):
         """The channels its per-channel cut-offs give (None with one cut-off for all)."""
         n = max(len(config.cutoff_hz), len(config.upper_hz))
         return n if n > 1 else None
+
     requires = {"scipy": "signal"}
     inputs = {
         "x": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="signal, one filter per channel")

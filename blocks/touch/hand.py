@@ -39,7 +39,10 @@ _GOLDEN = 0.6180339887498949
 
 def class_counts() -> dict[str, int]:
     """Afferents per class: density × area summed over the regions."""
-    return {c: round(sum(d * a for d, a in zip(DENSITY_PER_CM2[c], REGION_AREA_CM2, strict=True))) for c in CLASSES}
+    return {
+        c: round(sum(d * a for d, a in zip(DENSITY_PER_CM2[c], REGION_AREA_CM2, strict=True)))
+        for c in CLASSES
+    }
 
 
 @cache

@@ -69,6 +69,7 @@ class TouchsimProbe(ft.Source):
     @classmethod
     def shard_units(cls, config: TouchsimProbeConfig) -> int:
         return config.n
+
     outputs = {
         "s": ft.Port(dtype="float64", ndim=1, units="1", doc="static term per receptor"),
         "d": ft.Port(dtype="float64", ndim=1, units="1", doc="dynamic term per receptor"),
