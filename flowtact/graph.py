@@ -593,8 +593,9 @@ def _node(
         errors.append(
             GraphError(
                 y.loc("nodes", name, "process"),
-                f"node '{name}': 'process' must be an identifier (a sharded node: or a list of them); "
-                f"got {process!r}",
+                f"node '{name}': 'process' must be an identifier"
+                + (" or a list of them, one per shard" if "shards" in ndoc else "")
+                + f"; got {process!r}",
             )
         )
     seed = ndoc.get("seed")
