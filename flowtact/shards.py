@@ -16,7 +16,7 @@ is loaded, above the runtime (which needs no change): node ``X`` with ``shards: 
 Two nodes sharded alike (same K and bounds) are joined shard to shard, without a merge and slice
 between them. Boundaries are as even as the block's alignment allows (:meth:`Block.shard_align`:
 a noisy nlif splits only at its noise streams' boundaries, so each unit draws the same normals
-sharded or not and a ``--fast`` recording is bit-identical). docs/sharding.md.
+sharded or not and a ``--fast`` recording is bit-identical). docs/touchsim.md.
 """
 
 from __future__ import annotations

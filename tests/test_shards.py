@@ -183,3 +183,17 @@ def test_the_hand_graph_is_16900_afferents_in_two_processes():
 @pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
 def test_the_slice_block_conforms(check):
     check(ShardSlice)
+
+
+def test_a_processes_section_may_configure_the_shards_groups(tmp_path):
+    """A shard's group (named in the process list, or <node>_s<k>) takes `processes:` settings."""
+    nodes = {
+        "probe": {"block": "touchsim_probe", "params": {"n": 6}},
+        "pop": {"block": "nlif", "params": {"n": 6}},
+    }
+    path = _graph(tmp_path, "groups", nodes, ["probe.s -> pop.x"], ["pop.spikes"], {"pop": 2})
+    doc = yaml.safe_load(path.read_text())
+    doc["processes"] = {"pop_s1": {"restart": "on-failure"}}
+    path.write_text(yaml.safe_dump(doc))
+    plan = load_plan(path)
+    assert place(plan, fast=True).processes["pop_s1"].restart == "on-failure"
