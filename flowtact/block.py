@@ -242,6 +242,12 @@ class Block:
     #: what happened and whether it is harmless or a problem. The run summary and ``flowtact blocks
     #: NAME`` print it; every name counted must be here or in a base class's (a test reads the code).
     counter_docs: ClassVar[Mapping[str, str]] = {}
+    #: Its units (channels, neurons) are independent, so ``shards: K`` may split them across
+    #: processes (flowtact.graphfile.shards); such a block says how many (:meth:`shard_units`) and how to
+    #: slice its parameters (:meth:`shard_params`, default: the ``per_unit_params`` of length n).
+    shardable: ClassVar[bool] = False
+    #: Parameters holding one value per unit (a list of length n is sliced with the units).
+    per_unit_params: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kw: Any) -> None:
         super().__init_subclass__(**kw)
@@ -277,6 +283,29 @@ class Block:
         no serial library)."""
         req = cls.requires
         return dict(req) if isinstance(req, Mapping) else dict.fromkeys(req, "")
+
+    @classmethod
+    def shard_units(cls, config: Config) -> int | None:  # noqa: ARG003 - shardable blocks override
+        """The number of independent units a node with this config has (None: not known)."""
+        return None
+
+    @classmethod
+    def shard_align(cls, config: Config) -> int:  # noqa: ARG003 - a noisy block overrides it
+        """Shard boundaries fall on multiples of this (a block whose random streams cover groups
+        of units aligns to the groups, so every unit draws the same numbers sharded or not)."""
+        return 1
+
+    @classmethod
+    def shard_params(cls, params: dict[str, Any], lo: int, hi: int, n: int) -> dict[str, Any]:
+        """The parameters of the shard running units ``[lo, hi)`` of ``n``."""
+        out = dict(params)
+        for k in cls.per_unit_params:
+            v = out.get(k)
+            if isinstance(v, (list, tuple)) and len(v) == n and n > 1:
+                out[k] = list(v[lo:hi])
+        if "n" in out:
+            out["n"] = hi - lo
+        return out
 
     # -- compile-time contract ---------------------------------------------------------------
     def specs(self, inputs: Mapping[str, StreamSpec]) -> dict[str, StreamSpec]:

@@ -1,5 +1,7 @@
-"""CPU time of TouchSim's prefilter (iir) and current (rectified_gain) for a whole hand: 17 000
-channels at 5 kHz in 50-sample chunks (10 ms ticks), noise and saturation on; median of 40 chunks.
+"""CPU time of each stage of a whole hand's afferents: the synthetic stimulus (touchsim_probe),
+TouchSim's prefilter (iir), current (rectified_gain) and membranes (nlif, graphs/hand.yaml's
+models), 17 000 channels at 5 kHz in 50-sample chunks (10 ms ticks), noise and saturation on;
+median of 40 chunks.
 
     python scripts/touchsim_stage_costs.py
 
@@ -17,6 +19,9 @@ import numpy as np
 from flowtact import Chunk, StreamSpec
 from flowtact.blocks.signal.iir import Iir
 from flowtact.blocks.signal.rectified_gain import RectifiedGain
+from flowtact.blocks.spiking.nlif import Nlif
+from flowtact.blocks.touch.hand import hand_models
+from flowtact.blocks.touch.touchsim_probe import TouchsimProbe
 
 N, FS, CHUNK = 17_000, 5000.0, 50
 
@@ -43,10 +48,20 @@ def main() -> None:
         return float(np.median(times[1:]))  # the first call may compile
 
     a, b = cost(lambda c: iir(x=c)), cost(lambda c: gains(x1=c, x2=c))
+    probe = TouchsimProbe(n=N, repeat=True)
+    probe.bind({})
+    p = cost(lambda c: probe(float(c.t[-1]) + 1.0 / FS))
+    neurons = Nlif(models=[hand_models()[i % len(hand_models())] for i in range(N)])
+    neurons.bind({"x": spec})
+    drive = 0.02 * x  # TouchSim-sized currents: the afferents fire now and then
+    m = cost(lambda c: neurons(x=Chunk(c.t, drive)))
     per = 1e3 * CHUNK / FS
     print(f"N={N:,} at {FS:g} Hz, {CHUNK}-sample chunks: CPU ms per {per:g} ms of signal")
     print(f"  iir (butter 3, per-channel cut-offs): {a * 1e3:.1f}")
     print(f"  rectified_gain (s, d, ahead Δd, noise, saturation): {b * 1e3:.1f}")
+    print(f"  touchsim_probe (synthetic s and d): {p * 1e3:.1f}")
+    print(f"  nlif (the hand's TouchSim models, last-spike history): {m * 1e3:.1f}")
+    print(f"  a hand's chain (probe, 2 iir, rectified_gain, nlif): {(p + 2 * a + b + m) * 1e3:.1f}")
     print(f"  load average {os.getloadavg()[0]:.1f}")
 
 

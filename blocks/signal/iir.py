@@ -132,6 +132,15 @@ class Iir(ft.Block):
     """
 
     config_cls = IirConfig
+    shardable = True
+    per_unit_params = ("cutoff_hz", "upper_hz")
+
+    @classmethod
+    def shard_units(cls, config: IirConfig) -> int | None:
+        """The channels its per-channel cut-offs give (None with one cut-off for all)."""
+        n = max(len(config.cutoff_hz), len(config.upper_hz))
+        return n if n > 1 else None
+
     requires = {"scipy": "signal"}
     inputs = {
         "x": ft.Port(dtype="float64", ndim=(0, 1), require_rate=True, doc="signal, one filter per channel")

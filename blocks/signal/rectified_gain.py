@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numba import njit
@@ -116,6 +116,24 @@ def rectified_current(
     return y
 
 
+#: Channels per noise stream: channel c draws from stream c // NOISE_GROUP, in (sample, channel)
+#: order, so a population up to 4 096 channels is one flat stream and a shard cut at a multiple of
+#: it draws every channel's normals as the whole population does (nlif's grouping, same size).
+NOISE_GROUP = 4096
+_PER_CHANNEL = (
+    "pos1",
+    "neg1",
+    "pos2",
+    "neg2",
+    "pos3",
+    "neg3",
+    "ahead_pos",
+    "ahead_neg",
+    "noise_sd",
+    "saturation",
+)
+
+
 @dataclass(frozen=True)
 class RectifiedGainConfig(ft.BadDataConfig):
     """Parameters of :class:`RectifiedGain` (every gain list: one value for all channels, or one each)."""
@@ -145,7 +163,16 @@ class RectifiedGainConfig(ft.BadDataConfig):
     )
     units: str = ft.param("1", doc="units of the output current")
 
+    noise_offset: int = ft.param(
+        0,
+        doc="a shard's first channel in the whole population (set by shards: K): its noise streams are "
+        "the whole population's from there on; a multiple of 4096 (one noise stream's channels)",
+        ge=0,
+    )
+
     def check(self) -> None:
+        if self.noise_offset % NOISE_GROUP:
+            raise self.error("noise_offset", f"must be a multiple of {NOISE_GROUP}; got {self.noise_offset}")
         if any(v < 0 for v in self.noise_sd):
             raise self.error("noise_sd", "must be >= 0")
         if any(v < 0 for v in self.saturation):
@@ -201,6 +228,8 @@ class RectifiedGain(ft.Block):
     """
 
     config_cls = RectifiedGainConfig
+    shardable = True
+    per_unit_params = _PER_CHANNEL
     inputs = {
         "x1": ft.Port(
             dtype="float64", ndim=(0, 1), require_rate=True, doc="first input (the output's clock)"
@@ -219,6 +248,25 @@ class RectifiedGain(ft.Block):
         "unpaired_at_end": "input samples with no partners on the other inputs when the stream ended: not "
         "used (the inputs delivered different numbers of samples)",
     }
+
+    @classmethod
+    def shard_units(cls, config: RectifiedGainConfig) -> int | None:
+        """The channels its per-channel parameters give (None when every one is a single value)."""
+        n = max(len(getattr(config, k)) for k in _PER_CHANNEL)
+        return n if n > 1 else None
+
+    @classmethod
+    def shard_align(cls, config: RectifiedGainConfig) -> int:
+        """Noisy: cut at the noise streams' boundaries (4 096 channels each)."""
+        return NOISE_GROUP if any(config.noise_sd) else 1
+
+    @classmethod
+    def shard_params(cls, params: dict[str, Any], lo: int, hi: int, n: int) -> dict[str, Any]:
+        out = super().shard_params(params, lo, hi, n)
+        offset = int(params.get("noise_offset", 0)) + lo
+        if offset % NOISE_GROUP == 0:  # always so with noise (shard_align); without, it changes nothing
+            out["noise_offset"] = offset
+        return out
 
     def needs(self, connected: frozenset[str]) -> frozenset[str]:
         g, ahead = self.config.gains(), self.config.ahead
@@ -242,18 +290,7 @@ class RectifiedGain(ft.Block):
                 )
             if not math.isclose(spec.rate_hz or 0.0, x1.rate_hz or 0.0, rel_tol=1e-9):
                 raise ft.SpecError(p, f"input '{p}' is {spec.rate_hz:g} Hz but x1 is {x1.rate_hz:g} Hz")
-        for name in (
-            "pos1",
-            "neg1",
-            "pos2",
-            "neg2",
-            "pos3",
-            "neg3",
-            "ahead_pos",
-            "ahead_neg",
-            "noise_sd",
-            "saturation",
-        ):
+        for name in _PER_CHANNEL:
             v = getattr(cfg, name)
             if len(v) not in (1, nc):
                 raise ft.SpecError(
@@ -285,7 +322,11 @@ class RectifiedGain(ft.Block):
         self._gains[6], self._gains[7] = self._gd
         self._sd = full(cfg.noise_sd)
         self._sat = full(cfg.saturation)
-        self._rng_state = seed_state(self.rng) if self._sd.any() else None
+        self._rng_state: list[np.ndarray] | None = None
+        if self._sd.any():
+            for _ in range(cfg.noise_offset // NOISE_GROUP):  # the streams of channels before the shard
+                seed_state(self.rng)
+            self._rng_state = [seed_state(self.rng) for _ in range(-(-self._nc // NOISE_GROUP))]
         rate = spec.rate_hz or 1.0
         self._align = ft.Aligner(self.node, self.input_specs, self._ports, tol_s=1e-6 / rate)
         self._last: dict[str, np.ndarray | None] = {p: None for p in self._ports}
@@ -301,7 +342,7 @@ class RectifiedGain(ft.Block):
         noisy = self._rng_state is not None
         xi = np.empty(n * self._nc if noisy else 0)
         if noisy:
-            fill_normal(self._rng_state, xi)
+            self._draw(xi, n)
         bad = fused_current(
             y,
             *hx[0],
@@ -318,6 +359,19 @@ class RectifiedGain(ft.Block):
         )
         self.count("overflow", bad)
         return y
+
+    def _draw(self, xi: np.ndarray, n: int) -> None:
+        """``n`` samples' normals in (sample, channel) order, each group of channels from its stream."""
+        states = self._rng_state or []
+        if len(states) == 1:
+            fill_normal(states[0], xi)
+            return
+        grid = xi.reshape(n, self._nc)
+        for g, state in enumerate(states):
+            lo, hi = g * NOISE_GROUP, min(self._nc, (g + 1) * NOISE_GROUP)
+            part = np.empty(n * (hi - lo))
+            fill_normal(state, part)
+            grid[:, lo:hi] = part.reshape(n, hi - lo)
 
     def step(self, **inputs: ft.Chunk) -> dict[str, ft.Chunk]:
         t, data = self._align.push(inputs)

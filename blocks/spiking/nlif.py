@@ -13,6 +13,7 @@ import numpy as np
 import flowtact.api as ft
 from flowtact.blocks.spiking._lif_kernels import (
     NOISE_FILL,
+    NOISE_GROUP,
     NOISE_INTERNAL,
     NOISE_OFF,
     grid_coefficients,
@@ -20,6 +21,7 @@ from flowtact.blocks.spiking._lif_kernels import (
     lif_grid,
     lif_interp,
     order_within_steps,
+    seed_state,
     seed_streams,
 )
 from flowtact.blocks.spiking._lif_unit_kernels import lif_units
@@ -124,6 +126,14 @@ class NlifConfig(ft.BadDataConfig):
         ge=0,
     )
 
+    noise_offset: int = ft.param(
+        0,
+        doc="a shard's first unit in the whole population (set by shards: K): its noise streams are "
+        "the whole population's from there on, so each unit draws the same normals sharded or not; "
+        "a multiple of 4096 (one noise stream's units)",
+        ge=0,
+    )
+
     @property
     def size(self) -> int:
         """Units in the population: ``len(models)`` when models are given, else ``n``."""
@@ -187,6 +197,8 @@ class NlifConfig(ft.BadDataConfig):
         return out
 
     def check(self) -> None:
+        if self.noise_offset % NOISE_GROUP:
+            raise self.error("noise_offset", f"must be a multiple of {NOISE_GROUP}; got {self.noise_offset}")
         if self.models and self.n not in (1, len(self.models)):
             raise self.error("n", f"must be 1 or len(models) = {len(self.models)}; got {self.n}")
         for key in _PER_NEURON:
@@ -347,6 +359,8 @@ class Nlif(ft.Block):
     """
 
     config_cls = NlifConfig
+    shardable = True
+    per_unit_params = ("models", "tau_s", "v_leak", "gain", "sigma", "threshold")
     inputs = {
         "x": ft.Port(
             dtype="float64",
@@ -375,6 +389,29 @@ class Nlif(ft.Block):
         ),
     }
     counter_docs = ft.nonfinite_counter_docs("drive samples on 'x'")
+
+    # -- shards -----------------------------------------------------------------------------
+    @classmethod
+    def shard_units(cls, config: NlifConfig) -> int:
+        return config.size
+
+    @classmethod
+    def shard_align(cls, config: NlifConfig) -> int:
+        """Noisy populations split at their noise streams' boundaries (4 096 units each)."""
+        return NOISE_GROUP if (config.resolved()["sigma"] > 0).any() else 1
+
+    @classmethod
+    def shard_params(cls, params: dict[str, Any], lo: int, hi: int, n: int) -> dict[str, Any]:
+        out = super().shard_params(params, lo, hi, n)
+        w = out.get("h_weights")
+        if isinstance(w, (list, tuple)) and w and isinstance(w[0], (list, tuple)) and len(w) == n:
+            out["h_weights"] = list(w[lo:hi])
+        if "n" in out and out.get("models"):
+            out["n"] = 1 if params["n"] == 1 else hi - lo
+        offset = int(params.get("noise_offset", 0)) + lo
+        if offset % NOISE_GROUP == 0:  # always so with noise (shard_align); without, it changes nothing
+            out["noise_offset"] = offset
+        return out
 
     # -- specs -------------------------------------------------------------------------------
     def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
@@ -439,6 +476,8 @@ class Nlif(ft.Block):
             self._ring = np.zeros((n, 0))
         self._pos = 0
         self._noise = NOISE_INTERNAL if (p["sigma"] > 0).any() else NOISE_OFF
+        for _ in range(self.config.noise_offset // NOISE_GROUP):  # the streams of units before the shard
+            seed_state(self.rng)
         self._rng_state = seed_streams(self.rng, n)
         self._no_xi = np.zeros((0, n))
         self._no_v = np.zeros((0, n))

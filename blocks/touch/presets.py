@@ -49,6 +49,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from flowtact.blocks.touch.hand import hand_presets
 from flowtact.blocks.touch.touchsim import TOUCHSIM_PRESETS
 
 __all__ = ["NEURON_PRESETS", "PRESETS", "TABLE_I", "table_i_weights"]
@@ -108,3 +109,6 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     },
     "nlif": {**NEURON_PRESETS, **TOUCHSIM_PRESETS},  # Rager's SA1/FA1, TouchSim's SA1.0 … PC.3
 }
+
+for _block, _params in hand_presets().items():  # the whole hand's ≈ 17 000 afferents (touch.hand)
+    PRESETS.setdefault(_block, {})["hand"] = _params

@@ -63,6 +63,13 @@ class TouchsimProbe(ft.Source):
     """
 
     config_cls = TouchsimProbeConfig
+    shardable = True
+    per_unit_params = ("s_peak", "d_peak")
+
+    @classmethod
+    def shard_units(cls, config: TouchsimProbeConfig) -> int:
+        return config.n
+
     outputs = {
         "s": ft.Port(dtype="float64", ndim=1, units="1", doc="static term per receptor"),
         "d": ft.Port(dtype="float64", ndim=1, units="1", doc="dynamic term per receptor"),

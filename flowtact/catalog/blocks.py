@@ -112,6 +112,17 @@ def load_block(name: str, allow_modules: Iterable[str] = ()) -> type[Block]:
     """The block class registered as ``name``, or imported from ``module:Class`` when
     ``allow_modules`` (module names or package prefixes) allows that module; a module that is not
     allowed is never imported (:class:`ModuleNotAllowedError`)."""
+    if name == "shard_slice":
+        from flowtact.graphfile.shards import ShardSlice
+
+        return ShardSlice
+    if name.startswith("shard_merge["):
+        from flowtact.graphfile.shards import MERGE_RE, merge_class
+
+        m = MERGE_RE.match(name)
+        if m is None:
+            raise UnknownBlockError(f"block '{name}' is not shard_merge[<block>]")
+        return merge_class(load_block(m.group(1), allow_modules))
     if ":" in name:
         module, _, attr = name.partition(":")
         allow = _ALLOWED.get() | frozenset(allow_modules)

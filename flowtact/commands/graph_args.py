@@ -76,7 +76,7 @@ def add_allow_module(sp: argparse.ArgumentParser) -> None:
 
 
 def parse_replays(items: Sequence[str]) -> dict[str, str]:
-    """``--replay NODE=FILE[:MAP]`` items as node -> FILE[:MAP]; a located GraphErrors (``--replay:1:I``)
+    """``--replay NODE=FILE[:MAP]`` items as node -> FILE[:MAP]; a located GraphFileError (``--replay:1:I``)
     for a malformed item or a node replayed twice."""
     from flowtact.errors import GraphFileError
     from flowtact.graphfile.graph import Loc

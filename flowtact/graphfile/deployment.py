@@ -176,6 +176,14 @@ def _parse_processes(doc: dict[str, Any], y: Located, node_docs: dict[str, Any])
         for n in node_docs.values()
         if isinstance(n, dict) and isinstance(n.get("process"), str)
     }
+    for name, n in node_docs.items():  # a sharded node's groups: its process list, else <node>_s<k>
+        if not isinstance(n, dict) or not isinstance(n.get("shards"), int):
+            continue
+        given = n.get("process")
+        if isinstance(given, list):
+            used.update(g for g in given if isinstance(g, str))
+        elif given is None:
+            used.update(f"{name}_s{k}" for k in range(n["shards"]))
     raw = doc.get("processes") or {}
     if not isinstance(raw, dict):
         y.errors.append(

@@ -75,7 +75,7 @@ TOP_KEYS = (
     "network",
     "deadlines",
 )
-NODE_KEYS = ("block", "params", "process", "seed", "doc")
+NODE_KEYS = ("block", "params", "process", "seed", "doc", "shards")
 EDGE_KEYS = ("from", "to", "policy", "queue")
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 EDGE_RE = re.compile(r"^\s*([^\s.]+)\.([^\s.]+)\s*->\s*([^\s.]+)\.([^\s.]+)\s*$")
@@ -91,9 +91,12 @@ class NodeDef:
     params: dict[str, Any]
     config: Any
     loc: Loc
-    process: str | None = None
+    process: str | list[str] | None = None
+    """Its process group; a sharded node may list one per shard."""
     seed: int | None = None
     param_locs: dict[str, Loc] = field(default_factory=dict)
+    shards: int | None = None
+    """``shards: K`` as written (flowtact.graphfile.shards splits the node when the graph is loaded)."""
 
     def make(self) -> Block:
         """A fresh block instance for this node."""
@@ -440,6 +443,8 @@ def _build(
     record = _record(doc.get("record", []), y, node_docs, classes, errors)
     deployment = parse_deployment(doc, y, node_docs)
     errors.extend(deadline_path_errors(deployment.deadlines, edges))
+    if not errors:
+        nodes, edges = _split_shards(nodes, edges, record, seed, y, errors)
     if errors:
         raise GraphFileError(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
     return Graph(
@@ -456,6 +461,39 @@ def _build(
         overrides={o: parse_override(o)[2] for o in overrides},
         deployment=deployment,
     )
+
+
+def _split_shards(
+    nodes: dict[str, NodeDef],
+    edges: list[Edge],
+    record: list[tuple[str, str, Loc]],
+    seed: int,
+    y: Located,
+    errors: list[GraphProblem],
+) -> tuple[dict[str, NodeDef], list[Edge]]:
+    """Every node with ``shards: K`` (K > 1) split into K shard nodes and a merge named as the node
+    (:mod:`flowtact.graphfile.shards`); bad ``shards:`` values are reported where they are written."""
+    from flowtact.graphfile.shards import check_shards, expand_shards, plan_bounds
+    from flowtact.running.compile import node_seed
+
+    split = {}
+    for name, node in nodes.items():
+        if node.shards is None:
+            continue
+        got, errs = check_shards(node, node.shards, y.loc("nodes", name, "shards"))
+        errors.extend(errs)
+        if got is not None:
+            split[name] = got
+    bounds, why = plan_bounds(split, edges)
+    for name, reason in why.items():
+        errors.append(GraphProblem(y.loc("nodes", name, "shards"), f"node '{name}': {reason}"))
+    for name, node in nodes.items():
+        if name in split and name not in bounds and isinstance(node.process, list):
+            node.process = node.process[0]  # shards: 1
+    if errors or not bounds:
+        return nodes, edges
+    recorded = {(n, p) for n, p, _ in record}
+    return expand_shards(nodes, edges, recorded, bounds, lambda n: node_seed(seed, n))
 
 
 def _run_settings(doc: Mapping[str, Any], y: Located, errors: list[GraphProblem]) -> tuple[int, Any, Any]:
@@ -577,11 +615,14 @@ def _node(
         param_locs[k] = sloc  # --set: from here
         params.update(_resolved(cls.config_cls, {k: value}, {k: Path.cwd()}, param_locs, name, errors))
     process = ndoc.get("process")
-    if process is not None and not (isinstance(process, str) and NAME_RE.match(process)):
+    groups = process if isinstance(process, list) and "shards" in ndoc else [process]
+    if process is not None and not all(isinstance(g, str) and NAME_RE.match(g) for g in groups):
         errors.append(
             GraphProblem(
                 y.loc("nodes", name, "process"),
-                f"node '{name}': 'process' must be an identifier; got {process!r}",
+                f"node '{name}': 'process' must be an identifier"
+                + (" or a list of them, one per shard" if "shards" in ndoc else "")
+                + f"; got {process!r}",
             )
         )
     seed = ndoc.get("seed")
@@ -618,6 +659,7 @@ def _node(
         process=process,
         seed=seed,
         param_locs=param_locs,
+        shards=ndoc.get("shards"),
     )
 
 

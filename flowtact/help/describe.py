@@ -67,6 +67,8 @@ def _value(v: Any) -> str:
         return f"{v:g}"
     if isinstance(v, str):
         return repr(v)
+    if isinstance(v, Sequence) and len(v) > 12:  # a per-unit list of a large population: its ends
+        return f"[{_value(v[0])}, {_value(v[1])}, … {_value(v[-1])}] ({len(v)} values)"
     if isinstance(v, Sequence):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     return repr(v)

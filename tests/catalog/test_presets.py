@@ -15,7 +15,11 @@ from flowtact.graphfile.graph import load_graph
 
 def test_the_touch_domain_publishes_its_presets_for_generic_blocks():
     touchsim = {f"touch.{c}.{i}" for c, k in (("SA1", 4), ("RA", 9), ("PC", 4)) for i in range(k)}
-    assert {p for p in presets_for("nlif") if p.startswith("touch.")} == {"touch.SA1", "touch.FA1"} | touchsim
+    assert {p for p in presets_for("nlif") if p.startswith("touch.")} == {
+        "touch.SA1",
+        "touch.FA1",
+        "touch.hand",
+    } | touchsim
     assert set(presets_for("weighted_sum")) == {"touch.SA1", "touch.FA1"}
     assert set(presets_for("savgol")) == {"touch.rager"}
     assert presets_for("lowpass") == {}
