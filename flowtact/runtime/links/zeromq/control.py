@@ -20,10 +20,16 @@ BEAT_HWM = 8
 """Heartbeats queued at most: a stalled link drops old beats rather than blocking the thread."""
 
 
+LOCAL_RECONNECT_MS = 5
+"""A forked worker connects before its supervisor has bound (it forks first, then makes its ZeroMQ
+context): retried this often (ms) instead of ZeroMQ's 100 ms default, which every start-up waited."""
+
+
 def worker_control_socket(ctx: zmq.Context, endpoint: str, keys: Any = None) -> zmq.Socket:
     """A worker's control DEALER, connected to ``endpoint`` (tcp://: CURVE, handshake checked)."""
     sock = ctx.socket(zmq.DEALER)
     sock.setsockopt(zmq.LINGER, 2000)  # the last words (an error report) get out
+    sock.setsockopt(zmq.RECONNECT_IVL, LOCAL_RECONNECT_MS)
     if not endpoint.startswith("tcp://"):
         sock.connect(endpoint)
         return sock
