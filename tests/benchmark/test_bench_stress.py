@@ -63,7 +63,7 @@ def test_every_room_with_stress_cases_is_registered_and_a_toy_room_is_found(monk
 
     from flowtact.verify.stress import GROUP, collect
 
-    rooms = sorted(p.parent.name for p in (Path(__file__).parents[1] / "blocks").glob("*/stress_cases.py"))
+    rooms = sorted(p.parent.name for p in (Path(__file__).parents[2] / "blocks").glob("*/stress_cases.py"))
     expected = [c for r in rooms for c in import_module(f"flowtact.blocks.{r}.stress_cases").CASES]
     assert len(rooms) >= 5 and collect() == expected
     real = metadata.entry_points

@@ -318,6 +318,7 @@ SHIPPED = {
     "braille": "scan.position",
     "touchsim_afferents": "current.y",
     "touchsim_currents": "afferents.spikes",
+    "hand": "afferents.spikes",
 }
 
 
