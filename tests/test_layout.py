@@ -245,3 +245,18 @@ def test_the_role_rule_sees_a_literal_block_name(tmp_path, monkeypatch):
     )
     monkeypatch.setattr(f"{__name__}.ROOT", tmp_path)
     assert _literal_block_lookups(tmp_path / "m.py") == ["m.py:2: load_block('replay')"]
+
+
+def test_every_package_folder_is_in_the_wheel():
+    """A folder with an ``__init__.py`` that pyproject's package list leaves out is missing from an
+    installed flowtact (the editable install hides it; .ci/run's wheel check finds it late)."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    dirs = {"flowtact": "flowtact", "blocks": "flowtact.blocks", "bench": "flowtact.bench"}
+    found = {
+        ".".join([dirs[top], *init.parent.relative_to(ROOT / top).parts])
+        for top in dirs
+        for init in (ROOT / top).rglob("__init__.py")
+    }
+    assert not found - listed, sorted(found - listed)
