@@ -67,6 +67,16 @@ def table_i_weights(population: str) -> tuple[tuple[float, ...], tuple[float, ..
     return w[0:3], w[3:6], w[6:9]
 
 
+def rectified_table_i(population: str) -> dict[str, Any]:
+    """``rectified_gain`` parameters of Table I on magnitudes: per axis ``w·|F| + w'·|F'|``.
+
+    x1 = F (N), x2 = F' (N/s); a gain g on both the positive and the negative part is g·|x|. The
+    three per-axis outputs are then summed (``weighted_sum`` with ``w1: [1, 1, 1]``) into the drive.
+    """
+    (f1, f2, f3), (d1, d2, d3), _ = table_i_weights(population)
+    return {"pos1": (f1, f2, f3), "neg1": (f1, f2, f3), "pos2": (d1, d2, d3), "neg2": (d1, d2, d3)}
+
+
 #: ``nlif`` parameter values per population (see the module docstring for each choice).
 NEURON_PRESETS: dict[str, dict[str, Any]] = {
     "SA1": {
@@ -108,6 +118,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         for pop in TABLE_I
     },
     "nlif": {**NEURON_PRESETS, **TOUCHSIM_PRESETS},  # Rager's SA1/FA1, TouchSim's SA1.0 … PC.3
+    "rectified_gain": {f"{pop}.rectified": rectified_table_i(pop) for pop in TABLE_I},
 }
 
 for _block, _params in hand_presets().items():  # the whole hand's ≈ 17 000 afferents (touch.hand)

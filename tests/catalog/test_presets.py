@@ -22,6 +22,11 @@ def test_the_touch_domain_publishes_its_presets_for_generic_blocks():
     } | touchsim
     assert set(presets_for("weighted_sum")) == {"touch.SA1", "touch.FA1"}
     assert set(presets_for("savgol")) == {"touch.rager"}
+    assert set(presets_for("rectified_gain")) == {
+        "touch.SA1.rectified",
+        "touch.FA1.rectified",
+        "touch.hand",
+    }
     assert presets_for("lowpass") == {}
 
 

@@ -311,6 +311,7 @@ def test_fast_runs_neither_warn_about_nor_report_wall_clock_deadlines(tmp_path):
 SHIPPED = {
     "touch": "force.f",
     "slip": "force.f",
+    "touch_rectified": "force.f",
     "teleop": "exo.angles",
     "teleop_cnn": "exo.angles",
     "tactip_dataset": "sim.force",

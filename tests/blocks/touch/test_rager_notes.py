@@ -67,3 +67,59 @@ def test_touch_fa1_offset_burst_comes_from_the_tangential_load(shear_ratio):
     else:
         assert offset == 0
         assert np.abs(out["force.f"].data[:, 0]).max() < 0.01  # noise only
+
+
+# The rectified variant of Table I (graphs/touch_rectified.yaml, presets touch.SA1.rectified and
+# touch.FA1.rectified on rectified_gain): the drive is Σ w·|F| + w'·|F'|, the same neurons.
+
+RECTIFIED = GRAPHS / "touch_rectified.yaml"
+
+
+def test_the_rectified_drive_is_table_i_on_the_magnitudes():
+    """The recorded drives against numpy on the recorded force and derivative: Σ w·|F| + w'·|F'|.
+    Every product of a weight and a magnitude is exact in both (g·max(v, 0) − g·min(v, 0) is w·|v|
+    to the bit), and the sums run in the same order (two terms per axis, then the axes from x),
+    so the drives are equal bit for bit."""
+    out = run_graph(RECTIFIED, overrides=["sensor.scenario=slip"], duration_s=1.0)
+    f, d = out["force.f"], out["dforce.y"]
+    for pop in ("SA1", "FA1"):
+        y = out[f"{pop.lower()}_drive.y"]
+        n = len(y.t)
+        np.testing.assert_array_equal(y.t, d.t[:n])
+        w = np.asarray(TABLE_I[pop])
+        axes = w[:3] * np.abs(f.data[:n]) + w[3:6] * np.abs(d.data[:n])
+        want = axes[:, 0] + axes[:, 1] + axes[:, 2]
+        np.testing.assert_array_equal(y.data, want)
+        assert not np.allclose(y.data, f.data[:n] @ w[:3] + d.data[:n] @ w[3:6])  # not the signed sum
+
+
+def test_rectified_sa1_keeps_firing_through_the_hold_after_the_slip():
+    """With the signed weights SA1 is silent through the hold (Fx ≈ −0.19 N inhibits, test above);
+    on the magnitudes 0.405·|Fx| + 0.382·Fz ≈ 0.2 keeps it firing, as on the touch plateau."""
+    t0, t1 = after_slip()
+    n = load_graph(RECTIFIED).nodes["sa1"].config.n
+    out = run_graph(RECTIFIED, overrides=["sensor.scenario=slip"])
+    assert out["force.f"].data[(out["force.f"].t >= t0) & (out["force.f"].t < t1), 0].mean() < -0.15
+    assert rate(out["sa1.spikes"].t, t0, t1, n) > 50
+
+
+@pytest.mark.parametrize(("unload_s", "rectified_offset"), [(0.01, True), (0.03, False)])
+def test_rectified_fa1_answers_a_purely_normal_offset_only_when_unloading_is_as_fast_as_loading(
+    unload_s, rectified_offset
+):
+    """No tangential load (shear_ratio 0). The literal weights never give an offset burst (Fz' < 0
+    on the +0.024 weight inhibits); the rectified ones give one spike per afferent when the
+    unloading is as fast as the 10 ms loading (+0.024·|Fz'| as at onset), and none at the shipped
+    30 ms unloading (|Fz'| a third of the onset's: below FA1's threshold)."""
+    sets = ["sensor.shear_ratio=0", f"sensor.unload_s={unload_s}"]
+    c = load_graph(RECTIFIED, overrides=sets).nodes["sensor"].config
+    assert c.ramp_s == 0.01
+    on, off = c.onset_s, c.onset_s + c.ramp_s + c.hold_s
+    n = load_graph(RECTIFIED).nodes["fa1"].config.n
+    for graph, fires in ((RECTIFIED, rectified_offset), (GRAPHS / "touch.yaml", False)):
+        out = run_graph(graph, overrides=sets)
+        fa1 = out["fa1.spikes"].t
+        assert np.abs(out["force.f"].data[:, :2]).max() < 0.01  # no tangential load: noise only
+        assert np.count_nonzero((fa1 >= on) & (fa1 < on + 0.1)) >= n  # onset, either way
+        offset = np.count_nonzero((fa1 >= off) & (fa1 < off + 0.1))
+        assert offset >= n if fires else offset == 0, (graph.name, offset)
