@@ -53,17 +53,45 @@ def chain_run(seconds: float, cache: str, from_start: bool, timeout_s: float = 6
     }
 
 
+def graph_startup(
+    graph: str,
+    *,
+    duration_s: float = 0.5,
+    fork: bool | None = None,
+    cache: str | None = None,
+    timeout_s: float = 1800,
+) -> dict[str, Any]:
+    """One real-time ``flowtact run GRAPH --json``: launch → graph time 0 (``startup_s``) and its
+    ``parts`` (s), as the run's summary gives them. The one start-up measurement of this suite and
+    of scripts/startup_table.py.
+
+    ``graph``: a shipped graph's name or a path. ``fork``: True forks the workers from the run,
+    False starts them as their own interpreters (``FLOWTACT_NO_FORK=1``), None leaves that to the
+    caller's environment. ``cache``: numba's cache folder for the run (a new empty one: the first
+    run after an install); None: the usual one.
+    """
+    env = dict(os.environ)
+    if fork is not None:
+        env.pop(NO_FORK_ENV, None)
+        if not fork:
+            env[NO_FORK_ENV] = "1"
+    if cache is not None:
+        env["NUMBA_CACHE_DIR"] = cache
+    cmd = [sys.executable, "-m", "flowtact.cli", "run", graph, "--duration", repr(duration_s)]
+    cmd += ["--json", "--quiet"]
+    try:
+        proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"flowtact run {graph} did not finish within {timeout_s:.0f} s") from None
+    if proc.returncode != 0:
+        raise RuntimeError(f"flowtact run {graph} exited with {proc.returncode}:\n{proc.stderr[-2000:]}")
+    s = json.loads(proc.stdout)
+    return {"startup_s": s["startup_s"], "parts": s.get("startup_parts", {})}
+
+
 def touch_startup(fork: bool) -> dict[str, Any]:
     """launch → graph time 0 of graphs/touch.yaml (warm numba cache), its workers forked or not."""
-    cmd = [sys.executable, "-m", "flowtact.cli", "run", TOUCH, "--duration", "0.2", "--json", "--quiet"]
-    env = {k: v for k, v in os.environ.items() if k != NO_FORK_ENV}
-    if not fork:
-        env[NO_FORK_ENV] = "1"
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
-    if proc.returncode != 0:
-        raise RuntimeError(f"flowtact run touch.yaml exited with {proc.returncode}:\n{proc.stderr[-2000:]}")
-    s = json.loads(proc.stdout)
-    return {"startup_s": s["startup_s"], "parts": s["startup_parts"]}
+    return graph_startup(TOUCH, duration_s=0.2, fork=fork, timeout_s=600)
 
 
 def start_up_of_touch(ctx: Context) -> None:
