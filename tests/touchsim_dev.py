@@ -1,20 +1,30 @@
-"""TouchSim's development set (tests/data/touchsim_dev.npz) for the tests of its stages, and the error bound
-of scipy's (b, a) filtering that every comparison with TouchSim's own numbers inherits."""
+"""TouchSim's development set for the tests of its stages (read by the one loader,
+flowtact.bench.touchsim_dev_set, from its one copy, tests/data/touchsim_dev.npz), TouchSim's
+post-spike basis, and the error bound of scipy's (b, a) filtering that every comparison with
+TouchSim's own numbers inherits."""
 
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
-DEV = Path(__file__).parent / "data" / "touchsim_dev.npz"
-"""TouchSim's own development set (68 traces made by TouchSim with noise off; see docs/touchsim.md)."""
+from flowtact.bench.touchsim_dev_set import CHECKOUT_COPY, DevSet, load_dev_set
+
+IHBASIS = Path(__file__).parent / "data" / "touchsim_ihbasis.npz"
+"""TouchSim's post-spike basis ``ihbasis`` (2 × 190 taps at 5 kHz, /work/shared/touchsim/README.md)."""
 EPS = np.finfo(np.float64).eps
+
+
+@cache
+def dev_set() -> DevSet:
+    """The checkout's copy (never FLOWTACT_TOUCHSIM_DEV: the tests check against this one), read once."""
+    return load_dev_set(CHECKOUT_COPY)
 
 
 def touchsim_traces() -> list[tuple[str, dict[str, np.ndarray]]]:
     """The 68 traces ``STIM|CLASS|IDX`` -> {s, d, I, p, spk}, sorted."""
-    z = np.load(DEV)
-    keys = sorted({k.rsplit("|", 1)[0] for k in z.files})
-    return [(k, {f: z[f"{k}|{f}"] for f in ("s", "d", "I", "p", "spk")}) for k in keys]
+    dev = dev_set()
+    return [(name, dev.trace(name)) for name in dev.names]
 
 
 def ba_error_bound(b: np.ndarray, a: np.ndarray, x: np.ndarray, y: np.ndarray) -> float:

@@ -1,35 +1,31 @@
 """TouchSim's afferent models in nlif: spike for spike against TouchSim's own runs.
 
-The oracle is TouchSim itself: ``data/touchsim_dev_currents.npz`` holds, for the 68 traces of the
-development set (17 models × 4 stimuli, noise off, made by TouchSim's code), TouchSim's input current
-``I`` (samples at 5 kHz) and its spikes as sample indices (spike time × 5000 − 1); ``ihbasis`` is its
-post-spike basis (/work/shared/touchsim/README.md). A copy of those arrays, 2 MB.
+The oracle is TouchSim itself: its development set (tests/data/touchsim_dev.npz, read by
+flowtact.bench.touchsim_dev_set) holds, for 68 traces (17 models × 4 stimuli, noise off, made by
+TouchSim's code), TouchSim's input current ``I`` (samples at 5 kHz), its spikes as sample indices
+(spike time × 5000 − 1) and each model's parameters; tests/data/touchsim_ihbasis.npz is its
+post-spike basis (/work/shared/touchsim/README.md).
 """
 
-import itertools
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import touchsim_dev
 
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.touchsim import TOUCHSIM_PRESETS, TOUCHSIM_RATE_HZ, touchsim_models
 from flowtact.recording.hdf5 import read_recording
 from flowtact.testing import run_offline
 
-DATA = Path(__file__).parent / "data" / "touchsim_dev_currents.npz"
 MODEL_NAMES = [f"SA1.{i}" for i in range(4)] + [f"RA.{i}" for i in range(9)] + [f"PC.{i}" for i in range(4)]
 
 
 def dev_set():
     """(names 'STIM|CLASS|IDX', model names, currents (T, 68), TouchSim's spike indices per trace)."""
-    z = np.load(DATA)
-    names = [str(x) for x in z["names"]]
-    bounds = np.concatenate([[0], np.cumsum(z["counts"])])
-    spikes = [z["spikes"][a:b] for a, b in itertools.pairwise(bounds)]
-    models = [".".join(n.split("|")[1:]) for n in names]
-    return names, models, np.ascontiguousarray(z["I"].T), spikes
+    dev = touchsim_dev.dev_set()
+    return list(dev.names), dev.models, np.ascontiguousarray(dev.current), dev.spikes
 
 
 def spike_indices(out, n_units):
@@ -44,11 +40,11 @@ def test_the_17_models_are_touchsims_parameters():
     models = touchsim_models()
     assert list(models) == MODEL_NAMES
     assert all(len(p) == 13 for p in models.values())
-    z = np.load(DATA)
-    names = [str(x) for x in z["names"]]
+    dev = touchsim_dev.dev_set()
+    names = dev.names
     # the dev set carries the parameters its traces were made with: the package's copy equals them
     assert len(names) == 68 and {".".join(n.split("|")[1:]) for n in names} == set(MODEL_NAMES)
-    for name, p in zip(names, z["p"], strict=True):
+    for name, p in zip(names, dev.params, strict=True):
         # p12 (conduction delay) is 0 in the dev set: TouchSim's default turns delays off
         assert models[".".join(name.split("|")[1:])][:12] == tuple(p[:12]) and p[12] == 0, name
 
@@ -58,14 +54,14 @@ def test_nlif_basis_in_touchsim_terms_is_touchsims_basis():
     # agree to float64 rounding of log/cos (a few ulp of 1): a wrong peak or offset errs by > 1e-3
     from flowtact.blocks.spiking._spike_history import history_table
 
-    z = np.load(DATA)
+    ihbasis = np.load(touchsim_dev.IHBASIS)["ihbasis"]
     p = TOUCHSIM_PRESETS["SA1.0"]
     for col, row in ((0, 0), (3, 1)):
         w = np.zeros(4)
         w[col] = 1.0
         h = history_table(w, p["h_peaks_s"], p["h_offset_s"], 1 / TOUCHSIM_RATE_HZ)
         assert len(h) == 191
-        np.testing.assert_allclose(h[1:], z["ihbasis"][row], rtol=0, atol=1e-14)
+        np.testing.assert_allclose(h[1:], ihbasis[row], rtol=0, atol=1e-14)
 
 
 def test_all_68_dev_traces_spike_for_spike_from_touchsims_current():
