@@ -17,6 +17,32 @@ ROOT = Path(__file__).resolve().parent.parent
 FENCE = re.compile(r"^```bash\n(.*?)^```", re.S | re.M)
 
 
+#: Commands too long for the test suite (minutes on a busy 2-core machine), on any page or the
+#: README: replaced by a check that the same program starts and parses its arguments (or a cheap
+#: run of it). Everything else runs in full.
+CHECKED_ONLY = {
+    # 2 x 520 letters through the open-loop graph: minutes
+    "python scripts/braille_discrimination.py --letters 520 --speed 30": (
+        "python scripts/braille_discrimination.py --help"
+    ),
+    # 3 x 260 letters of training runs (README runs a small train-braille in full)
+    "flowtact train-braille --out model.npz": "flowtact train-braille --help",
+    # the Braille benchmark: ~30 s idle, minutes loaded (flowtact bench has its own tests)
+    "flowtact bench braille --quick --out bench-braille": "flowtact bench --list",
+    # a dozen closed-loop readings of 104 letters: no arguments to parse; compiled only
+    "python scripts/braille_controller_validation.py": "python -m py_compile scripts/braille_controller_validation.py",
+    # three fresh numba compiles of the normal generator under different CPU tunings: minutes under load
+    "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",
+    # installs TouchSim from GitHub into a throw-away venv, then 400 noisy runs: minutes, and a network
+    "python scripts/touchsim_noise_reference.py --repeats 400": "python scripts/touchsim_noise_reference.py --help",
+    # the TouchSim benchmark with its peer (a throw-away venv from GitHub): a minute and more
+    "flowtact bench touchsim --quick --peers --out bench-touchsim": "flowtact bench --list",
+    # the start-up table: 4 graphs x 2 caches x idle and loaded (CPU-bound loops) x 3 rounds, a quarter
+    # of an hour; the README's cheap row (one graph, idle, one round) runs in full
+    "python scripts/startup_table.py": "python scripts/startup_table.py --help",
+}
+
+
 def pages() -> list[Path]:
     """README.md and every docs/*.md page."""
     return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

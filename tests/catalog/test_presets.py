@@ -38,9 +38,24 @@ def test_a_preset_fills_in_parameters_and_given_ones_override_it():
     assert ws.expect_units == ("N", "N/s", "N/s^2")
 
 
+SA1_FAMILY = (
+    "(did you mean one of the SA1 presets: touch.SA1, touch.SA1.0, touch.SA1.1, touch.SA1.2, touch.SA1.3?)"
+)
+
+
 @pytest.mark.parametrize(
     ("given", "hint"),
-    [("SA1", "did you mean 'touch.SA1'?"), ("touch.SA2", "did you mean 'touch.SA1"), (3, "touch.")],
+    [
+        ("SA1", "(did you mean 'touch.SA1'?)"),  # spelt before presets had domains
+        ("SA2", SA1_FAMILY),  # a family misspelt: the family's presets, not 'touch.SA1.2' by likeness
+        ("touch.SA2", SA1_FAMILY),
+        ("touch.SA1.9", SA1_FAMILY),  # no such model: its family
+        ("touch.RA", ", ".join(f"touch.RA.{i}" for i in range(9)) + "?)"),  # a family without a model
+        ("PC.7", "(did you mean one of the PC presets: touch.PC.0, touch.PC.1, touch.PC.2, touch.PC.3?)"),
+        ("FA2", "(did you mean 'touch.FA1'?)"),  # a family of one
+        ("touch.hnad", "(did you mean 'touch.hand'?)"),
+        (3, "(valid: braille.afferent, "),
+    ],
 )
 def test_an_unknown_or_old_preset_spelling_is_refused_with_a_hint(given, hint):
     with pytest.raises(ConfigError, match=r"'preset' must name a preset of nlif as DOMAIN\.NAME") as e:

@@ -6,15 +6,17 @@ or a symlinked graphs folder would be), with only PATH and HOME set (:func:`doc_
 a command that needs a variable the page does not set fails. Pages whose quoted outputs are checked
 too have their own test (``RUN_ELSEWHERE``), which must run them through the same clean shell;
 the other pages run here. Commands too long for the suite are checked by a cheaper command on the
-same entry point (``CHECKED_ONLY``); each such substitution is listed here and nowhere else.
+same entry point (``doc_pages.CHECKED_ONLY``, which the README's test applies too); each such
+substitution is listed there and nowhere else.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
-from doc_pages import ROOT, bash_blocks, commands, pages, run_in_clean_shell
+from doc_pages import CHECKED_ONLY, ROOT, bash_blocks, commands, pages, run_in_clean_shell
 
 #: Pages run, block by block in a clean shell, by their own test (which also checks quoted outputs).
 RUN_ELSEWHERE = {
@@ -25,26 +27,6 @@ RUN_ELSEWHERE = {
 }
 #: Pages whose commands this test runs, in page order.
 RUN_HERE = ("docs/braille.md", "docs/recordings.md", "docs/touch-encoding.md", "docs/touchsim.md")
-#: Commands too long for the test suite (minutes on a busy 2-core machine): replaced by a check
-#: that the same program starts and parses its arguments. Everything else runs in full.
-CHECKED_ONLY = {
-    # 2 x 520 letters through the open-loop graph: minutes
-    "python scripts/braille_discrimination.py --letters 520 --speed 30": (
-        "python scripts/braille_discrimination.py --help"
-    ),
-    # 3 x 260 letters of training runs (README runs a small train-braille in full)
-    "flowtact train-braille --out model.npz": "flowtact train-braille --help",
-    # the Braille benchmark: ~30 s idle, minutes loaded (flowtact bench has its own tests)
-    "flowtact bench braille --quick --out bench-braille": "flowtact bench --list",
-    # a dozen closed-loop readings of 104 letters: no arguments to parse; compiled only
-    "python scripts/braille_controller_validation.py": "python -m py_compile scripts/braille_controller_validation.py",
-    # three fresh numba compiles of the normal generator under different CPU tunings: minutes under load
-    "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",
-    # installs TouchSim from GitHub into a throw-away venv, then 400 noisy runs: minutes, and a network
-    "python scripts/touchsim_noise_reference.py --repeats 400": "python scripts/touchsim_noise_reference.py --help",
-    # the TouchSim benchmark with its peer (a throw-away venv from GitHub): a minute and more
-    "flowtact bench touchsim --quick --peers --out bench-touchsim": "flowtact bench --list",
-}
 
 
 def _rel(page: Path) -> str:
@@ -70,8 +52,20 @@ def test_the_pages_own_test_runs_it_in_the_clean_shell(page):
 
 
 def test_every_checked_only_command_is_on_a_page():
-    written = {_stripped(c) for p in RUN_HERE for b in bash_blocks(ROOT / p) for c in commands(b)}
+    shown = (*RUN_HERE, "README.md")
+    written = {_stripped(c) for p in shown for b in bash_blocks(ROOT / p) for c in commands(b)}
     assert set(CHECKED_ONLY) <= written
+
+
+def test_every_script_the_readme_names_in_its_text_is_in_one_of_its_command_blocks():
+    """A command named only in the prose (`python scripts/x.py`) is run by no test: show it in a
+    ```bash block, which tests/docs/test_readme_commands.py runs (or checks, CHECKED_ONLY)."""
+    text = (ROOT / "README.md").read_text()
+    written = [_stripped(c) for b in bash_blocks(ROOT / "README.md") for c in commands(b)]
+    prose = re.sub(r"```.*?```", "", text, flags=re.S).replace("\n", " ")
+    named = re.findall(r"`(python3? scripts/[^`]+)`", prose)
+    assert named, "the README names scripts/startup_table.py"
+    assert [c for c in named if not any(w.startswith(c) for w in written)] == []
 
 
 @pytest.fixture
