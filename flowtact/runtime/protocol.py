@@ -404,7 +404,7 @@ def decode(raw: bytes) -> Message:
     if cls is None:
         raise ProtocolError(f"control message: unknown op {op!r:.40}")
     try:
-        return _read(cls, fields_, "")
+        return _read(cls, fields_)
     except _Malformed as e:
         raise ProtocolError(f"control message '{op}': {e}") from None
 
@@ -417,9 +417,12 @@ def spec_to_wire(spec: StreamSpec) -> dict[str, Any]:
 def spec_from_wire(d: Any) -> StreamSpec:
     """Inverse of :func:`spec_to_wire` (:class:`~flowtact.errors.ProtocolError` when malformed)."""
     try:
-        return _read(StreamSpec, d, "")
+        return _read(StreamSpec, d)
     except _Malformed as e:
         raise ProtocolError(f"stream spec: {e}") from None
+
+
+_NAMES: dict[type, tuple[str, ...]] = {}
 
 
 def _plain(obj: Any) -> Any:
@@ -428,104 +431,200 @@ def _plain(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     if is_dataclass(obj):
-        return {f.name: getattr(obj, f.name) for f in fields(obj)}
+        names = _NAMES.get(type(obj))
+        if names is None:
+            names = _NAMES[type(obj)] = tuple(f.name for f in fields(obj))
+        return {name: getattr(obj, name) for name in names}
     if isinstance(obj, LatencyHistogram):
         return obj.to_wire()
     raise TypeError(f"cannot send {type(obj).__name__}")
 
 
 class _Malformed(Exception):
-    """A value that does not fit its declared type; the message names the field's path."""
+    """A value that does not fit its declared type. ``problem`` has a NUL character where the
+    field's path goes; the path is collected while the exception unwinds, so that reading a good
+    message builds no strings."""
+
+    def __init__(self, problem: str) -> None:
+        super().__init__(problem)
+        self.problem = problem
+        self.path: list[str] = []
+
+    def __str__(self) -> str:
+        return self.problem.replace("\0", "".join(reversed(self.path)).lstrip("."))
 
 
-_FIELDS: dict[type, tuple[tuple[str, Any, bool], ...]] = {}
-
-
-def _fields_of(cls: type) -> tuple[tuple[str, Any, bool], ...]:
-    """(name, type, required) of a dataclass' fields, resolved once."""
-    got = _FIELDS.get(cls)
-    if got is None:
-        hints = get_type_hints(cls)
-        got = tuple(
-            (f.name, hints[f.name], f.default is MISSING and f.default_factory is MISSING)
-            for f in fields(cls)
-        )
-        _FIELDS[cls] = got
-    return got
+Reader = Callable[[Any], Any]
+_READERS: dict[Any, Reader] = {}
 
 
 def _shown(v: Any) -> str:
     return f"{type(v).__name__} {v!r:.40}"
 
 
-def _at(where: str, name: str) -> str:
-    return f"{where}.{name}" if where else name
-
-
-_SCALARS: dict[type, Callable[[Any], bool]] = {
-    bool: lambda v: isinstance(v, bool),
-    int: lambda v: isinstance(v, int) and not isinstance(v, bool),
-    float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
-    str: lambda v: isinstance(v, str),
-}
-
-
-def _read(tp: Any, v: Any, where: str) -> Any:
+def _read(tp: Any, v: Any) -> Any:
     """``v`` (as msgpack decoded it) checked against type ``tp`` and built into it."""
+    return _reader(tp)(v)
+
+
+def _reader(tp: Any) -> Reader:
+    """The function that checks and builds a value of type ``tp`` (made once per type)."""
+    got = _READERS.get(tp)
+    if got is None:
+        got = _READERS[tp] = _make_reader(tp)
+    return got
+
+
+def _make_reader(tp: Any) -> Reader:
     if tp is Any:
-        return v
+        return lambda v: v
     origin = get_origin(tp)
     if origin is not None:
-        return _read_generic(origin, get_args(tp), v, where)
-    check = _SCALARS.get(tp)
-    if check is not None:
-        if not check(v):
-            raise _Malformed(f"field '{where}' should be {tp.__name__}, got {_shown(v)}")
-        return float(v) if tp is float else v
+        return _generic_reader(origin, get_args(tp))
+    if tp in _SCALARS:
+        return _SCALARS[tp]
     if tp is LatencyHistogram:
-        try:
-            return LatencyHistogram.from_wire(v)
-        except (TypeError, ValueError, OverflowError) as e:
-            raise _Malformed(f"field '{where}': {e}") from None
+        return _histogram
     if isinstance(tp, type) and is_dataclass(tp):
-        return _read_dataclass(tp, v, where)
+        return _dataclass_reader(tp)
     raise TypeError(f"the control protocol cannot carry {tp!r}")  # a mistake in this module
 
 
-def _read_generic(origin: Any, args: tuple[Any, ...], v: Any, where: str) -> Any:
-    """``X | None``, ``dict[K, V]``, ``tuple[X, ...]`` and ``tuple[X, Y]``."""
+def _wrong(what: str, v: Any) -> _Malformed:
+    return _Malformed(f"field '\0' should be {what}, got {_shown(v)}")
+
+
+def _int(v: Any) -> int:
+    if type(v) is int:
+        return v
+    raise _wrong("int", v)
+
+
+def _float(v: Any) -> float:
+    if type(v) is float:
+        return v
+    if type(v) is int:
+        return float(v)
+    raise _wrong("float", v)
+
+
+def _str(v: Any) -> str:
+    if type(v) is str:
+        return v
+    raise _wrong("str", v)
+
+
+def _bool(v: Any) -> bool:
+    if type(v) is bool:
+        return v
+    raise _wrong("bool", v)
+
+
+_SCALARS: dict[type, Reader] = {int: _int, float: _float, str: _str, bool: _bool}
+
+
+def _histogram(v: Any) -> LatencyHistogram:
+    try:
+        return LatencyHistogram.from_wire(v)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise _Malformed(f"field '\0': {e}") from None
+
+
+def _generic_reader(origin: Any, args: tuple[Any, ...]) -> Reader:
+    """``X | None``, ``dict[K, V]``, ``tuple[X, ...]`` and ``tuple[X, Y, ...]``."""
     if origin is UnionType or origin is Union:
-        if v is None and type(None) in args:
-            return None
         (rest,) = (a for a in args if a is not type(None))  # the protocol's unions are X | None
-        return _read(rest, v, where)
+        inner = _reader(rest)
+        return lambda v: None if v is None else inner(v)
     if origin is dict:
-        kt, vt = args
-        if not isinstance(v, dict):
-            raise _Malformed(f"field '{where}' should be a map, got {_shown(v)}")
-        return {_read(kt, k, f"{where}[{k!r}]"): _read(vt, x, f"{where}[{k!r}]") for k, x in v.items()}
+        return _dict_reader(_reader(args[0]), _reader(args[1]))
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        return _list_reader(_reader(args[0]))
     if origin is tuple:
-        if not isinstance(v, (list, tuple)):
-            raise _Malformed(f"field '{where}' should be a list, got {_shown(v)}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_read(args[0], x, f"{where}[{i}]") for i, x in enumerate(v))
-        if len(v) != len(args):
-            raise _Malformed(f"field '{where}' should have {len(args)} items, got {len(v)}")
-        return tuple(_read(a, x, f"{where}[{i}]") for i, (a, x) in enumerate(zip(args, v, strict=True)))
+        return _row_reader(tuple(_reader(a) for a in args))
     raise TypeError(f"the control protocol cannot carry {origin!r}")  # a mistake in this module
 
 
-def _read_dataclass(cls: type, v: Any, where: str) -> Any:
-    if not isinstance(v, dict):
-        raise _Malformed(f"field '{where}' should be a map, got {_shown(v)}")
-    declared = _fields_of(cls)
-    unknown = [k for k in v if k not in {name for name, _, _ in declared}]
-    if unknown:
-        raise _Malformed(f"unknown field '{_at(where, str(unknown[0]))}'")
-    kw = {}
-    for name, tp, required in declared:
-        if name in v:
-            kw[name] = _read(tp, v[name], _at(where, name))
-        elif required:
-            raise _Malformed(f"field '{_at(where, name)}' is missing")
-    return cls(**kw)
+def _dict_reader(key: Reader, value: Reader) -> Reader:
+    def read(v: Any) -> dict[Any, Any]:
+        if type(v) is not dict:
+            raise _wrong("a map", v)
+        out = {}
+        for k, x in v.items():
+            try:
+                out[key(k)] = value(x)
+            except _Malformed as e:
+                e.path.append(f"[{k!r}]")
+                raise
+        return out
+
+    return read
+
+
+def _list_reader(item: Reader) -> Reader:
+    def read(v: Any) -> tuple[Any, ...]:
+        if not isinstance(v, (list, tuple)):
+            raise _wrong("a list", v)
+        out = []
+        for i, x in enumerate(v):
+            try:
+                out.append(item(x))
+            except _Malformed as e:
+                e.path.append(f"[{i}]")
+                raise
+        return tuple(out)
+
+    return read
+
+
+def _row_reader(items: tuple[Reader, ...]) -> Reader:
+    def read(v: Any) -> tuple[Any, ...]:
+        if not isinstance(v, (list, tuple)):
+            raise _wrong("a list", v)
+        if len(v) != len(items):
+            raise _Malformed(f"field '\0' should have {len(items)} items, got {len(v)}")
+        out = []
+        for i, (r, x) in enumerate(zip(items, v, strict=True)):
+            try:
+                out.append(r(x))
+            except _Malformed as e:
+                e.path.append(f"[{i}]")
+                raise
+        return tuple(out)
+
+    return read
+
+
+def _dataclass_reader(cls: type) -> Reader:
+    hints = get_type_hints(cls)
+    declared = [
+        (f.name, f.default is MISSING and f.default_factory is MISSING, hints[f.name]) for f in fields(cls)
+    ]
+    names = {name for name, _, _ in declared}
+    readers: list[tuple[str, bool, Reader]] = []
+
+    def read(v: Any) -> Any:
+        if type(v) is not dict:
+            raise _wrong("a map", v)
+        if not readers:  # resolved on first use: a dataclass may hold itself
+            readers.extend((name, required, _reader(tp)) for name, required, tp in declared)
+        if not v.keys() <= names:
+            raise _named(_Malformed("unknown field '\0'"), next(str(k) for k in v if k not in names))
+        kw = {}
+        for name, required, r in readers:
+            if name in v:
+                try:
+                    kw[name] = r(v[name])
+                except _Malformed as e:
+                    raise _named(e, name) from None
+            elif required:
+                raise _named(_Malformed("field '\0' is missing"), name)
+        return cls(**kw)
+
+    return read
+
+
+def _named(e: _Malformed, name: str) -> _Malformed:
+    """``e`` with the field ``name`` put in front of its path."""
+    e.path.append(f".{name}")
+    return e

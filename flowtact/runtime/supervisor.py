@@ -56,7 +56,6 @@ from flowtact.runtime.protocol import (
     Hello,
     Message,
     Ping,
-    Plan,
     Ready,
     Start,
     Stats,
@@ -309,29 +308,14 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
                 self._on_beat(proc, msg)
             return
         if isinstance(msg, Hello):
-            proc = self.procs.get(msg.process)
-            if proc is None:
-                return
-            if proc.host is None and proc.popen is not None and msg.pid != proc.popen.pid:
-                return  # a stale worker
-            proc.ident, proc.sock, proc.pid = ident, sock, msg.pid
-            proc.hello_at = time.monotonic()
-            proc.progress_at, proc.phase = time.monotonic(), "waiting for its plan"
-            self.by_ident[ident] = proc
-            self._send(proc, Plan(self.wplans[proc.name], self._bind_addresses(proc)))
-            proc.state = "planned"
+            self._on_hello(sock, ident, msg)
             return
         proc = self.by_ident.get(ident)
         if proc is None:
             return
         proc.progress_at = time.monotonic()  # every message before the start is start-up progress
         if isinstance(msg, Ready):
-            self.compiles.on_ready(proc.describe(), msg)
-            proc.ready_at, proc.setup = time.monotonic(), msg.setup
-            proc.endpoints = dict(msg.endpoints)
-            proc.state = "ready"
-            if proc.restarts and self.t0_ns:  # a restart after the start rejoins the running graph
-                self._wire(proc)
+            self._on_ready(proc, msg)
         elif isinstance(msg, Wired):
             proc.wired = True
             if proc.restarts and self.t0_ns:

@@ -278,7 +278,7 @@ def test_a_malformed_worker_plan_is_refused_at_its_nested_field():
         decode(msgpack.packb(doc))
 
 
-def _supervisor_poll(frames: list[bytes], known: bool) -> tuple[list[str], BaseException | None]:
+def _supervisor_poll(frames: list[bytes], known: bool, wplans=None) -> tuple[list[str], BaseException | None]:
     """Send ``frames`` from a peer to a supervisor's control socket and let it poll once: what it
     warned, and what it raised."""
     import zmq
@@ -300,6 +300,7 @@ def _supervisor_poll(frames: list[bytes], known: bool) -> tuple[list[str], BaseE
         sup.poller.register(ctl, zmq.POLLIN)
         proc = Proc("b", ["a", "b"], None, "never", 0, 1.0, 1.0, 1.0)
         sup.procs, sup.by_ident = {"b": proc}, ({b"peer": proc} if known else {})
+        sup.wplans = wplans or {}
         peer.send_multipart(frames)
         raised = None
         try:
@@ -338,6 +339,15 @@ def test_a_garbled_message_from_a_worker_fails_that_worker_by_name():
         "process 'b' (nodes a, b) sent a malformed control message: "
         "control message 'ready': field 'endpoints' is missing"
     )
+
+
+def test_a_worker_ready_without_binding_its_inputs_fails_by_name_not_by_keyerror():
+    _, placement = _placed(fast=False)
+    wplans = {"b": placement.worker_plan("b", fast=False, tick_s=0.01, duration_s=2.0)}
+    sid = wplans["b"].inbound[0].id
+    said, raised = _supervisor_poll([encode(Ready({}))], known=True, wplans=wplans)
+    assert isinstance(raised, ProcessFailure) and not said
+    assert raised.report.message == f"said ready without an endpoint for stream(s) [{sid}]"
 
 
 def test_the_flow_in_a_worker_plan_is_the_high_water_mark_of_both_socket_ends(tmp_path):
