@@ -334,4 +334,6 @@ def test_the_import_graph_is_read_with_function_level_and_type_only_imports():
 
 def test_no_two_modules_import_each_other():
     circles = _circles(_module_graph())
-    assert not circles, f"import circles (move what both need to a third module): {[sorted(c) for c in circles]}"
+    assert not circles, (
+        f"import circles (move what both need to a third module): {[sorted(c) for c in circles]}"
+    )
