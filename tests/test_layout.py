@@ -7,6 +7,8 @@
   points), so the conformance suite runs on it;
 * no module imports another module's private (``_name``) name (framework, blocks, bench, scripts);
 * no two modules import each other, directly or round a circle;
+* the framework's modules sit in rooms named for their job (``CORE`` at the top level, the rest in
+  ``ROOMS``), and the framework's tests mirror them (tests/ROOM/);
 * the framework names no library block (no literal ``load_block("...")``): it asks for a role
   (``flowtact.catalog.blocks.ROLES``), which a registered block fills.
 
@@ -31,7 +33,7 @@ from flowtact.catalog.blocks import block_names, load_block
 
 ROOT = Path(__file__).resolve().parent.parent
 FAMILIES = ("signal", "spiking", "devices")
-CORE = ("__init__", "block", "chunk", "params", "finite", "errors", "version", "testing", "cli")
+CORE = ("__init__", "api", "block", "chunk", "params", "finite", "errors", "version", "testing", "cli")
 """The framework's top level: what a block author imports (and the command line)."""
 ROOMS = {
     "streams": "helpers that pair and join a block's input streams",
@@ -47,6 +49,7 @@ ROOMS = {
     "pictures": "`flowtact graph` and `flowtact plot`",
     "benchmark": "`flowtact bench`",
     "sweeps": "`flowtact sweep`",
+    "commands": "the command line's commands, one module each, found through one entry-point group",
 }
 TEST_ONLY_ROOMS = ("blocks", "docs")
 """Test folders with no framework room: the block library's tests, the docs' own tests."""
@@ -256,6 +259,24 @@ def test_every_package_folder_is_in_the_wheel():
         for init in (ROOT / top).rglob("__init__.py")
     }
     assert not found - listed, sorted(found - listed)
+
+
+def test_the_framework_sits_in_its_documented_rooms():
+    top = sorted(p.stem for p in (ROOT / "flowtact").glob("*.py"))
+    assert top == sorted(CORE), f"a top-level module outside CORE: put it in a room ({sorted(ROOMS)})"
+    rooms = sorted(p.name for p in (ROOT / "flowtact").iterdir() if (p / "__init__.py").exists())
+    assert rooms == sorted(ROOMS)
+    for room in (r for r in rooms if r != "runtime"):  # runtime/ is being rebuilt (issue 32, Deliver 1)
+        doc = (ROOT / "flowtact" / room / "__init__.py").read_text()
+        assert doc.startswith('"""'), f"flowtact/{room}/__init__.py: say what the room holds"
+
+
+def test_the_framework_tests_mirror_its_rooms():
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and any(p.rglob("test_*.py"))}
+    assert folders <= set(ROOMS) | set(TEST_ONLY_ROOMS), folders - set(ROOMS) - set(TEST_ONLY_ROOMS)
+    assert len(folders) >= 10
+    names = [p.name for p in (ROOT / "tests").rglob("test_*.py")]
+    assert len(names) == len(set(names)), "test file names must stay unique (the folders have no __init__.py)"
 
 
 def _module_graph() -> dict[str, set[str]]:
