@@ -1,5 +1,6 @@
 """flowtact: YAML graphs of reusable streaming blocks for tactile sensing and haptics."""
 
+from flowtact import errors
 from flowtact.block import (
     BadDataConfig,
     BadDataPolicy,
@@ -11,35 +12,7 @@ from flowtact.block import (
     screen_nonfinite,
 )
 from flowtact.chunk import Chunk, StreamSpec, concat
-from flowtact.errors import (
-    BadDataError,
-    BlockSpecsFailed,
-    ConfigError,
-    ConformanceError,
-    FileRefused,
-    FlowtactError,
-    GraphFileError,
-    MisalignedError,
-    ModuleNotAllowedError,
-    NodeError,
-    NodeFailure,
-    NotARecording,
-    ProcessFailure,
-    RecordingCorrupted,
-    RecordingError,
-    RecordingRefused,
-    SafeYamlError,
-    SecurityError,
-    SpecError,
-    SuiteSkipped,
-    SweepSpecError,
-    UnknownBlockError,
-    UsageError,
-    WireError,
-    WorkerDied,
-    WorkerFailed,
-    WorkerStop,
-)
+from flowtact.errors import *  # noqa: F403 — errors.__all__, exported below
 from flowtact.params import Config, param
 from flowtact.version import __version__
 
@@ -54,41 +27,14 @@ def sweep(graph, **kwargs):  # type: ignore[no-untyped-def]
 
 __all__ = [
     "BadDataConfig",
-    "BadDataError",
     "BadDataPolicy",
     "Block",
-    "BlockSpecsFailed",
     "Chunk",
     "Config",
-    "ConfigError",
-    "ConformanceError",
     "Example",
-    "FileRefused",
-    "FlowtactError",
-    "GraphFileError",
-    "MisalignedError",
-    "ModuleNotAllowedError",
-    "NodeError",
-    "NodeFailure",
-    "NotARecording",
     "Port",
-    "ProcessFailure",
-    "RecordingCorrupted",
-    "RecordingError",
-    "RecordingRefused",
-    "SafeYamlError",
-    "SecurityError",
     "Source",
-    "SpecError",
     "StreamSpec",
-    "SuiteSkipped",
-    "SweepSpecError",
-    "UnknownBlockError",
-    "UsageError",
-    "WireError",
-    "WorkerDied",
-    "WorkerFailed",
-    "WorkerStop",
     "__version__",
     "concat",
     "nonfinite_counter_docs",
@@ -96,3 +42,4 @@ __all__ = [
     "screen_nonfinite",
     "sweep",
 ]
+__all__ += errors.__all__  # every public error (flowtact.errors keeps the one list of them)

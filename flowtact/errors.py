@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from flowtact.inputs.safe_text import shown
 
@@ -28,6 +29,7 @@ __all__ = [
     "NodeFailure",
     "NotARecording",
     "ProcessFailure",
+    "ProtocolError",
     "RecordingCorrupted",
     "RecordingError",
     "RecordingRefused",
@@ -216,6 +218,11 @@ class WireError(FlowtactError, ValueError):
     """A frame that is not a flowtact stream message (another version, a stray sender, corruption)."""
 
 
+class ProtocolError(FlowtactError, ValueError):
+    """A control message that is not one (not msgpack, an unknown op, a missing, unknown or
+    mistyped field): one line naming the op and the field (:mod:`flowtact.runtime.protocol`)."""
+
+
 # -- sweeps and benchmarks -------------------------------------------------------------------------
 
 
@@ -257,8 +264,9 @@ class NodeFailure(FlowtactError):
 
 class ProcessFailure(FlowtactError):
     """A worker reported an error or died (caught by the supervisor: restart the group or end the
-    run with :class:`WorkerFailed`). ``proc`` is the supervisor's record of the group."""
+    run with :class:`WorkerFailed`). ``proc`` is the supervisor's record of the group, ``report``
+    the failure (a :class:`flowtact.runtime.protocol.ErrorReport`); ``stalled``: it hung, kill it."""
 
-    def __init__(self, proc: object, report: dict) -> None:
-        self.proc, self.report = proc, report
-        super().__init__(report.get("message", ""))
+    def __init__(self, proc: object, report: Any, *, stalled: bool = False) -> None:
+        self.proc, self.report, self.stalled = proc, report, stalled
+        super().__init__(report.message)

@@ -6,6 +6,9 @@
 * every Block subclass defined in blocks/ is registered under its name (pyproject.toml entry
   points), so the conformance suite runs on it;
 * no module imports another module's private (``_name``) name (framework, blocks, bench, scripts);
+* no two modules import each other, directly or round a circle;
+* the framework's modules sit in rooms named for their job (``CORE`` at the top level, the rest in
+  ``ROOMS``), and the framework's tests mirror them (tests/ROOM/);
 * the framework names no library block (no literal ``load_block("...")``): it asks for a role
   (``flowtact.catalog.blocks.ROLES``), which a registered block fills.
 
@@ -30,7 +33,7 @@ from flowtact.catalog.blocks import block_names, load_block
 
 ROOT = Path(__file__).resolve().parent.parent
 FAMILIES = ("signal", "spiking", "devices")
-CORE = ("__init__", "block", "chunk", "params", "finite", "errors", "version", "testing", "cli")
+CORE = ("__init__", "api", "block", "chunk", "params", "finite", "errors", "version", "testing", "cli")
 """The framework's top level: what a block author imports (and the command line)."""
 ROOMS = {
     "streams": "helpers that pair and join a block's input streams",
@@ -46,14 +49,10 @@ ROOMS = {
     "pictures": "`flowtact graph` and `flowtact plot`",
     "benchmark": "`flowtact bench`",
     "sweeps": "`flowtact sweep`",
+    "commands": "the command line's commands, one module each, found through one entry-point group",
 }
 TEST_ONLY_ROOMS = ("blocks", "docs")
 """Test folders with no framework room: the block library's tests, the docs' own tests."""
-KNOWN_CIRCLES = [
-    # helper "extend" (issue 32, Deliver 4) splits the CLI into command modules; this circle goes then
-    {"flowtact.cli", "flowtact.runtime.worker", "flowtact.sweeps.cli"},
-]
-"""Circles being removed on another branch: each must still be there, so its line goes when it does."""
 DOMAINS = ("touch", "teleop", "braille")
 
 
@@ -260,3 +259,102 @@ def test_every_package_folder_is_in_the_wheel():
         for init in (ROOT / top).rglob("__init__.py")
     }
     assert not found - listed, sorted(found - listed)
+
+
+def test_the_framework_sits_in_its_documented_rooms():
+    top = sorted(p.stem for p in (ROOT / "flowtact").glob("*.py"))
+    assert top == sorted(CORE), f"a top-level module outside CORE: put it in a room ({sorted(ROOMS)})"
+    rooms = sorted(p.name for p in (ROOT / "flowtact").iterdir() if (p / "__init__.py").exists())
+    assert rooms == sorted(ROOMS)
+    for room in (r for r in rooms if r != "runtime"):  # runtime/ is being rebuilt (issue 32, Deliver 1)
+        doc = (ROOT / "flowtact" / room / "__init__.py").read_text()
+        assert doc.startswith('"""'), f"flowtact/{room}/__init__.py: say what the room holds"
+
+
+def test_the_framework_tests_mirror_its_rooms():
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and any(p.rglob("test_*.py"))}
+    assert folders <= set(ROOMS) | set(TEST_ONLY_ROOMS), folders - set(ROOMS) - set(TEST_ONLY_ROOMS)
+    assert len(folders) >= 10
+    names = [p.name for p in (ROOT / "tests").rglob("test_*.py")]
+    assert len(names) == len(set(names)), "test file names must stay unique (the folders have no __init__.py)"
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Module -> the modules of flowtact/, blocks/ and bench/ it imports (packages by their __init__)."""
+    files: dict[str, tuple[Path, str]] = {}
+    for folder, package in (
+        ("flowtact", "flowtact"),
+        ("blocks", "flowtact.blocks"),
+        ("bench", "flowtact.bench"),
+    ):
+        for path, pkg in _sources(folder, package):
+            rel = path.relative_to(ROOT / folder).with_suffix("")
+            files[".".join([package, *rel.parts]).removesuffix(".__init__")] = (path, pkg)
+    return {
+        name: {m for m in _imports(path, pkg) if m in files and m != name}
+        for name, (path, pkg) in files.items()
+    }
+
+
+def _circles(graph: dict[str, set[str]]) -> list[set[str]]:
+    """The strongly connected groups of more than one module (Tarjan's algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[set[str]] = []
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, edges = work[-1]
+            w = next(edges, None)
+            if w is None:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    group = set()
+                    while True:
+                        x = stack.pop()
+                        on_stack.discard(x)
+                        group.add(x)
+                        if x == v:
+                            break
+                    if len(group) > 1:
+                        out.append(group)
+            elif w not in index:
+                index[w] = low[w] = len(index)
+                stack.append(w)
+                on_stack.add(w)
+                work.append((w, iter(sorted(graph[w]))))
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+    return out
+
+
+def test_the_circle_finder_finds_circles_and_only_them():
+    assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [{"a", "b", "c"}]
+    assert _circles({"a": {"b"}, "b": set(), "c": {"b"}}) == []
+    assert sorted(map(sorted, _circles({"a": {"b"}, "b": {"a"}, "c": {"d"}, "d": {"c", "a"}}))) == [
+        ["a", "b"],
+        ["c", "d"],
+    ]
+
+
+def test_the_import_graph_is_read_with_function_level_and_type_only_imports():
+    graph = _module_graph()
+    assert "flowtact.running.compile" in graph["flowtact.running.launch"]  # module level
+    assert "flowtact.sweeps.api" in graph["flowtact"]  # inside a function (flowtact.sweep)
+    assert len(graph) > 150
+
+
+def test_no_two_modules_import_each_other():
+    circles = _circles(_module_graph())
+    assert not circles, (
+        f"import circles (move what both need to a third module): {[sorted(c) for c in circles]}"
+    )

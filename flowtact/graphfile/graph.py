@@ -31,11 +31,11 @@ from flowtact.graphfile.deployment import (
     DEFAULT_QUEUE,
     POLICIES,
     Deployment,
-    Flow,
     deadline_path_errors,
     parse_deployment,
 )
 from flowtact.graphfile.located import GraphProblem, Loc, Located
+from flowtact.graphfile.nodes import Edge, NodeDef
 from flowtact.graphfile.param_paths import graph_folder, path_fields, resolve_path, resolve_value
 from flowtact.graphfile.replay_spec import parse_port_map, split_replay
 from flowtact.graphfile.safe_yaml import compose, load_value, read_graph_text
@@ -79,51 +79,6 @@ NODE_KEYS = ("block", "params", "process", "seed", "doc", "shards")
 EDGE_KEYS = ("from", "to", "policy", "queue")
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 EDGE_RE = re.compile(r"^\s*([^\s.]+)\.([^\s.]+)\s*->\s*([^\s.]+)\.([^\s.]+)\s*$")
-
-
-@dataclass
-class NodeDef:
-    """One node: its block class, validated config, placement and where it was written."""
-
-    name: str
-    block: str
-    cls: type[Block]
-    params: dict[str, Any]
-    config: Any
-    loc: Loc
-    process: str | list[str] | None = None
-    """Its process group; a sharded node may list one per shard."""
-    seed: int | None = None
-    param_locs: dict[str, Loc] = field(default_factory=dict)
-    shards: int | None = None
-    """``shards: K`` as written (flowtact.graphfile.shards splits the node when the graph is loaded)."""
-
-    def make(self) -> Block:
-        """A fresh block instance for this node."""
-        return self.cls(self.config, node=self.name)
-
-
-@dataclass(frozen=True)
-class Edge:
-    """``src_node.src_port -> dst_node.dst_port``."""
-
-    src: str
-    src_port: str
-    dst: str
-    dst_port: str
-    loc: Loc
-    policy: str = "block"
-    """Across processes: ``block`` (lossless, back-pressure) or ``latest`` (drop the oldest)."""
-    queue: int = DEFAULT_QUEUE
-    """Bound of the edge's queue, in messages, when it crosses processes."""
-
-    @property
-    def flow(self) -> Flow:
-        """Its policy and queue bound as one value: what a stream crossing processes carries to its socket."""
-        return Flow(self.policy, self.queue)
-
-    def __str__(self) -> str:
-        return f"{self.src}.{self.src_port} -> {self.dst}.{self.dst_port}"
 
 
 @dataclass
@@ -473,8 +428,8 @@ def _split_shards(
 ) -> tuple[dict[str, NodeDef], list[Edge]]:
     """Every node with ``shards: K`` (K > 1) split into K shard nodes and a merge named as the node
     (:mod:`flowtact.graphfile.shards`); bad ``shards:`` values are reported where they are written."""
+    from flowtact.graphfile.seeds import node_seed
     from flowtact.graphfile.shards import check_shards, expand_shards, plan_bounds
-    from flowtact.running.compile import node_seed
 
     split = {}
     for name, node in nodes.items():

@@ -37,8 +37,8 @@ from flowtact.errors import SpecError
 from flowtact.params import Config, param
 
 if TYPE_CHECKING:
-    from flowtact.graphfile.graph import Edge, NodeDef
     from flowtact.graphfile.located import GraphProblem
+    from flowtact.graphfile.nodes import Edge, NodeDef
 
 __all__ = [
     "MAX_SHARDS",
@@ -458,7 +458,7 @@ def _merge_edges(
 ) -> list[Edge]:
     """Shard k's output ``p`` -> merge input ``p_k`` for each port ``used`` (read from the merge by
     an edge that is not shard to shard, or recorded)."""
-    from flowtact.graphfile.graph import Edge
+    from flowtact.graphfile.nodes import Edge
 
     out = []
     for name, b in bounds.items():

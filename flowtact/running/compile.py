@@ -9,12 +9,9 @@ irrelevant (zero weights) is not demanded, and a node that ends up feeding nothi
 
 from __future__ import annotations
 
-import zlib
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-
-import numpy as np
 
 from flowtact.block import Block, Source
 from flowtact.chunk import StreamSpec
@@ -22,8 +19,9 @@ from flowtact.errors import BlockSpecsFailed, ConfigError, GraphFileError, SpecE
 from flowtact.graphfile.extras import missing_extras
 from flowtact.graphfile.graph import Edge, Graph, Loc
 from flowtact.graphfile.located import GraphProblem
+from flowtact.graphfile.seeds import node_seed
 
-__all__ = ["CompiledGraph", "compile_graph", "node_seed"]
+__all__ = ["CompiledGraph", "compile_graph"]
 
 Stream = tuple[str, str]
 
@@ -64,12 +62,6 @@ class CompiledGraph:
     def bind(self, node: str, block: Block) -> dict[str, StreamSpec]:
         """Bind a block instance of ``node`` with its input specs, seed and demanded outputs."""
         return block.bind(self.input_specs(node), seed=self.seeds[node], demanded=self.demanded[node])
-
-
-def node_seed(graph_seed: int, node: str) -> int:
-    """The seed of a node's own random stream: independent per node, stable across edits."""
-    ss = np.random.SeedSequence(graph_seed, spawn_key=(zlib.crc32(node.encode()),))
-    return int(ss.generate_state(1, np.uint64)[0])
 
 
 def _essential(spec: StreamSpec) -> tuple[object, ...]:

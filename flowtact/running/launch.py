@@ -23,7 +23,7 @@ from flowtact.running.compile import CompiledGraph, compile_graph
 from flowtact.running.source_ends import EndWatch, default_duration
 from flowtact.runtime.clock import DEFAULT_TICK_REALTIME_S, tick_for
 from flowtact.runtime.executors import DEFAULT_EXECUTOR, Executor, RunOptions, executor_for
-from flowtact.runtime.inproc import RunSummary
+from flowtact.runtime.summary import RunSummary
 from flowtact.version import __version__
 
 __all__ = ["load_compiled", "provenance", "resolved_graph", "run_compiled", "versions"]

@@ -9,7 +9,8 @@ missed (flowtact/runtime/warm_up.py): that is said too, never left to show up as
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+
+from flowtact.runtime.protocol import Beat, Ready
 
 __all__ = ["CompileNotices"]
 
@@ -22,30 +23,28 @@ class CompileNotices:
         self.said: set[str] = set()
         self.late_said: set[str] = set()
 
-    def on_beat(self, proc: str, what: str, running: bool, beat: dict[str, Any]) -> None:
+    def on_beat(self, proc: str, what: str, running: bool, beat: Beat) -> None:
         """A heartbeat of worker ``proc`` (``what`` describes it) arrived."""
-        current = beat.get("compiling")
+        current = beat.compiling
         if current is None:
             return
         if not running and proc not in self.said:
             self.said.add(proc)
-            node = f" for {beat['node']}" if beat.get("node") else ""
+            node = f" for {beat.node}" if beat.node else ""
             self.warn(
                 f"{what}: compiling kernels{node} (first run after an install or upgrade; "
                 "numba caches them for the next runs)..."
             )
         elif running and proc not in self.late_said:
             self.late_said.add(proc)
-            node = f" in node '{beat['node']}'" if beat.get("node") else ""
+            node = f" in node '{beat.node}'" if beat.node else ""
             self.warn(
                 f"{what}: compiling kernel {current}{node} after the start: the run stalls meanwhile "
                 "(the warm-up missed this signature; please report it)"
             )
 
-    def on_ready(self, what: str, msg: dict[str, Any]) -> None:
+    def on_ready(self, what: str, msg: Ready) -> None:
         """A worker (``what`` describes it) said ready: tell how long its compiling took, if it did."""
-        n = int(msg.get("compiled", 0))
+        n = msg.compiled
         if n:
-            self.warn(
-                f"{what}: {n} kernel{'s' if n > 1 else ''} compiled in {msg.get('compile_s', 0.0):.1f} s"
-            )
+            self.warn(f"{what}: {n} kernel{'s' if n > 1 else ''} compiled in {msg.compile_s:.1f} s")

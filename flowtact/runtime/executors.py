@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from flowtact.running.compile import CompiledGraph
 
 if TYPE_CHECKING:
-    from flowtact.runtime.inproc import RunSummary
+    from flowtact.runtime.summary import RunSummary
 
 __all__ = ["DEFAULT_EXECUTOR", "EXECUTORS", "Executor", "RunOptions", "executor_for", "register_executor"]
 

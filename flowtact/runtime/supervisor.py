@@ -39,23 +39,39 @@ from typing import Any
 
 import zmq
 
+from flowtact.errors import ProcessFailure, ProtocolError, WorkerFailed
 from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.clock import tick_for
 from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.executors import RunOptions
-from flowtact.runtime.inproc import RunSummary, Sink
+from flowtact.runtime.inproc import Sink
 from flowtact.runtime.links.zeromq.wire import recv_message
 from flowtact.runtime.placement import Placement, place
-from flowtact.runtime.protocol import Op, decode, encode
+from flowtact.runtime.protocol import (
+    Abort,
+    Beat,
+    Done,
+    ErrorReport,
+    Exit,
+    Hello,
+    Message,
+    Ping,
+    Ready,
+    Start,
+    Stats,
+    Stop,
+    Wired,
+    decode,
+    encode,
+)
 from flowtact.runtime.rundir import make_run_folder
+from flowtact.runtime.summary import RunSummary
 from flowtact.runtime.supervisor_liveness import SupervisorLiveness
 from flowtact.runtime.supervisor_procs import (
     PING_S,
     STOP_MARGIN_S,
     WATCH_S,
     Proc,
-    ProcessFailure,
-    WorkerFailed,
     describe_failure,
 )
 from flowtact.runtime.supervisor_startup import SupervisorStartup
@@ -145,6 +161,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
         self.interrupts = 0
         self.refused_seen = 0
         self.max_lag_s = 0.0
+        self.strangers = 0  # malformed control messages from no known worker
         self.self_warm: tuple[float, float] | None = None
         """The supervisor's own CPU seconds and monotonic time when the first worker was warm."""
         self.late: list[str] = []  # the busiest nodes when the run fell behind real time
@@ -218,9 +235,9 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
 
         return restore
 
-    def _send(self, proc: Proc, op: Op, **kw: Any) -> None:
+    def _send(self, proc: Proc, msg: Message) -> None:
         with contextlib.suppress(zmq.ZMQError):  # the worker is gone; its process watch reports it
-            proc.sock.send_multipart([proc.ident, encode(op, **kw)])  # type: ignore[union-attr]
+            proc.sock.send_multipart([proc.ident, encode(msg)])  # type: ignore[union-attr]
 
     def _pump(self, timeout_ms: int) -> None:
         """Receive control messages and records, notice exits and stalls, ping, show progress."""
@@ -234,7 +251,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
             self.next_ping = now + PING_S
             for p in self.procs.values():
                 if p.ident is not None:
-                    self._send(p, Op.PING)
+                    self._send(p, Ping())
             if self.t0_ns:
                 self._check_overload()
                 if self.live is not None:
@@ -248,8 +265,15 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
         for sock, _ in self.poller.poll(timeout_ms):
             if sock is self.ctl or sock is self.ctl_tcp:
                 while sock.getsockopt(_EVENTS) & _POLLIN:  # not zmq.Again: an exception per wake-up
-                    ident, raw = sock.recv_multipart(zmq.NOBLOCK)
-                    self._on_control(sock, ident, decode(raw))
+                    frames = sock.recv_multipart(zmq.NOBLOCK)
+                    try:
+                        if len(frames) != 2:
+                            raise ProtocolError(f"control message: {len(frames) - 1} frames, not 1")
+                        msg = decode(frames[1])
+                    except ProtocolError as e:
+                        self._malformed(frames[0], e)
+                        continue
+                    self._on_control(sock, frames[0], msg)
             else:
                 self._drain_records(sock)
 
@@ -267,56 +291,50 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
             if self.recorder is not None:
                 self.recorder.write(name, m.chunk)
 
-    def _on_control(self, sock: zmq.Socket, ident: bytes, msg: dict[str, Any]) -> None:
-        op = msg["op"]
-        if op is Op.BEAT:  # from the worker's heartbeat thread (a socket of its own)
-            proc = self.procs.get(msg["process"])
-            if proc is not None and msg["pid"] == proc.pid:
+    def _malformed(self, ident: bytes, e: ProtocolError) -> None:
+        """A message the codec refused: from a known worker, that worker has failed (named, with
+        the op and field); from no known worker (a stray or hostile peer), said once and dropped."""
+        proc = self.by_ident.get(ident)
+        if proc is not None:
+            raise ProcessFailure(proc, ErrorReport(f"sent a malformed control message: {e}"))
+        self.strangers += 1
+        if self.strangers == 1:
+            self.warn(f"ignored a malformed control message from an unknown peer: {e}")
+
+    def _on_control(self, sock: zmq.Socket, ident: bytes, msg: Message) -> None:
+        if isinstance(msg, Beat):  # from the worker's heartbeat thread (a socket of its own)
+            proc = self.procs.get(msg.process)
+            if proc is not None and msg.pid == proc.pid:
                 self._on_beat(proc, msg)
             return
-        if op is Op.HELLO:
-            proc = self.procs.get(msg["process"])
-            if proc is None:
-                return
-            if proc.host is None and proc.popen is not None and msg["pid"] != proc.popen.pid:
-                return  # a stale worker
-            proc.ident, proc.sock, proc.pid = ident, sock, msg["pid"]
-            proc.hello_at = time.monotonic()
-            proc.progress_at, proc.phase = time.monotonic(), "waiting for its plan"
-            self.by_ident[ident] = proc
-            self._send(proc, Op.PLAN, plan=self.wplans[proc.name], bind=self._bind_addresses(proc))
-            proc.state = "planned"
+        if isinstance(msg, Hello):
+            self._on_hello(sock, ident, msg)
             return
         proc = self.by_ident.get(ident)
         if proc is None:
             return
         proc.progress_at = time.monotonic()  # every message before the start is start-up progress
-        if op is Op.READY:
-            self.compiles.on_ready(proc.describe(), msg)
-            proc.ready_at, proc.setup = time.monotonic(), msg.get("setup") or {}
-            proc.endpoints = {int(k): v for k, v in msg["endpoints"].items()}
-            proc.state = "ready"
-            if proc.restarts and self.t0_ns:  # a restart after the start rejoins the running graph
-                self._wire(proc)
-        elif op is Op.WIRED:
+        if isinstance(msg, Ready):
+            self._on_ready(proc, msg)
+        elif isinstance(msg, Wired):
             proc.wired = True
             if proc.restarts and self.t0_ns:
-                self._send(proc, Op.START, t0_ns=self.t0_ns, k0=proc.last_k, resume=True)
+                self._send(proc, Start(self.t0_ns, proc.last_k, resume=True))
                 self._running(proc)
                 if self.stopped:
-                    self._send(proc, Op.STOP, k=self.stop_k)
+                    self._send(proc, Stop(self.stop_k))
             else:
                 proc.state = "wired"
-        elif op is Op.STATS:
+        elif isinstance(msg, Stats):
             self._on_stats(proc, msg)
-        elif op is Op.DONE:
-            self._on_stats(proc, msg)
-            proc.counters = msg.get("counters", {})
-            proc.summaries = msg.get("summaries", {})
+        elif isinstance(msg, Done):
+            self._on_stats(proc, msg.stats)
+            proc.counters = msg.counters
+            proc.summaries = msg.summaries
             proc.done = True
             self.last_done_ns = time.monotonic_ns()
             proc.state = "done"
-        elif op is Op.ERROR:
+        elif isinstance(msg, ErrorReport):
             raise ProcessFailure(proc, msg)
 
     def _supervise(self) -> str:
@@ -352,7 +370,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
         self.stop_k = k
         for p in self.procs.values():
             if p.ident is not None:
-                self._send(p, Op.STOP, k=k)
+                self._send(p, Stop(k))
 
     def _draining(self) -> str:
         left = [p for p in self.procs.values() if not p.done]
@@ -372,7 +390,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
     def _failed(self, f: ProcessFailure) -> None:
         """Restart the worker when its group asks for it and may; otherwise end the run."""
         proc, text = f.proc, describe_failure(f.proc, f.report)
-        if f.report.get("stalled") and proc.popen is not None and proc.popen.poll() is None:
+        if f.stalled and proc.popen is not None and proc.popen.poll() is None:
             proc.popen.kill()  # stopped or hung: it cannot take part in an orderly end
             proc.popen.wait()
         if (
@@ -381,7 +399,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
             or proc.host is not None
             or self.stopped
         ):
-            raise WorkerFailed(text, f.report.get("traceback"))
+            raise WorkerFailed(text, f.report.traceback)
         proc.restarts += 1
         self.warn(f"{text}; restarting it ({proc.restarts}/{proc.max_restarts})")
         if proc.popen is not None and proc.popen.poll() is None:
@@ -393,7 +411,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
         proc.state = "restarting"
 
     def _graph_now(self) -> float:
-        return min((p.stats.get("now", 0.0) for p in self.procs.values()), default=0.0)
+        return min((p.stats.now for p in self.procs.values()), default=0.0)
 
     def _drain_until_records_end(self) -> None:
         """Write what is still in flight: every recording worker ends its records with a marker."""
@@ -410,7 +428,7 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
             self.shared_warm.join()  # a compile under way ends before the interpreter does
         for p in self.procs.values():
             if p.ident is not None:
-                self._send(p, Op.ABORT if failed else Op.EXIT)
+                self._send(p, Abort() if failed else Exit())
         deadline = time.monotonic() + 2.0
         for p in self.procs.values():
             if p.popen is None:

@@ -9,16 +9,16 @@ import os
 import signal
 import time
 from pathlib import Path
-from typing import Any
 
+from flowtact.errors import ProcessFailure
 from flowtact.runtime.clock import LAG_WARN_S
+from flowtact.runtime.protocol import Beat, ErrorReport
 from flowtact.runtime.stats import format_factor
 from flowtact.runtime.supervisor_procs import (
     IDLE_CPU,
     LAST_WORDS_S,
     SILENT_PROBE_S,
     Proc,
-    ProcessFailure,
 )
 
 __all__ = ["SupervisorLiveness", "proc_stat", "tick_rate"]
@@ -27,21 +27,21 @@ __all__ = ["SupervisorLiveness", "proc_stat", "tick_rate"]
 class SupervisorLiveness:
     """Liveness of a :class:`~flowtact.runtime.supervisor.ProcessExecutor`'s workers."""
 
-    def _on_beat(self, proc: Proc, beat: dict[str, Any]) -> None:
+    def _on_beat(self, proc: Proc, beat: Beat) -> None:
         now = time.monotonic()
         old = proc.beat
-        if beat["node"] is None or beat["node"] != old.get("node") or beat["steps"] != old.get("steps"):
+        if beat.node is None or old is None or beat.node != old.node or beat.steps != old.steps:
             proc.busy_since = now  # waiting, or a new step: progress
             proc.silent_mark = None
-        if old:  # ticks per second, for where a stop can reach it
+        if old is not None:  # ticks per second, for where a stop can reach it
             proc.tick_rate = max(tick_rate(old, beat), 0.5 * proc.tick_rate)  # slow to forget a fast spell
         proc.beat, proc.beat_at = beat, now
         if proc.state != "running":
-            proc.phase = beat.get("phase") or proc.phase
-            if beat.get("progress") != proc.progress:  # start-up advances: its window restarts
-                proc.progress, proc.progress_at = beat.get("progress"), now
+            proc.phase = beat.phase or proc.phase
+            if beat.progress != proc.progress:  # start-up advances: its window restarts
+                proc.progress, proc.progress_at = beat.progress, now
         self.compiles.on_beat(proc.name, proc.describe(), proc.state == "running", beat)
-        proc.last_k = max(proc.last_k, beat["k"])
+        proc.last_k = max(proc.last_k, beat.k)
 
     def _watch(self) -> None:
         """Notice a worker process that exited without saying done (after its last words)."""
@@ -57,7 +57,7 @@ class SupervisorLiveness:
             if p.done:
                 continue
             cause = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exited with status {code}"
-            raise ProcessFailure(p, {"node": None, "message": cause})
+            raise ProcessFailure(p, ErrorReport(cause))
 
     def _check_liveness(self) -> None:
         """A running worker that shows no progress for ``stall_s`` has stalled.
@@ -72,8 +72,8 @@ class SupervisorLiveness:
         for p in self.procs.values():
             if p.state != "running" or p.done:
                 continue
-            window = p.startup_s if p.beat.get("first", True) else p.stall_s
-            node = p.beat.get("node")
+            window = p.startup_s if p.beat is None or p.beat.first else p.stall_s
+            node = p.beat.node if p.beat is not None else None
             quiet = now - p.beat_at
             stuck = now - p.busy_since if node else 0.0
             if max(quiet, stuck) <= window:
@@ -88,12 +88,11 @@ class SupervisorLiveness:
             )
             raise ProcessFailure(
                 p,
-                {
-                    "node": None,
-                    "message": f"stalled at tick {p.last_k} (t={p.last_k * self.tick_s:.3f} s): {what}, {why} "
-                    f"(stall_s {window:g} s)",
-                    "stalled": True,
-                },
+                ErrorReport(
+                    f"stalled at tick {p.last_k} (t={p.last_k * self.tick_s:.3f} s): {what}, {why} "
+                    f"(stall_s {window:g} s)"
+                ),
+                stalled=True,
             )
 
     def _why_stalled(self, p: Proc, now: float, idle_for: float) -> str | None:
@@ -120,19 +119,17 @@ class SupervisorLiveness:
         """Warn once when a real-time run falls behind its clock, naming the busiest nodes."""
         if self.fast or self.late:
             return
-        lagging = [p for p in self.procs.values() if p.stats.get("max_lag_s", 0.0) > LAG_WARN_S]
+        lagging = [p for p in self.procs.values() if p.stats.max_lag_s > LAG_WARN_S]
         if not lagging:
             return
-        worst = max(lagging, key=lambda p: p.stats["max_lag_s"])
-        wall = max((worst.stats["wall_ns"] - self.t0_ns) / 1e9, 1e-9)
-        share = {
-            n: ns / 1e9 / wall for p in self.procs.values() for n, ns in p.stats.get("node_ns", {}).items()
-        }
+        worst = max(lagging, key=lambda p: p.stats.max_lag_s)
+        wall = max((worst.stats.wall_ns - self.t0_ns) / 1e9, 1e-9)
+        share = {n: ns / 1e9 / wall for p in self.procs.values() for n, ns in p.stats.node_ns.items()}
         self.late = sorted(share, key=share.get, reverse=True)[:3]  # type: ignore[arg-type]
         busiest = ", ".join(f"{n} {100 * share[n]:.0f} %" for n in self.late)
         self.warn(
-            f"falling behind real time: {worst.describe()} ran {worst.stats['max_lag_s']:.2f} s late by "
-            f"t={worst.stats['now']:.2f} s (real-time factor {format_factor(worst.stats['now'] / wall)}); "
+            f"falling behind real time: {worst.describe()} ran {worst.stats.max_lag_s:.2f} s late by "
+            f"t={worst.stats.now:.2f} s (real-time factor {format_factor(worst.stats.now / wall)}); "
             f"busiest nodes (share of wall time in their steps): {busiest}"
         )
 
@@ -146,9 +143,9 @@ def proc_stat(pid: int) -> tuple[str, float] | None:
     return fields[0], (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def tick_rate(old: dict[str, Any], beat: dict[str, Any]) -> float:
+def tick_rate(old: Beat, beat: Beat) -> float:
     """Ticks per second between two heartbeats, timed by the worker that sent them: on a loaded
     machine beats queue and arrive together, and their arrival times would make a rate of
     millions of ticks per second (and a stop tick minutes ahead of every worker)."""
-    dt = (beat.get("sent_ns", 0) - old.get("sent_ns", 0)) / 1e9
-    return max(beat["k"] - old["k"], 0) / dt if dt > 0 else 0.0
+    dt = (beat.sent_ns - old.sent_ns) / 1e9
+    return max(beat.k - old.k, 0) / dt if dt > 0 else 0.0

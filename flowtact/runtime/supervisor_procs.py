@@ -10,10 +10,10 @@ from typing import Any
 
 import zmq
 
-from flowtact.errors import ProcessFailure, WorkerFailed
 from flowtact.runtime.forked import ForkedWorker
+from flowtact.runtime.protocol import Beat, ErrorReport, Stats
 
-__all__ = ["Proc", "ProcessFailure", "WorkerFailed", "describe_failure"]
+__all__ = ["Proc", "describe_failure"]
 
 PING_S = 0.25
 WATCH_S = 0.02
@@ -57,7 +57,8 @@ class Proc:
     state: str = "starting"
     restarts: int = 0
     endpoints: dict[int, str] = field(default_factory=dict)
-    stats: dict[str, Any] = field(default_factory=dict)
+    stats: Stats = field(default_factory=Stats)
+    """Its latest statistics (``Stats()`` before any)."""
     warm: tuple[float, int] | None = None  # (cpu_s, wall_ns) at the end of the warm-up
     cpu_pct: float | None = None
     done: bool = False
@@ -70,7 +71,7 @@ class Proc:
     violations: dict[str, int] = field(default_factory=dict)
     since: float = 0.0  # when it was (re)started or started running: the clock of its windows
     beat_at: float = 0.0  # when its last heartbeat arrived
-    beat: dict[str, Any] = field(default_factory=dict)
+    beat: Beat | None = None  # its last heartbeat
     busy_since: float = 0.0  # since when its current step (same node, same step count) runs
     next_waiting: float = math.inf  # when to repeat that the run waits for it (another host)
     tick_rate: float = 0.0  # ticks per second lately (from heartbeats)
@@ -84,12 +85,11 @@ class Proc:
         return f"process '{self.name}'{where} (nodes {', '.join(self.nodes)})"
 
 
-def describe_failure(proc: Proc, report: dict[str, Any]) -> str:
+def describe_failure(proc: Proc, report: ErrorReport) -> str:
     """``node 'sa1' (nlif) in process 'neurons' failed at t=1.234 s: ...`` or a dead process."""
-    node = report.get("node")
-    if node:
+    if report.node:
         return (
-            f"node '{node}' ({report.get('block')}) failed at t={report.get('now') or 0.0:.3f} s "
-            f"in process '{proc.name}': {report['message']}"
+            f"node '{report.node}' ({report.block}) failed at t={report.now or 0.0:.3f} s "
+            f"in process '{proc.name}': {report.message}"
         )
-    return f"process '{proc.name}' (nodes {', '.join(proc.nodes)}) {report['message']}"
+    return f"process '{proc.name}' (nodes {', '.join(proc.nodes)}) {report.message}"

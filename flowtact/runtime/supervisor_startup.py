@@ -16,18 +16,14 @@ from pathlib import Path
 
 import zmq
 
+from flowtact.errors import ProcessFailure, WorkerFailed
 from flowtact.running.python_child import python_command
 from flowtact.runtime.forked import ForkedWorker, can_fork, fork_worker
 from flowtact.runtime.links.zeromq.control import supervisor_sockets, supervisor_tcp_sockets
 from flowtact.runtime.links.zeromq.streams import bind_address
-from flowtact.runtime.protocol import Op
+from flowtact.runtime.protocol import ErrorReport, Hello, Plan, Ready, Start, Wire
 from flowtact.runtime.supervisor_liveness import proc_stat
-from flowtact.runtime.supervisor_procs import (
-    WAITING_EVERY_S,
-    Proc,
-    ProcessFailure,
-    WorkerFailed,
-)
+from flowtact.runtime.supervisor_procs import WAITING_EVERY_S, Proc
 from flowtact.runtime.warm_up import load_shared_kernels, warm_shared_kernels
 
 __all__ = ["SupervisorStartup"]
@@ -111,7 +107,7 @@ class SupervisorStartup:
         proc.spawned_at = time.monotonic()
         proc.state = "starting"
         proc.ident = None
-        proc.beat = {}
+        proc.beat = None
         proc.since = proc.progress_at = time.monotonic()
         proc.progress, proc.phase = None, "starting its interpreter"
         proc.done = proc.rec_done = proc.wired = False
@@ -143,6 +139,32 @@ class SupervisorStartup:
                 )
         return out
 
+    def _on_hello(self, sock: zmq.Socket, ident: bytes, msg: Hello) -> None:
+        """A worker of a known group introduced itself: it gets its plan (a stale one is ignored)."""
+        proc = self.procs.get(msg.process)
+        if proc is None:
+            return
+        if proc.host is None and proc.popen is not None and msg.pid != proc.popen.pid:
+            return  # a stale worker
+        proc.ident, proc.sock, proc.pid = ident, sock, msg.pid
+        proc.hello_at = time.monotonic()
+        proc.progress_at, proc.phase = time.monotonic(), "waiting for its plan"
+        self.by_ident[ident] = proc
+        self._send(proc, Plan(self.wplans[proc.name], self._bind_addresses(proc)))
+        proc.state = "planned"
+
+    def _on_ready(self, proc: Proc, msg: Ready) -> None:
+        """A worker is built, warm and bound: it must have bound every stream it receives."""
+        missing = sorted({d.id for d in self.wplans[proc.name].inbound} - msg.endpoints.keys())
+        if missing:
+            raise ProcessFailure(proc, ErrorReport(f"said ready without an endpoint for stream(s) {missing}"))
+        self.compiles.on_ready(proc.describe(), msg)
+        proc.ready_at, proc.setup = time.monotonic(), msg.setup
+        proc.endpoints = dict(msg.endpoints)
+        proc.state = "ready"
+        if proc.restarts and self.t0_ns:  # a restart after the start rejoins the running graph
+            self._wire(proc)
+
     def _start_all(self) -> bool:
         """Handshake: hello -> plan -> ready -> wire -> wired -> start; False if interrupted first."""
         while not all(p.wired for p in self.procs.values()):
@@ -172,7 +194,7 @@ class SupervisorStartup:
         self.go_ns = t0 if not self.fast else t0 - 20_000_000  # --fast workers start at once
         self.t_run = time.monotonic()
         for p in self.procs.values():
-            self._send(p, Op.START, t0_ns=t0, k0=0, resume=False)
+            self._send(p, Start(t0, k0=0, resume=False))
             self._running(p)
         return True
 
@@ -227,5 +249,5 @@ class SupervisorStartup:
             connect.setdefault(d.id, {})[d.group] = self.procs[d.group].endpoints[d.id]
         remote = proc.host is not None
         record = self.tcp_rec if remote else f"ipc://{self.rundir}/rec"
-        self._send(proc, Op.WIRE, connect=connect, record=record)
+        self._send(proc, Wire(connect, record))
         proc.state = "wiring"

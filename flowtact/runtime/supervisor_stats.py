@@ -9,8 +9,10 @@ import time
 from typing import Any
 
 from flowtact.runtime.clock import LAG_WARN_S
-from flowtact.runtime.inproc import RunSummary, explain_counters
+from flowtact.runtime.inproc import explain_counters
+from flowtact.runtime.protocol import Stats
 from flowtact.runtime.stats import LatencyHistogram
+from flowtact.runtime.summary import RunSummary
 from flowtact.runtime.supervisor_procs import (
     DEADLINE_WARN_EVERY_S,
     WARMUP_S,
@@ -23,29 +25,33 @@ __all__ = ["SupervisorStats"]
 class SupervisorStats:
     """Statistics of a :class:`~flowtact.runtime.supervisor.ProcessExecutor`'s run."""
 
-    def _on_stats(self, proc: Proc, msg: dict[str, Any]) -> None:
+    def _on_stats(self, proc: Proc, msg: Stats) -> None:
         proc.stats = msg
-        proc.last_k = max(proc.last_k, msg["k"])
-        wall = msg["wall_ns"]
+        proc.last_k = max(proc.last_k, msg.k)
+        wall = msg.wall_ns
         if proc.warm is None and time.monotonic() - self.t_run >= WARMUP_S:
-            proc.warm = (msg["cpu_s"], wall)
+            proc.warm = (msg.cpu_s, wall)
             if self.self_warm is None:
                 self.self_warm = (time.process_time(), time.monotonic())
         if proc.warm is not None and wall > proc.warm[1]:
-            proc.cpu_pct = 100.0 * (msg["cpu_s"] - proc.warm[0]) / ((wall - proc.warm[1]) / 1e9)
-        self.max_lag_s = max(self.max_lag_s, msg.get("max_lag_s", 0.0))
+            proc.cpu_pct = 100.0 * (msg.cpu_s - proc.warm[0]) / ((wall - proc.warm[1]) / 1e9)
+        self.max_lag_s = max(self.max_lag_s, msg.max_lag_s)
         if self.fast:  # deadlines are wall-clock budgets: a virtual clock cannot miss them
             return
         now = time.monotonic()
-        for name, p in msg["paths"].items():
+        for name, p in msg.paths.items():
             seen = proc.violations.get(name, 0)
-            if p["violations"] > seen and now >= self.deadline_quiet.get(name, 0.0):
-                budget = next(d.budget_s for d in self.plan.graph.deployment.deadlines if d.name == name)
-                self.warn(
-                    f"deadline {name} ({budget * 1e3:g} ms) missed {p['violations'] - seen}x "
-                    f"(worst {p['worst_ns'] / 1e6:.2f} ms so far)"
+            if p.violations > seen and now >= self.deadline_quiet.get(name, 0.0):
+                budget = next(
+                    (d.budget_s for d in self.plan.graph.deployment.deadlines if d.name == name), None
                 )
-                proc.violations[name] = p["violations"]
+                if budget is None:
+                    continue  # no such path in this graph: nothing to warn about
+                self.warn(
+                    f"deadline {name} ({budget * 1e3:g} ms) missed {p.violations - seen}x "
+                    f"(worst {p.worst_ns / 1e6:.2f} ms so far)"
+                )
+                proc.violations[name] = p.violations
                 self.deadline_quiet[name] = now + DEADLINE_WARN_EVERY_S
 
     def snapshot(self) -> dict[str, Any]:
@@ -109,22 +115,23 @@ class SupervisorStats:
         out: dict[str, dict[str, Any]] = {}
         sent_dropped: dict[int, int] = {}  # drops at the sending end ('latest' queue full)
         for q in self.procs.values():
-            for sid, n in q.stats.get("sent_dropped", {}).items():
-                sent_dropped[int(sid)] = sent_dropped.get(int(sid), 0) + n
+            for sid, n in q.stats.sent_dropped.items():
+                sent_dropped[sid] = sent_dropped.get(sid, 0) + n
         for p in self.procs.values():
-            for sid, s in p.stats.get("inbound", {}).items():
-                sid = int(sid)
+            for sid, s in p.stats.inbound.items():
+                crossing = self.placement.crossings.get((sid, p.name))
+                if crossing is None:
+                    continue  # not a stream this process receives: nothing to report
                 name = self.placement.stream_name(sid)
                 key = name if len(self.placement.consumers(sid)) == 1 else f"{name}@{p.name}"
-                policy = self.placement.crossings[(sid, p.name)].policy
                 out[key] = {
                     "to": p.name,
-                    "policy": policy,
-                    "messages": s["messages"],
-                    "samples": s["samples"],
-                    "dropped": s["dropped"] + sent_dropped.get(sid, 0),
-                    "gaps": s["gaps"],
-                    "latency_us": LatencyHistogram.from_wire(s["lat"]).summary(),
+                    "policy": crossing.policy,
+                    "messages": s.messages,
+                    "samples": s.samples,
+                    "dropped": s.dropped + sent_dropped.get(sid, 0),
+                    "gaps": s.gaps,
+                    "latency_us": s.lat.summary(),
                 }
         return out
 
@@ -134,10 +141,10 @@ class SupervisorStats:
             h = LatencyHistogram()
             violations = 0
             for p in self.procs.values():
-                ps = p.stats.get("paths", {}).get(d.name)
+                ps = p.stats.paths.get(d.name)
                 if ps:
-                    h.merge(LatencyHistogram.from_wire(ps["lat"]))
-                    violations += ps["violations"]
+                    h.merge(ps.lat)
+                    violations += ps.violations
             s = h.summary()
             out[d.name] = {
                 "p50_us": s["p50"],
@@ -176,11 +183,12 @@ class SupervisorStats:
             if n in plan.demanded:
                 (events if plan.specs[(n, p)].events else samples)[name] = self.samples.get(name, 0)
         for proc in self.procs.values():
-            for name, count in proc.stats.get("counts", {}).items():
-                n, p = name.split(".", 1)
-                if plan.specs[(n, p)].events and name not in events:
+            for name, count in proc.stats.counts.items():
+                n, _, p = name.partition(".")
+                spec = plan.specs.get((n, p))
+                if spec is not None and spec.events and name not in events:
                     events[name] = count
-        now = max((p.stats.get("now", 0.0) for p in self.procs.values()), default=0.0)
+        now = max((p.stats.now for p in self.procs.values()), default=0.0)
         counters = {n: c for p in self.procs.values() for n, c in p.counters.items()}
         return RunSummary(
             graph=plan.graph.name,

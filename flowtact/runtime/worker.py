@@ -54,7 +54,7 @@ import zmq
 
 from flowtact.errors import NodeFailure, WorkerStop
 from flowtact.runtime.links.zeromq.control import heartbeat_socket, worker_control_socket
-from flowtact.runtime.protocol import Op, encode
+from flowtact.runtime.protocol import Beat, ErrorReport, Exit, Hello, Plan, Ready, Start, Wire, Wired, encode
 from flowtact.runtime.warm_up import CompileWatch
 from flowtact.runtime.worker_control import ORPHAN_S, WorkerControl
 from flowtact.runtime.worker_setup import WorkerSetup
@@ -112,64 +112,58 @@ class Worker(WorkerControl, WorkerSetup, WorkerTicks):
 
     def serve(self) -> int:
         """Run the whole lifecycle; returns the process exit status."""
-        self._send(Op.HELLO, process=self.process, pid=os.getpid(), host=socket.gethostname())
+        self._send(Hello(self.process, os.getpid(), socket.gethostname()))
         self.heart.start()
         try:
             self._phase("waiting for the plan")
-            msg = self._expect(Op.PLAN)
+            msg = self._expect(Plan)
             t_plan = time.monotonic()
-            self._build(msg["plan"])
+            self._build(msg.plan)
             t_built = time.monotonic()
             self._warm_up()
             t_warm = time.monotonic()
             self._phase("binding its inputs")
-            endpoints = self._bind(msg["bind"])
+            endpoints = self._bind(msg.bind)
             self._send(
-                Op.READY,
-                endpoints=endpoints,
-                compiled=self.warm_report.total_compiled,
-                compile_s=self.compiles.seconds,
-                setup={
-                    "build": t_built - t_plan,
-                    "warm_up": t_warm - t_built,
-                    "bind": time.monotonic() - t_warm,
-                },
+                Ready(
+                    endpoints=endpoints,
+                    compiled=self.warm_report.total_compiled,
+                    compile_s=self.compiles.seconds,
+                    setup={
+                        "build": t_built - t_plan,
+                        "warm_up": t_warm - t_built,
+                        "bind": time.monotonic() - t_warm,
+                    },
+                )
             )
             self._phase("waiting for the other processes")
-            wire = self._expect(Op.WIRE)
+            wire = self._expect(Wire)
             self._phase("connecting its outputs")
-            self._connect(wire["connect"], wire["record"])
+            self._connect(wire.connect, wire.record)
             try:
                 self._open()  # devices, cameras, weights: before the clock starts, not on its time
-                self._send(Op.WIRED)
+                self._send(Wired())
                 self._phase("waiting for the start")
-                start = self._expect(Op.START)
-                self.t0_ns = start["t0_ns"] or time.monotonic_ns()
+                start = self._expect(Start)
+                self.t0_ns = start.t0_ns or time.monotonic_ns()
                 self.warm_ns = self.t0_ns + int(_latency_from_s() * 1e9)
-                self.k = int(start.get("k0", 0))
-                self._run(resume=bool(start.get("resume")))
+                self.k = start.k0
+                self._run(resume=start.resume)
                 self._finish()  # steps and flushes the blocks once more: before they are closed
             finally:
                 self._close_blocks()
-            self._expect(Op.EXIT)
+            self._expect(Exit)
             return 0
         except WorkerStop:
             self._salvage_records()
             return 0
         except NodeFailure as f:
             self._salvage_records()
-            self._send(Op.ERROR, **f.report)
+            self._send(ErrorReport(**f.report))
             return 1
         except Exception as e:  # noqa: BLE001 — any framework failure is reported to the supervisor, not lost
             self._salvage_records()
-            self._send(
-                Op.ERROR,
-                node=None,
-                block=None,
-                now=None,
-                message=f"{type(e).__name__}: {e}",
-                traceback=traceback.format_exc(),
-            )
+            self._send(ErrorReport(f"{type(e).__name__}: {e}", traceback=traceback.format_exc()))
             return 1
         finally:
             self.heart.halt()
@@ -205,23 +199,22 @@ class _Heartbeat:
         pid = os.getpid()
         try:
             while not self.stopped.wait(BEAT_S):
-                beat = {
-                    "process": w.process,
-                    "pid": pid,
-                    "k": w.k,
-                    "steps": w.steps,
-                    "node": w.busy,
-                    "first": w.busy_first,
-                    "lag_s": w.lag_s,
-                    "compiling": w.compiles.current,
-                    "compiled": w.compiles.count,
-                    "phase": w.phase,
-                    # start-up progress: phases entered, modules imported, compiler passes run
-                    "progress": (w.marks, len(sys.modules), w.compiles.passes),
-                    "sent_ns": time.monotonic_ns(),  # rates from the sender's clock, not arrivals
-                }
+                beat = Beat(
+                    process=w.process,
+                    pid=pid,
+                    k=w.k,
+                    steps=w.steps,
+                    node=w.busy,
+                    first=w.busy_first,
+                    lag_s=w.lag_s,
+                    compiling=w.compiles.current,
+                    compiled=w.compiles.count,
+                    phase=w.phase,
+                    progress=(w.marks, len(sys.modules), w.compiles.passes),
+                    sent_ns=time.monotonic_ns(),
+                )
                 with contextlib.suppress(zmq.Again):
-                    sock.send(encode(Op.BEAT, **beat), zmq.NOBLOCK)
+                    sock.send(encode(beat), zmq.NOBLOCK)
         finally:
             sock.close(linger=0)
 
@@ -251,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--process", required=True, help="the process group to run")
     p.add_argument("--keys", help="CURVE keys folder for tcp (default: $FLOWTACT_KEYS)")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
-    from flowtact.cli import add_allow_module
+    from flowtact.commands.graph_args import add_allow_module
 
     add_allow_module(p)
     args = p.parse_args(argv)

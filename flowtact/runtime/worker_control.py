@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Any
+from typing import TypeVar
 
 import zmq
 
@@ -19,7 +19,17 @@ from flowtact.runtime.links.zeromq.streams import (
     POLL_MS,
 )
 from flowtact.runtime.links.zeromq.wire import send_message
-from flowtact.runtime.protocol import Op, decode, encode
+from flowtact.runtime.protocol import (
+    Abort,
+    Exit,
+    InboundStats,
+    Message,
+    PathStats,
+    Stats,
+    Stop,
+    decode,
+    encode,
+)
 
 __all__ = [
     "CONTROL_NS",
@@ -46,32 +56,32 @@ RECORD_MAX_CHUNKS = 256
 """... or once this many chunks of one stream wait (a fast run's memory stays bounded)."""
 
 
+M = TypeVar("M", bound=Message)
+
+
 class WorkerControl:
     """The control loop, recording pump and statistics of a :class:`~flowtact.runtime.worker.Worker`."""
 
-    def _send(self, op: Op, **kw: Any) -> None:
-        self.ctl.send(encode(op, **kw))
+    def _send(self, msg: Message) -> None:
+        self.ctl.send(encode(msg))
 
-    def _recv_ctl(self, timeout_ms: int) -> dict[str, Any] | None:
+    def _recv_ctl(self, timeout_ms: int) -> Message | None:
         if not self.ctl.poll(timeout_ms):
             return None
         msg = decode(self.ctl.recv())
         self.last_ping = time.monotonic()
         return msg
 
-    def _expect(self, op: Op) -> dict[str, Any]:
-        """Wait for control message ``op`` for as long as the supervisor lives (it keeps time)."""
+    def _expect(self, kind: type[M]) -> M:
+        """Wait for a control message of class ``kind`` for as long as the supervisor lives (it keeps time)."""
         while True:
             msg = self._recv_ctl(POLL_MS)
             if msg is None:
                 self._check_orphan()
                 continue
-            if msg["op"] is op:
+            if isinstance(msg, kind):
                 return msg
-            if msg["op"] in (Op.ABORT, Op.EXIT):
-                raise WorkerStop
-            if msg["op"] is Op.STOP:
-                self.stop_k = min(self.stop_k, int(msg["k"]))
+            self._control(msg)
 
     def _check_orphan(self) -> None:
         if self.parent is not None:
@@ -93,7 +103,7 @@ class WorkerControl:
         now = now_ns / 1e9
         if now >= self.next_beat:
             self.next_beat = now + HEARTBEAT_S
-            self._send(Op.STATS, **self._stats())
+            self._send(self._stats())
 
     def _flush_records(self) -> None:
         """Send every recorded stream's coalesced chunks to the recorder (one message each)."""
@@ -120,37 +130,35 @@ class WorkerControl:
         self.phase = text
         self.marks += 1
 
-    def _control(self, msg: dict[str, Any]) -> None:
-        if msg["op"] is Op.STOP:
-            self.stop_k = min(self.stop_k, int(msg["k"]))
-        elif msg["op"] in (Op.ABORT, Op.EXIT):
+    def _control(self, msg: Message) -> None:
+        """A message that is not the one awaited: a stop names the last tick, abort and exit end now
+        (pings only prove the supervisor alive)."""
+        if isinstance(msg, Stop):
+            self.stop_k = min(self.stop_k, msg.k)
+        elif isinstance(msg, (Abort, Exit)):
             raise WorkerStop
 
-    def _stats(self) -> dict[str, Any]:
-        return {
-            "k": self.k,
-            "now": self.now,
-            "cpu_s": time.process_time(),
-            "wall_ns": time.monotonic_ns(),
-            "lag_s": self.lag_s,
-            "max_lag_s": self.max_lag_s,
-            "merged_ticks": self.merged_ticks,
-            "node_ns": {nd.name: nd.ns for nd in self.plans},
-            "counts": {o.key: o.samples for nd in self.plans for o in nd.outputs.values()},
-            "inbound": {
-                ib.id: {
-                    "messages": ib.messages,
-                    "samples": ib.samples,
-                    "dropped": ib.dropped,
-                    "gaps": ib.gaps,
-                    "lat": ib.hist.to_wire(),
-                }
+    def _stats(self) -> Stats:
+        """What :class:`~flowtact.runtime.protocol.Stats` reports now (sent at once: the
+        histograms are the live ones)."""
+        return Stats(
+            k=self.k,
+            now=self.now,
+            cpu_s=time.process_time(),
+            wall_ns=time.monotonic_ns(),
+            lag_s=self.lag_s,
+            max_lag_s=self.max_lag_s,
+            merged_ticks=self.merged_ticks,
+            node_ns={nd.name: nd.ns for nd in self.plans},
+            counts={o.key: o.samples for nd in self.plans for o in nd.outputs.values()},
+            inbound={
+                ib.id: InboundStats(ib.messages, ib.samples, ib.dropped, ib.gaps, ib.hist)
                 for ib in self.inbound.values()
             },
-            "sent_dropped": {ob.id: ob.dropped for ob in self.outbound if ob.dropped},
-            "paths": {
-                d.name: {"lat": d.hist.to_wire(), "violations": d.violations, "worst_ns": d.worst_ns}
+            sent_dropped={ob.id: ob.dropped for ob in self.outbound if ob.dropped},
+            paths={
+                d.name: PathStats(d.hist, d.violations, d.worst_ns)
                 for ds in self.deadlines.values()
                 for d in ds
             },
-        }
+        )

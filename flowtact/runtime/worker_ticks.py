@@ -22,7 +22,7 @@ from flowtact.runtime.links.zeromq.streams import (
     send_lossless,
 )
 from flowtact.runtime.links.zeromq.wire import END
-from flowtact.runtime.protocol import Op
+from flowtact.runtime.protocol import Done
 from flowtact.runtime.worker_control import HEARTBEAT_S, RECORD_MAX_CHUNKS
 from flowtact.runtime.worker_plan import NO_ORIGINS, WorkerNode, merge_origins, take
 
@@ -341,4 +341,4 @@ class WorkerTicks:
             self._flush_records()
             self._send_lossless(self.rec, -1, 0, k, Chunk.empty(), flags=END)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
-        self._send(Op.DONE, **self._stats(), counters=counters, summaries=block_summaries(self.blocks))
+        self._send(Done(self._stats(), counters, block_summaries(self.blocks)))

@@ -357,10 +357,11 @@ def test_the_readme_training_set_command_exits_0(tmp_path):
 def test_a_stop_tick_is_not_pushed_ahead_by_heartbeats_that_arrive_together():
     """On a loaded machine beats queue and are read back to back: the rate comes from the times the
     worker stamped, so 50 ticks in 0.25 s is 200 ticks/s however close together the beats arrive."""
+    from flowtact.runtime.protocol import Beat
     from flowtact.runtime.supervisor_liveness import tick_rate as _tick_rate
 
-    old = {"k": 100, "sent_ns": 1_000_000_000}
-    beat = {"k": 150, "sent_ns": 1_250_000_000}
-    assert _tick_rate(old, beat) == pytest.approx(200.0)
-    assert _tick_rate(old, {"k": 150, "sent_ns": 1_000_000_000}) == 0.0  # no time told: no rate
-    assert _tick_rate({"k": 100}, {"k": 150}) == 0.0  # a worker that stamps nothing: no rate
+    def beat(k: int, sent_ns: int) -> Beat:
+        return Beat("p", 1, k, 0, None, False, 0.0, None, 0, "running", (0, 0, 0), sent_ns)
+
+    assert _tick_rate(beat(100, 1_000_000_000), beat(150, 1_250_000_000)) == pytest.approx(200.0)
+    assert _tick_rate(beat(100, 1_000_000_000), beat(150, 1_000_000_000)) == 0.0  # no time between: no rate

@@ -42,7 +42,7 @@ import yaml
 
 from flowtact import Chunk, StreamSpec
 from flowtact.benchmark import Context, Suite
-from flowtact.running.compile import node_seed
+from flowtact.graphfile.seeds import node_seed
 
 DATASET_GRAPH = Path(str(files("flowtact.graphs") / "tactip_dataset.yaml"))
 TRAIN_SEED, HELDOUT_SEED = 2023, 7
