@@ -165,7 +165,9 @@ def test_kill_9_of_a_worker_ends_the_run_naming_it_and_keeps_the_recording(tmp_p
     _, stderr = proc.communicate(timeout=30)
     elapsed = time.monotonic() - t_kill
     assert proc.returncode == 1, stderr
-    assert elapsed < 2.0, elapsed
+    # Noticed at once, not when the 60 s run would have ended: a generous bound a loaded 2-core
+    # machine keeps (the death is seen within a liveness poll; teardown takes the rest).
+    assert elapsed < 20.0, elapsed
     assert "process 'afferents' (nodes sa1, fa1, sa1_stim) killed by SIGKILL" in stderr
     assert not [k for k in kids if alive(k)]  # no orphans
     rec = read_recording(out)
