@@ -1,5 +1,7 @@
 """flowtact: YAML graphs of reusable streaming blocks for tactile sensing and haptics."""
 
+from typing import TYPE_CHECKING, Any
+
 from flowtact.block import (
     BadDataConfig,
     BadDataPolicy,
@@ -43,6 +45,28 @@ from flowtact.errors import (
 from flowtact.params import Config, param
 from flowtact.version import __version__
 
+if TYPE_CHECKING:
+    from flowtact.running.builder import GraphBuilder
+    from flowtact.running.from_python import run
+    from flowtact.running.results import RunResult, Stream, read_streams
+
+_LAZY = {
+    "GraphBuilder": "flowtact.running.builder",
+    "run": "flowtact.running.from_python",
+    "RunResult": "flowtact.running.results",
+    "Stream": "flowtact.running.results",
+    "read_streams": "flowtact.running.results",
+}
+"""Runs from Python (docs/python.md), imported on first use: ``import flowtact`` stays light."""
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'flowtact' has no attribute {name!r}")
+
 
 def sweep(graph, **kwargs):  # type: ignore[no-untyped-def]
     """Run a graph over a parameter grid and recordings; a pandas DataFrame, one row per run
@@ -65,6 +89,7 @@ __all__ = [
     "Example",
     "FileRefused",
     "FlowtactError",
+    "GraphBuilder",
     "GraphFileError",
     "MisalignedError",
     "ModuleNotAllowedError",
@@ -76,10 +101,12 @@ __all__ = [
     "RecordingCorrupted",
     "RecordingError",
     "RecordingRefused",
+    "RunResult",
     "SafeYamlError",
     "SecurityError",
     "Source",
     "SpecError",
+    "Stream",
     "StreamSpec",
     "SuiteSkipped",
     "SweepSpecError",
@@ -93,6 +120,8 @@ __all__ = [
     "concat",
     "nonfinite_counter_docs",
     "param",
+    "read_streams",
+    "run",
     "screen_nonfinite",
     "sweep",
 ]
