@@ -192,3 +192,31 @@ def test_import_flowtact_stays_light_and_the_names_are_the_modules():
     assert flowtact.run is from_python.run and flowtact.Stream is results.Stream
     with pytest.raises(AttributeError):
         flowtact.no_such_name  # noqa: B018
+
+
+NOTEBOOK = """
+import threading, numpy as np, flowtact
+from flowtact.runtime.forked import can_fork
+stop = threading.Event()
+threading.Thread(target=stop.wait, daemon=True).start()  # a kernel's threads: no fork
+assert not can_fork()
+g = flowtact.GraphBuilder.from_file(PATH)
+here, apart = flowtact.run(g), flowtact.run(g, processes=True)
+print(sorted(apart.summary.processes), all(
+    np.array_equal(here[k].t, apart[k].t) and np.array_equal(here[k].data, apart[k].data) for k in here))
+stop.set()
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.cli
+@pytest.mark.timeout(900)
+def test_a_process_with_threads_starts_its_workers_as_fresh_interpreters(tmp_path):
+    """As from a notebook kernel (threads running: a fork could inherit a held lock)."""
+    path = press().save(tmp_path / "press.yaml")
+    code = f"PATH = {str(path)!r}\n" + NOTEBOOK
+    done = subprocess.run(
+        [sys.executable, "-P", "-c", code], capture_output=True, text=True, timeout=850, cwd=tmp_path
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.split("\n")[0] == "['afferents', 'sensing'] True"
