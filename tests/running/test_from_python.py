@@ -18,7 +18,7 @@ import flowtact
 from flowtact.chunk import StreamSpec
 from flowtact.cli import main
 from flowtact.errors import GraphFileError
-from flowtact.graphfile.graph import load_graph, parse_override
+from flowtact.graphfile.graph import load_graph, parse_override, shipped_graphs
 from flowtact.running.builder import GraphBuilder
 from flowtact.running.compile import compile_graph
 from flowtact.running.from_python import override_texts
@@ -56,9 +56,15 @@ def test_a_built_graph_is_the_graph_file_it_writes(tmp_path):
     assert built["edges"][-1] == {"from": "drive.y", "to": "sa1.x", "policy": "block", "queue": 8}
 
 
-def test_a_graph_file_read_into_a_builder_is_unchanged():
+@pytest.mark.parametrize("name", shipped_graphs())
+def test_a_shipped_graph_read_into_a_builder_is_unchanged(name):
+    """Its files (npz currents, models) still found beside the graph file."""
+    g = GraphBuilder.from_file(name)
+    assert resolved_graph(compile_graph(g.load())) == resolved_graph(load_compiled(name))
+
+
+def test_a_builder_changes_a_nodes_parameters():
     g = GraphBuilder.from_file("touch")
-    assert resolved_graph(compile_graph(g.load())) == resolved_graph(load_compiled("touch"))
     g.set("sa1", n=3)
     assert g.load().nodes["sa1"].config.n == 3 and g.load().nodes["sa1"].config.tau_s > 0  # preset kept
     with pytest.raises(KeyError, match="no node 'sa9'"):
