@@ -113,6 +113,8 @@ def graph_schema() -> dict[str, Any]:
         "deadlines": _deadlines_schema(),
     }
     assert set(top) == set(TOP_KEYS), "the schema misses a top-level key the loader accepts"
+    for key, prop in top.items():
+        prop.setdefault("title", key)
     return {
         "$schema": DRAFT,
         "$id": SCHEMA_ID,
@@ -157,6 +159,8 @@ def _node_schema(classes: dict[str, type[Block]]) -> dict[str, Any]:
         },
     }
     assert set(node_props) == set(NODE_KEYS), "the schema misses a node key the loader accepts"
+    for key, prop in node_props.items():
+        prop.setdefault("title", key)
     rules: list[dict[str, Any]] = [
         {  # a process list only with shards
             "if": {"not": {"required": ["shards"]}},
@@ -194,12 +198,14 @@ def params_schema(cls: type[Block]) -> dict[str, Any]:
     A required field may come from a preset: with ``preset: P`` only what P leaves out is required.
     """
     hints = typing.get_type_hints(cls.config_cls)
+    types_ = {i.name: i.type for i in cls.config_cls.fields_info()}
     props: dict[str, Any] = {}
     for f in dataclasses.fields(cls.config_cls):  # type: ignore[arg-type]
         rules = f.metadata.get("rules", Rules())
         prop = type_schema(hints[f.name], rules)
         doc = f.metadata.get("doc", "")
         said = rules.text()
+        prop["title"] = f"{cls.name}.{f.name}: {types_[f.name]}"  # the editor's hover heading
         prop["description"] = f"{doc} ({said})" if said else doc
         if f.default is not dataclasses.MISSING:
             prop["default"] = _plain(f.default)
@@ -213,6 +219,7 @@ def params_schema(cls: type[Block]) -> dict[str, Any]:
     }
     if presets:
         props["preset"] = {
+            "title": f"{cls.name}.preset",
             "enum": sorted(presets),
             "description": "a published parameter set (DOMAIN.NAME); parameters given beside it win",
         }
