@@ -26,6 +26,7 @@ from typing import Any, Literal, get_args, get_origin
 from flowtact.block import Block
 from flowtact.catalog.blocks import block_names, load_block
 from flowtact.catalog.presets import presets_for
+from flowtact.errors import UnknownBlockError
 from flowtact.graphfile.deployment import DEADLINE_KEYS, NETWORK_KEYS, POLICIES, PROCESS_KEYS, RESTARTS
 from flowtact.graphfile.graph import EDGE_KEYS, NODE_KEYS, TOP_KEYS
 from flowtact.graphfile.shards import MAX_SHARDS
@@ -51,9 +52,19 @@ FINITE = sys.float_info.max
 """A float parameter is finite: bounds of ±max float keep out ``.inf`` (NaN compares with nothing)."""
 
 
-def graph_schema() -> dict[str, Any]:
-    """The JSON Schema of a graph file, for every block registered in ``flowtact.blocks``."""
-    classes = {name: load_block(name) for name in block_names()}
+def graph_schema(left_out: dict[str, str] | None = None) -> dict[str, Any]:
+    """The JSON Schema of a graph file, for every block registered in ``flowtact.blocks``.
+
+    A registered block that cannot be imported (a broken or half-installed package) is left out,
+    its name and why put in ``left_out``: the schema of every other block is still worth having.
+    """
+    classes: dict[str, type[Block]] = {}
+    for name in block_names():
+        try:
+            classes[name] = load_block(name)
+        except (UnknownBlockError, ImportError) as e:
+            if left_out is not None:
+                left_out[name] = str(e).splitlines()[0] if str(e) else type(e).__name__
     outputs = sorted({p for cls in classes.values() for p in cls.outputs})
     inputs = sorted({p for cls in classes.values() for p in cls.inputs})
     out_end = rf"{NAME}\.({'|'.join(map(re.escape, outputs))})"

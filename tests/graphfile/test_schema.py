@@ -215,3 +215,15 @@ def test_an_unwritable_output_is_a_usage_error(tmp_path, capsys):
     assert main(["schema", "-o", str(tmp_path / "no" / "such" / "x.json")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "-o " in err and "Traceback" not in err
+
+
+def test_a_block_that_does_not_load_is_left_out_and_named(tmp_path, capsys, monkeypatch):
+    from flowtact.graphfile import schema as schema_module
+
+    monkeypatch.setattr(schema_module, "block_names", lambda: ["savgol", "broken_one"])
+    assert main(["schema", "-o", str(tmp_path / "s.json")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "left out block 'broken_one'" in err[0] and "unknown block" in err[0]
+    written = json.loads((tmp_path / "s.json").read_text())
+    assert written["properties"]["nodes"]["additionalProperties"] == {"$ref": "#/definitions/node"}
+    assert [k for k in written["definitions"] if k.startswith("params_")] == ["params_savgol"]
