@@ -21,7 +21,7 @@ from flowtact.errors import GraphFileError
 from flowtact.graphfile.graph import load_graph, parse_override, shipped_graphs
 from flowtact.running.builder import GraphBuilder
 from flowtact.running.compile import compile_graph
-from flowtact.running.from_python import override_texts
+from flowtact.running.from_python import compile_source, override_texts
 from flowtact.running.launch import load_compiled, resolved_graph
 from flowtact.running.results import Stream, read_streams
 
@@ -111,10 +111,10 @@ def test_processes_give_the_in_process_arrays_and_leave_the_signal_handlers_alon
 
 
 def test_overrides_reach_the_nodes_as_set_does():
-    plan = flowtact.running.from_python.compile_source(press(), overrides={"sa1.n": 2, "dforce.window": 7})
+    plan = compile_source(press(), overrides={"sa1.n": 2, "dforce.window": 7})
     assert plan.graph.nodes["sa1"].config.n == 2 and plan.graph.nodes["dforce"].config.window == 7
     with pytest.raises(GraphFileError, match=r"--set:1:1: .*'n' must be"):
-        flowtact.running.from_python.compile_source(press(), overrides={"sa1.n": -1})
+        compile_source(press(), overrides={"sa1.n": -1})
 
 
 @pytest.mark.parametrize(
@@ -134,9 +134,7 @@ def test_a_bad_graph_raises_its_located_error_naming_node_and_rule():
 
 def test_a_mapping_is_a_graph_document_too():
     doc = press().document()
-    assert resolved_graph(flowtact.running.from_python.compile_source(doc)) == resolved_graph(
-        compile_graph(press().load())
-    )
+    assert resolved_graph(compile_source(doc)) == resolved_graph(compile_graph(press().load()))
 
 
 def sample_stream(labels=("Fx", "Fy", "Fz"), categories=None, shape=(3,)) -> Stream:
