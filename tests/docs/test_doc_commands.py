@@ -26,7 +26,13 @@ RUN_ELSEWHERE = {
     "docs/sweeps.md": "tests/sweeps/test_sweeps_doc.py",
 }
 #: Pages whose commands this test runs, in page order.
-RUN_HERE = ("docs/braille.md", "docs/recordings.md", "docs/touch-encoding.md", "docs/touchsim.md")
+RUN_HERE = (
+    "docs/braille.md",
+    "docs/recordings.md",
+    "docs/schema.md",
+    "docs/touch-encoding.md",
+    "docs/touchsim.md",
+)
 
 
 def _rel(page: Path) -> str:
