@@ -59,12 +59,18 @@ class OffsetFit:
 
     @property
     def drift_ppm(self) -> float:
-        """How fast the offset changes: the remote clock's rate error against ours (ppm)."""
-        return self._slope * 1e6
+        """The remote clock's rate error against ours (ppm; positive: it runs fast, so the offset
+        to add to its stamps falls)."""
+        return -self._slope * 1e6
 
-    def offset(self, local_t: float) -> float:
+    def offset(self, local_t: float | np.ndarray) -> float | np.ndarray:
         """The offset predicted at local time ``local_t`` (0 before any reading)."""
         return self._value + self._slope * (local_t - self._at)
+
+    def to_local(self, remote_t: np.ndarray) -> np.ndarray:
+        """Remote stamps on the local clock: the line is over local time, so it is read where the
+        stamp lands (the mean offset first; the two clocks may be hours apart, the drift tiny)."""
+        return remote_t + self.offset(remote_t + self._value)
 
 
 class Anchor:

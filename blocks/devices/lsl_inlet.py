@@ -296,8 +296,7 @@ class LslInlet(ft.Source):
     def _take(self, ts: np.ndarray, x: np.ndarray) -> None:
         """Map a pulled chunk's LSL stamps to graph time (increasing: nudged) and queue it."""
         assert self._anchor is not None
-        local = ts + np.array([self._fit.offset(t) for t in ts])
-        t = local - self._anchor
+        t = self._fit.to_local(ts) - self._anchor
         self.count("samples", len(t))
         self.count("before_start", int((t < 0).sum()))
         for i in range(len(t)):

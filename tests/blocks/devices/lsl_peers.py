@@ -1,9 +1,9 @@
 """Plain pylsl peers for the LSL interop tests, run as separate processes (no flowtact import).
 
-``send NAME N RATE``: an outlet of a force stream (Fx, Fy, Fz in N, float64, labels/units in its
+``send NAME N RATE [NAN_AT]``: an outlet of a force stream (Fx, Fy, Fz in N, float64, labels/units in its
 desc); prints ``ready`` once created, waits for a consumer and then for a ``go`` line on stdin,
 pushes N samples paced at RATE on the LSL clock (a device's own timing: the only waiting here is
-this emulated sender's), each stamped with ``local_clock()`` at its push, prints ``sent N FIRST
+this emulated sender's; Fx of sample NAN_AT is NaN), each stamped with ``local_clock()`` at its push, prints ``sent N FIRST
 LAST`` and stays until stdin closes (the outlet must outlive the graph reading it).
 
 ``receive NAME N TIMEOUT``: resolves NAME, opens it, prints ``ready``, pulls until N samples came
@@ -17,7 +17,7 @@ import sys
 import pylsl
 
 
-def send(name: str, n: int, rate: float) -> None:
+def send(name: str, n: int, rate: float, nan_at: int = -1) -> None:
     info = pylsl.StreamInfo(name, "Force", 3, rate, "double64", f"peer/{name}")
     channels = info.desc().append_child("channels")
     for label in ("Fx", "Fy", "Fz"):
@@ -40,7 +40,7 @@ def send(name: str, n: int, rate: float) -> None:
         last = due  # stamped with its nominal time, as a device with its own clock would
         first = first or last
         fz = 0.12 + 0.02 * (i % 400 >= 200)  # a 120 mN baseline, 20 mN steps every 0.2 s
-        outlet.push_sample([0.0, 1e-6 * i, fz], last)
+        outlet.push_sample([float("nan") if i == nan_at else 0.0, 1e-6 * i, fz], last)
     print(f"sent {n} {first!r} {last!r}", flush=True)
     sys.stdin.read()
 
@@ -50,20 +50,24 @@ def receive(name: str, n: int, timeout: float) -> None:
     if not hits:
         print(json.dumps({"error": f"no stream {name}"}), flush=True)
         return
-    inlet = pylsl.StreamInlet(hits[0], max_buflen=360)
+    inlet = pylsl.StreamInlet(hits[0], max_buflen=360, recover=False)  # a lost stream raises
     inlet.open_stream(timeout)
     corr = inlet.time_correction(timeout)
+    info = inlet.info(timeout)
     print("ready", flush=True)
     values, stamps, arrivals = [], [], []
     deadline = pylsl.local_clock() + timeout
-    while len(stamps) < n and pylsl.local_clock() < deadline:
-        x, ts = inlet.pull_chunk(timeout=0.05)
+    lost = False
+    while len(stamps) < n and pylsl.local_clock() < deadline and not lost:
+        try:
+            x, ts = inlet.pull_chunk(timeout=0.05)
+        except pylsl.util.LostError:  # the outlet went away: what came before is all there is
+            lost, x, ts = True, [], []
         now = pylsl.local_clock()
         for row, t in zip(x, ts, strict=True):
             values.append(list(row))
             stamps.append(t + corr)
             arrivals.append(now)
-    info = inlet.info(1.0)
     ch = info.desc().child("channels").child("channel")
     out = {
         "values": values,
@@ -75,6 +79,7 @@ def receive(name: str, n: int, timeout: float) -> None:
         "label": ch.child_value("label"),
         "unit": ch.child_value("unit"),
         "kind": info.desc().child("flowtact").child_value("kind"),
+        "lost": lost,
     }
     print(json.dumps(out), flush=True)
 
@@ -82,6 +87,6 @@ def receive(name: str, n: int, timeout: float) -> None:
 if __name__ == "__main__":
     cmd, name, a, b = sys.argv[1:5]
     if cmd == "send":
-        send(name, int(a), float(b))
+        send(name, int(a), float(b), *map(int, sys.argv[5:6]))
     else:
         receive(name, int(a), float(b))
