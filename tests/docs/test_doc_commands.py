@@ -24,7 +24,13 @@ RUN_ELSEWHERE = {
     "docs/sweeps.md": "tests/sweeps/test_sweeps_doc.py",
 }
 #: Pages whose commands this test runs, in page order.
-RUN_HERE = ("docs/braille.md", "docs/lsl.md", "docs/recordings.md", "docs/touch-encoding.md", "docs/touchsim.md")
+RUN_HERE = (
+    "docs/braille.md",
+    "docs/lsl.md",
+    "docs/recordings.md",
+    "docs/touch-encoding.md",
+    "docs/touchsim.md",
+)
 #: Commands too long for the test suite (minutes on a busy 2-core machine): replaced by a check
 #: that the same program starts and parses its arguments. Everything else runs in full.
 CHECKED_ONLY = {
