@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -44,6 +44,21 @@ class LslInletConfig(ft.BadDataConfig):
     buffer_s: int = ft.param(
         360, gt=0, le=3600, doc="seconds of samples liblsl keeps while the graph is slow"
     )
+    channels: int | None = ft.param(
+        None,
+        gt=0,
+        le=4096,
+        doc="declare the stream instead of asking it when the graph is checked: its channel count (with "
+        "format, rate_hz, units, labels); the live stream must match when the run opens it. None: ask it",
+    )
+    format: Literal["float32", "float64", "int8", "int16", "int32", "int64"] = ft.param(
+        "float64", doc="with channels: the declared sample format (LSL float32, double64, int8..int64)"
+    )
+    rate_hz: float = ft.param(
+        0.0, ge=0, le=ft.NOMINAL_RATE_HZ, doc="with channels: declared nominal rate (0: irregular)"
+    )
+    units: str = ft.param("1", doc="with channels: the declared units of every channel")
+    labels: tuple[str, ...] = ft.param((), doc="with channels: the declared channel labels (empty: none)")
     sim: bool = ft.param(
         False,
         doc="emulate the stream in this process instead (a sine per channel, a remote clock off by "
@@ -58,6 +73,8 @@ class LslInletConfig(ft.BadDataConfig):
     def check(self) -> None:
         if not self.sim and not (self.name or self.type or self.source_id):
             raise self.error("name", "give the stream's name, type or source_id (or sim: true)")
+        if self.labels and self.channels is not None and len(self.labels) != self.channels:
+            raise self.error("labels", f"must name all {self.channels} channels; got {len(self.labels)}")
         for field in ("name", "type", "source_id"):
             if "'" in getattr(self, field):
                 raise self.error(field, f"must not contain a quote; got {getattr(self, field)!r}")
@@ -77,6 +94,21 @@ def _spec_of(meta: StreamMeta) -> ft.StreamSpec:
     )
 
 
+def _mismatch(live: ft.StreamSpec, want: ft.StreamSpec, declared: bool) -> bool:
+    """Whether the live stream differs from the port's spec: everything, or for a declared stream
+    what was declared (units and labels only when given)."""
+    if not declared:
+        return live != want
+    same = (live.dtype, live.shape, live.rate_hz) == (want.dtype, want.shape, want.rate_hz)
+    if want.units != "1" and live.units != want.units:
+        return True
+    return not same or (want.labels is not None and live.labels != want.labels)
+
+
+def _names(spec: ft.StreamSpec) -> str:
+    return f" [{', '.join(spec.labels)}]" if spec.labels else ""
+
+
 class LslInlet(ft.Source):
     """Read an LSL stream (found by name, type and/or source id) as a graph stream in graph time.
 
@@ -86,7 +118,9 @@ class LslInlet(ft.Source):
 
     Notes
     -----
-    The port. Checking or starting the graph resolves the stream (waiting up to
+    The port. Unless it is declared (``channels`` with ``format``, ``rate_hz``, ``units``,
+    ``labels``: the graph then checks offline, and opening the live stream verifies it), checking or
+    starting the graph resolves the stream (waiting up to
     ``resolve_timeout_s``; not found: an error at the node naming the query and the streams seen)
     and its metadata becomes the output's spec: channel count (the sample shape), format (dtype:
     float32, float64, int8..int64; string streams are refused), nominal rate (0, irregular: an
@@ -175,6 +209,15 @@ class LslInlet(ft.Source):
         if c.sim:
             labels = tuple(f"ch{i + 1}" for i in range(c.sim_channels))
             spec = ft.StreamSpec("float32", (c.sim_channels,), "1", c.sim_rate_hz, labels=labels)
+        elif c.channels is not None:
+            scalar = c.channels == 1
+            spec = ft.StreamSpec(
+                c.format,
+                () if scalar else (c.channels,),
+                c.units,
+                c.rate_hz or None,
+                labels=None if scalar else (tuple(c.labels) or None),
+            )
         else:
             self._meta = self._resolve()
             spec = _spec_of(self._meta)
@@ -216,11 +259,14 @@ class LslInlet(ft.Source):
                 f"{self.node} (lsl_inlet): LSL stream with {pred} did not connect within "
                 f"{c.resolve_timeout_s:g} s: {e}"
             ) from None
-        if self.output_specs and _spec_of(meta) != self.output_specs["x"]:
+        live, want = _spec_of(meta), self.output_specs.get("x")
+        if want is not None and _mismatch(live, want, declared=c.channels is not None):
             self._inlet.close_stream()
+            self._inlet = None
+            what = "declared" if c.channels is not None else "when the graph was checked"
             raise RuntimeError(
-                f"{self.node} (lsl_inlet): the LSL stream with {pred} changed since the graph was checked: "
-                f"now {_spec_of(meta).describe()}, was {self.output_specs['x'].describe()}"
+                f"{self.node} (lsl_inlet): the LSL stream with {pred} is {live.describe()}"
+                f"{_names(live)}, not as {what}: {want.describe()}{_names(want)}"
             )
         self._meta = meta
         self.count("clock_probes")

@@ -114,6 +114,21 @@ def test_the_streams_metadata_becomes_the_ports_spec(sender):
     assert spec == ft.StreamSpec("float64", (3,), "N", 1000.0, labels=("Fx", "Fy", "Fz"))
 
 
+def test_a_declared_stream_checks_offline_and_a_live_stream_that_differs_is_refused_at_open(sender):
+    name = _name()
+    block = LslInlet(name=name, channels=2, rate_hz=1000.0, units="N", node="force")
+    assert block.specs({})["x"] == ft.StreamSpec("float64", (2,), "N", 1000.0)  # no stream needed
+    sender(name, 10)  # but the live one has 3 channels
+    block.bind({})
+    with pytest.raises(RuntimeError) as e:
+        block.open()
+    block.close()
+    assert str(e.value) == (
+        f"force (lsl_inlet): the LSL stream with name='{name}' is float64[3] N @ 1000 Hz [Fx, Fy, Fz], "
+        "not as declared: float64[2] N @ 1000 Hz"
+    )
+
+
 def test_a_stream_not_found_is_a_located_one_line_error(tmp_path, lsl_env):
     graph = tmp_path / "g.yaml"
     graph.write_text(
