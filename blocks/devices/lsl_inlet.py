@@ -18,6 +18,7 @@ from flowtact.blocks.devices.lsl_streams import (
     forget,
     open_inlet,
     query_text,
+    watch,
 )
 
 __all__ = ["LslInlet", "LslInletConfig"]
@@ -40,6 +41,13 @@ class LslInletConfig(ft.BadDataConfig):
     )
     clock_probe_s: float = ft.param(
         1.0, gt=0, doc="read LSL's clock offset to the sender this often (it re-measures every few seconds)"
+    )
+    lost_after_s: float = ft.param(
+        2.0,
+        ge=0.5,
+        le=600,
+        doc="a stream that stopped answering LSL discovery this long is lost: the run stops with an error "
+        "once every sample received was emitted",
     )
     buffer_s: int = ft.param(
         360, gt=0, le=3600, doc="seconds of samples liblsl keeps while the graph is slow"
@@ -142,7 +150,10 @@ class LslInlet(ft.Source):
 
     Bad input. NaN/inf samples follow ``on_bad_data``. A stream that disappears (its outlet closed,
     the sender died) raises an error naming the node and the stream once every sample received
-    before has been emitted: nothing received is lost.
+    before has been emitted: nothing received is lost. liblsl's own "lost" signal cannot be used
+    for that (an inlet without recovery raises before handing out what it had received), so the
+    inlet keeps liblsl's recovery on and watches the stream's uid with a continuous resolver
+    (non-blocking reads of liblsl's background discovery): gone for ``lost_after_s`` means lost.
 
     ``sim: true`` emulates a stream in graph time (seeded by the block's rng), through the same
     offset-and-drift fit: deterministic and chunking-invariant.
@@ -179,6 +190,7 @@ class LslInlet(ft.Source):
         super().__init__(*args, **kw)
         self._inlet: Any = None
         self._meta: StreamMeta | None = None
+        self._watch: Any = None
         self._holding = False
 
     @classmethod
@@ -269,6 +281,8 @@ class LslInlet(ft.Source):
                 f"{_names(live)}, not as {what}: {want.describe()}{_names(want)}"
             )
         self._meta = meta
+        self._watch = watch(meta.uid, c.lost_after_s)
+        self._seen = False  # the watch answered at least once
         self.count("clock_probes")
         anchor.acquire()
         self._holding = True
@@ -277,6 +291,7 @@ class LslInlet(ft.Source):
         if self._inlet is not None:
             self._inlet.close_stream()
             self._inlet = None
+        self._watch = None
         if self._holding:
             anchor.release()
             self._holding = False
@@ -293,12 +308,11 @@ class LslInlet(ft.Source):
                 )
             self._anchor = anchor.at(now)
             self._check_realtime(now)
+            if self._lost is not None and not self._ready_t:
+                raise RuntimeError(self._lost)  # after a step that emitted everything received
             if self._lost is None:
                 self._pull()
-        out = self._emit(now)
-        if self._lost is not None and not self._ready_t:
-            raise RuntimeError(self._lost)
-        return out
+        return self._emit(now)
 
     def _check_realtime(self, now: float) -> None:
         import pylsl
@@ -319,23 +333,29 @@ class LslInlet(ft.Source):
 
         c = self.config
         local = pylsl.local_clock()
-        try:
-            if local >= self._next_probe:
-                self._next_probe = local + c.clock_probe_s
+        probe = local >= self._next_probe
+        if probe:
+            self._next_probe = local + c.clock_probe_s
+            try:
                 self._fit.add(local, self._inlet.time_correction(0.0))
                 self.count("clock_probes")
-            while True:
-                x, ts = self._inlet.pull_chunk(timeout=0.0, max_samples=4096)
-                if not ts:
-                    break
-                self._take(np.asarray(ts, np.float64), np.asarray(x))
-        except RuntimeError as e:  # pylsl's LostError (and TimeoutError): the outlet went away
+            except RuntimeError:  # no fresh estimate (the sender is slow to answer, or gone)
+                pass
+            visible = bool(self._watch.results())
+            gone = self._seen and not visible
+            self._seen = self._seen or visible
+        while True:  # what liblsl received, even from a stream that has gone since
+            x, ts = self._inlet.pull_chunk(timeout=0.0, max_samples=4096)
+            if not ts:
+                break
+            self._take(np.asarray(ts, np.float64), np.asarray(x))
+        if probe and gone:
             m = self._meta
             what = f"'{m.name}' (source id {m.source_id or '-'}, {m.hostname})" if m else "stream"
             self._lost = (
                 f"{self.node} (lsl_inlet): LSL stream {what} was lost after "
-                f"{self.counters.get('samples', 0)} samples ({e or type(e).__name__}); every sample "
-                "received was emitted"
+                f"{self.counters.get('samples', 0)} samples (gone from discovery for {c.lost_after_s:g} s, "
+                "lost_after_s); every sample received was emitted"
             )
             forget(c.name, c.type, c.source_id, c.resolve_timeout_s)
 
@@ -384,8 +404,7 @@ class LslInlet(ft.Source):
             return {"x": ft.Chunk.empty(spec)}
         t = np.concatenate(self._ready_t)
         x = np.concatenate(self._ready_x)
-        # the stream is gone: emit everything received (then step raises), else what is due
-        k = len(t) if self._lost is not None else int(np.searchsorted(t, now, side="left"))
+        k = int(np.searchsorted(t, now, side="left"))  # what is due; a lost stream's too, then step raises
         self._ready_t = [t[k:]] if k < len(t) else []
         self._ready_x = [x[k:]] if k < len(t) else []
         if k:

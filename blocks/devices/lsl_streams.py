@@ -29,6 +29,7 @@ __all__ = [
     "meta_of",
     "open_inlet",
     "query_text",
+    "watch",
 ]
 
 #: LSL channel format name -> the dtype of the flowtact port carrying it ("" : not a numeric stream).
@@ -147,16 +148,28 @@ def forget(name: str | None, type_: str | None, source_id: str | None, timeout_s
 
 
 def open_inlet(pred: str, timeout_s: float, buffer_s: int) -> tuple[Any, StreamMeta]:
-    """A connected pylsl inlet (no recovery: a lost stream raises) on the first stream matching
-    ``pred``, and its metadata; :class:`LslNotFound` when there is none within ``timeout_s``."""
+    """A connected pylsl inlet on the first stream matching ``pred``, and its metadata;
+    :class:`LslNotFound` when there is none within ``timeout_s``. With liblsl's recovery on: an
+    inlet without it raises at the next pull once the stream is lost, *before* handing out the
+    samples it had already received (they would be lost); the caller watches for the stream's
+    disappearance itself (:func:`watch`)."""
     import pylsl
 
     hits = pylsl.resolve_bypred(pred, 1, timeout_s)
     if not hits:
         raise LslNotFound(f"no LSL stream with {pred} within {timeout_s:g} s")
-    inlet = pylsl.StreamInlet(hits[0], max_buflen=buffer_s, recover=False)
+    inlet = pylsl.StreamInlet(hits[0], max_buflen=buffer_s, recover=True)
     inlet.open_stream(timeout_s)
     return inlet, meta_of(inlet.info(timeout_s))
+
+
+def watch(uid: str, forget_after_s: float) -> Any:
+    """A pylsl ContinuousResolver for the one stream ``uid`` names: its ``results()`` (a
+    non-blocking read of what liblsl's background discovery last saw) is empty once the stream has
+    not answered for ``forget_after_s``."""
+    import pylsl
+
+    return pylsl.ContinuousResolver(pred=f"uid='{uid}'", forget_after=forget_after_s)
 
 
 def _answer(pred: str, timeout_s: float) -> dict[str, Any]:
