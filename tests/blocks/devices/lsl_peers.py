@@ -59,8 +59,10 @@ def receive(name: str, n: int, timeout: float) -> None:
     deadline = pylsl.local_clock() + timeout
     lost = False
     while len(stamps) < n and pylsl.local_clock() < deadline and not lost:
-        try:
-            x, ts = inlet.pull_chunk(timeout=0.05)
+        try:  # one sample as soon as it is there (pull_chunk with a timeout waits the whole timeout)
+            first, t0 = inlet.pull_sample(timeout=0.05)
+            x, ts = inlet.pull_chunk(timeout=0.0) if first is not None else ([], [])
+            x, ts = ([first, *x], [t0, *ts]) if first is not None else (x, ts)
         except pylsl.util.LostError:  # the outlet went away: what came before is all there is
             lost, x, ts = True, [], []
         now = pylsl.local_clock()
