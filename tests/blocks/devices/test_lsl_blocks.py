@@ -200,6 +200,22 @@ def test_nan_samples_follow_the_policy_and_a_lost_stream_raises_after_emitting_e
     assert "\n" not in msg
 
 
+def test_a_live_stream_refuses_a_fast_run(sender):
+    name = _name()
+    sender(name, 10)
+    block = LslInlet(name=name, node="force")
+    block.bind({})
+    block.open()
+    try:
+        block(0.0)
+        with pytest.raises(
+            RuntimeError, match=r"^force \(lsl_inlet\): graph time runs .* ahead of the wall clock"
+        ):
+            block(5.0)  # 5 s of graph time at once: --fast
+    finally:
+        block.close()
+
+
 def test_nan_samples_stop_the_run_by_default_naming_node_and_port(sender):
     name = _name()
     peer = sender(name, 50, nan_at=10)

@@ -67,10 +67,14 @@ def _start(
 
 
 def _graph(tmp_path: Path, tag: str) -> tuple[Path, dict[str, str]]:
-    """graphs/lsl_touch.yaml with stream names of this test only; the outlets wait for their readers."""
+    """graphs/lsl_touch.yaml with stream names of this test only, the force stream's spec asked of
+    the live stream rather than declared, and outlets that wait for their readers."""
     g = yaml.safe_load((ROOT / "graphs" / "lsl_touch.yaml").read_text())
     names = {"force": f"ft_force_{tag}", "force_out": f"ft_force_out_{tag}", "sa1_out": f"ft_sa1_{tag}"}
-    g["nodes"]["force"]["params"]["name"] = names["force"]
+    force = g["nodes"]["force"]["params"]
+    force["name"] = names["force"]
+    for declared in ("channels", "format", "rate_hz", "units", "labels"):  # asked of the live stream:
+        force.pop(declared)  # compiled in the supervisor, bound in a worker forked from it
     for node in ("force_out", "sa1_out"):
         g["nodes"][node]["params"].update(name=names[node], wait_for_consumers_s=BOUND_S)
     g["nodes"]["fa1_out"]["params"]["name"] = f"ft_fa1_{tag}"
