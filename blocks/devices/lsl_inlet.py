@@ -283,6 +283,7 @@ class LslInlet(ft.Source):
         self._meta = meta
         self._watch = watch(meta.uid, c.lost_after_s)
         self._seen = False  # the watch answered at least once
+        self._watch_deadline = pylsl.local_clock() + max(c.lost_after_s, c.resolve_timeout_s)
         self.count("clock_probes")
         anchor.acquire()
         self._holding = True
@@ -342,7 +343,8 @@ class LslInlet(ft.Source):
             except RuntimeError:  # no fresh estimate (the sender is slow to answer, or gone)
                 pass
             visible = bool(self._watch.results())
-            gone = self._seen and not visible
+            # gone: seen, then not; or never seen by the watch (it went before the watch's first look)
+            gone = not visible and (self._seen or local > self._watch_deadline)
             self._seen = self._seen or visible
         while True:  # what liblsl received, even from a stream that has gone since
             x, ts = self._inlet.pull_chunk(timeout=0.0, max_samples=4096)
