@@ -12,6 +12,7 @@ import select
 import subprocess
 import sys
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -156,6 +157,17 @@ def test_a_stream_not_found_is_a_located_one_line_error(tmp_path, lsl_env):
 # -- bad input: NaN, a stream that disappears --------------------------------------------------------
 
 
+def _until(ready: Callable[[], bool]) -> bool:
+    """Poll ``ready`` until it holds (True) or the hang bound passed (False)."""
+    import pylsl
+
+    deadline = pylsl.local_clock() + BOUND_S
+    while not ready():
+        if pylsl.local_clock() > deadline:
+            return False
+    return True
+
+
 def _drive(block: LslInlet, until: int) -> tuple[list[ft.Chunk], BaseException | None]:
     """Step the opened block in real time (now: the LSL clock since the start) until ``until``
     samples came out or it raised; a hang bound, no sleeps (each step polls)."""
@@ -174,8 +186,8 @@ def _drive(block: LslInlet, until: int) -> tuple[list[ft.Chunk], BaseException |
 
 
 def test_nan_samples_follow_the_policy_and_a_lost_stream_raises_after_emitting_everything(sender):
-    """The sender pushes all its samples and is killed before the block pulled any: every sample
-    liblsl received still comes out (an inlet without liblsl's recovery would raise at once and
+    """The sender pushes all its samples, liblsl receives them all, the sender is killed before the
+    block pulled any: every sample liblsl received still comes out (an inlet without liblsl's recovery would raise at once and
     lose all 300), then the error names the node and the stream."""
     name = _name()
     n = 300
@@ -185,8 +197,10 @@ def test_nan_samples_follow_the_policy_and_a_lost_stream_raises_after_emitting_e
     block.open()
     try:
         _go(peer)
-        assert _line(peer).startswith(f"sent {n}")
-        peer.kill()  # the sender dies: its outlet vanishes, with every sample already sent
+        assert _line(peer).startswith(f"sent {n}")  # pushed: liblsl sends them from its own thread
+        received = _until(lambda: block._inlet.samples_available() >= n)  # noqa: SLF001 - in liblsl, not pulled
+        assert received, "liblsl did not receive every sample"
+        peer.kill()  # the sender dies: its outlet vanishes, every sample received, none pulled yet
         peer.wait()
         chunks, raised = _drive(block, 10**9)
     finally:
