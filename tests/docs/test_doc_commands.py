@@ -28,6 +28,7 @@ RUN_ELSEWHERE = {
 #: Pages whose commands this test runs, in page order.
 RUN_HERE = (
     "docs/braille.md",
+    "docs/lsl.md",
     "docs/recordings.md",
     "docs/schema.md",
     "docs/touch-encoding.md",

@@ -323,8 +323,14 @@ SHIPPED = {
 }
 
 
+#: Shipped graphs that need a live device stream: run (and stopped with Ctrl-C) by their own test.
+LIVE = {"lsl_touch": "tests/blocks/devices/test_lsl_interop.py"}
+
+
 def test_every_shipped_graph_is_tested_here():
-    assert set(SHIPPED) == {p.stem for p in (ROOT / "graphs").glob("*.yaml")}
+    assert set(SHIPPED) | set(LIVE) == {p.stem for p in (ROOT / "graphs").glob("*.yaml")}
+    for test in LIVE.values():
+        assert "SIGINT" in (ROOT / test).read_text()
 
 
 @pytest.mark.parametrize("graph", sorted(SHIPPED))
