@@ -46,6 +46,7 @@ ROOMS = {
     "pictures": "`flowtact graph` and `flowtact plot`",
     "benchmark": "`flowtact bench`",
     "sweeps": "`flowtact sweep`",
+    "view": "`flowtact run --view`: live streams in a browser",
 }
 TEST_ONLY_ROOMS = ("blocks", "docs")
 """Test folders with no framework room: the block library's tests, the docs' own tests."""
