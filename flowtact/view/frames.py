@@ -65,7 +65,7 @@ class _Rates:
         counts = np.bincount(units[ok], minlength=self.n_units)
         self.frames.append((end, counts))
         self.total += counts
-        while len(self.frames) > 1 and end - self.frames[0][0] > RATE_WINDOW_S:
+        while len(self.frames) > 1 and end - self.frames[0][0] >= RATE_WINDOW_S - 1e-9:
             t0, old = self.frames.popleft()
             self.total -= old
             self.start = t0
@@ -123,13 +123,13 @@ class FrameMaker:
         n = len(p.t)
         pick = _decimate(n, MAX_POINTS)
         t = p.t[pick]
-        flat = p.data.reshape(n, -1)[pick]
+        flat = p.data.reshape(n, spec.size)[pick]
         out: dict[str, Any] = {"t": _values(t), "dropped": p.dropped}
         if kind == "categorical":
             cats = spec.categories or ()
             out["y"] = [_values(flat[:, 0])]
             if n:
-                last = p.data.reshape(n, -1)[-1, 0]
+                last = p.data.reshape(n, spec.size)[-1, 0]
                 i = int(last) if np.isfinite(last) else -1
                 out["current"] = cats[i] if 0 <= i < len(cats) else f"{last:g}"
         else:
@@ -137,7 +137,7 @@ class FrameMaker:
         return out
 
     def _raster(self, name: str, spec: StreamSpec, p: Pending) -> dict[str, Any]:
-        units = p.data[:, 0] if is_pulses(spec) else p.data.reshape(len(p.t), -1)[:, 0]
+        units = p.data[:, 0] if is_pulses(spec) else p.data.reshape(len(p.t), spec.size)[:, 0]
         units = np.asarray(units).astype(np.int64, copy=False)
         end = p.end if p.end is not None else (float(p.t[-1]) if len(p.t) else self.now)
         rates = self.rates[name].add(units, end)

@@ -15,6 +15,7 @@ import contextlib
 import json
 import secrets
 import socket
+import sys
 import threading
 from collections import deque
 from dataclasses import dataclass, field
@@ -53,6 +54,7 @@ def listen(port: int) -> socket.socket:
 @dataclass(eq=False)
 class _Client:
     ws: web.WebSocketResponse
+    transport: asyncio.BaseTransport | None
     queue: deque[str] = field(default_factory=lambda: deque(maxlen=CLIENT_QUEUE))
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     dropped: int = 0
@@ -76,6 +78,7 @@ class ViewServer:
         self.frames = FrameMaker({n: b.spec for n, b in buffers.streams.items()})
         self.clients: set[_Client] = set()
         self.sent = 0
+        self.errors = 0
         """Frames made (each sent to every browser connected then)."""
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -124,7 +127,7 @@ class ViewServer:
         app = web.Application()
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._ws)
-        runner = web.AppRunner(app, handle_signals=False, access_log=None)
+        runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=CLOSE_S)
         await runner.setup()
         await web.SockSite(runner, self.sock).start()
         self._ready.set()
@@ -143,12 +146,16 @@ class ViewServer:
             await runner.cleanup()
 
     async def _close(self, c: _Client) -> None:
-        """Give a browser its last messages (or up to CLOSE_S), then close its socket."""
-        with contextlib.suppress(Exception):
+        """Give a browser its last messages and close its socket; one that does not read them
+        within CLOSE_S (a paused browser) has its connection cut."""
+        try:
             async with asyncio.timeout(CLOSE_S):
                 while c.queue:
                     await c.ws.send_str(c.queue.popleft())
                 await c.ws.close()
+        except (TimeoutError, ConnectionError, RuntimeError):
+            if c.transport is not None:
+                c.transport.abort()
 
     async def _pump(self) -> None:
         period = 1.0 / self.fps
@@ -162,6 +169,15 @@ class ViewServer:
             self._frame()
 
     def _frame(self) -> None:
+        """Make and queue one frame; a failure is said once and the view goes on (the graph too)."""
+        try:
+            self._make_frame()
+        except Exception as e:  # noqa: BLE001 - the view must never take the run down
+            self.errors += 1
+            if self.errors == 1:
+                print(f"flowtact: view: a frame failed ({type(e).__name__}: {e})", file=sys.stderr, flush=True)
+
+    def _make_frame(self) -> None:
         pending = self.buffers.take()
         if not self.clients:
             return  # nobody watches: the data was stale anyway
@@ -190,7 +206,7 @@ class ViewServer:
             return web.Response(status=403, text="403\n")
         ws = web.WebSocketResponse(max_msg_size=1 << 16)
         await ws.prepare(request)
-        client = _Client(ws)
+        client = _Client(ws, request.transport)
         client.put(json.dumps(self.frames.meta(self.graph)))
         self.clients.add(client)
         sender = asyncio.ensure_future(self._send(client))
@@ -206,11 +222,12 @@ class ViewServer:
         return ws
 
     async def _send(self, c: _Client) -> None:
-        while True:
-            await c.wake.wait()
-            c.wake.clear()
-            while c.queue:
-                await c.ws.send_str(c.queue.popleft())  # waits while the browser does not read
+        with contextlib.suppress(ConnectionError, RuntimeError):  # the browser went away
+            while True:
+                await c.wake.wait()
+                c.wake.clear()
+                while c.queue:
+                    await c.ws.send_str(c.queue.popleft())  # waits while the browser does not read
 
 
 def _page() -> str:
