@@ -19,8 +19,9 @@ from flowtact.view.kinds import describe, is_pulses, view_kind
 
 __all__ = ["MAX_CHANNELS", "MAX_EVENTS", "MAX_POINTS", "MAX_RATE_BARS", "MAX_SIDE", "FrameMaker"]
 
-MAX_POINTS = 200
-"""Points per channel in one frame (20 frames a second: 4000 a second, more than a plot's width)."""
+MAX_POINTS = 50
+"""Points per channel in one frame: at 20 frames a second a 1 kHz stream is drawn whole, a faster one
+decimated to 1000 points a second (10 000 over the page's 10 s window: more than a plot's width)."""
 MAX_CHANNELS = 16
 """Channels of one stream drawn as lines; the rest are left out (the page says how many)."""
 MAX_EVENTS = 2000

@@ -33,11 +33,13 @@ def chosen_streams(plan: CompiledGraph, names: Sequence[str]) -> list[Stream]:
     for name in names:
         node, dot, port = name.partition(".")
         if not dot or (node, port) not in plan.specs:
-            if node in plan.graph.nodes:
-                ports = [p for (n, p) in plan.specs if n == node]
+            ports = [p for (n, p) in plan.specs if n == node]
+            if not dot:
+                have = "expected NODE.PORT" + (f", e.g. {node}.{ports[0]}" if ports else "")
+            elif node in plan.graph.nodes:
                 have = f"'{node}' has outputs {', '.join(ports) or 'none'}"
             else:
-                have = f"no node '{shown(node, limit=80)}'" if dot else "expected NODE.PORT"
+                have = f"no node '{shown(node, limit=80)}'"
             raise UsageError(f"--view {shown(name, limit=120)}: not a stream of the graph ({have})")
         if (node, port) not in out:
             out.append((node, port))
