@@ -21,7 +21,6 @@ from collections import deque
 from dataclasses import dataclass, field
 from importlib.resources import files
 
-
 from aiohttp import WSMsgType, web
 
 from flowtact.view.buffers import ViewBuffers
@@ -175,7 +174,9 @@ class ViewServer:
         except Exception as e:  # noqa: BLE001 - the view must never take the run down
             self.errors += 1
             if self.errors == 1:
-                print(f"flowtact: view: a frame failed ({type(e).__name__}: {e})", file=sys.stderr, flush=True)
+                print(
+                    f"flowtact: view: a frame failed ({type(e).__name__}: {e})", file=sys.stderr, flush=True
+                )
 
     def _make_frame(self) -> None:
         pending = self.buffers.take()
@@ -237,5 +238,3 @@ def _page() -> str:
     js = (here / "vendor" / "uPlot.iife.min.js").read_text(encoding="utf-8")
     css = (here / "vendor" / "uPlot.min.css").read_text(encoding="utf-8")
     return html.replace("/*UPLOT_CSS*/", css).replace("/*UPLOT_JS*/", js.replace("</script", "<\\/script"))
-
-

@@ -27,7 +27,9 @@ def chosen_streams(plan: CompiledGraph, names: Sequence[str]) -> list[Stream]:
     :class:`~flowtact.errors.UsageError` naming the first that is no output of the graph."""
     if not names:
         if not plan.record:
-            raise UsageError("--view: the graph records no stream; name the streams to view (--view NODE.PORT ...)")
+            raise UsageError(
+                "--view: the graph records no stream; name the streams to view (--view NODE.PORT ...)"
+            )
         return list(plan.record)
     out: list[Stream] = []
     for name in names:

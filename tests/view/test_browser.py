@@ -35,7 +35,13 @@ HANG_S = 300  # start-up (kernel compiles) on a loaded machine; never a timing a
 @pytest.fixture
 def browser():
     o = Options()
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,1000"):
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1400,1000",
+    ):
         o.add_argument(a)
     o.binary_location = CHROMIUM
     o.set_capability("goog:loggingPrefs", {"browser": "ALL"})

@@ -19,7 +19,9 @@ SPIKES = StreamSpec(dtype="int64", events=True, n_units=20)
 
 def _chunk(t0: int, n: int, spec: StreamSpec = FORCE) -> Chunk:
     t = (np.arange(t0, t0 + n) / 1000.0).astype(np.float64)
-    data = np.repeat(np.arange(t0, t0 + n, dtype=np.float64)[:, None], spec.size, axis=1).reshape(n, *spec.shape)
+    data = np.repeat(np.arange(t0, t0 + n, dtype=np.float64)[:, None], spec.size, axis=1).reshape(
+        n, *spec.shape
+    )
     return Chunk(t, data)
 
 
@@ -72,7 +74,10 @@ def test_an_event_watermark_without_events_still_moves_time():
         (FORCE, "lines"),
         (StreamSpec(), "lines"),
         (SPIKES, "raster"),
-        (StreamSpec(shape=(3,), events=True, n_units=20, labels=("unit", "amplitude_ua", "width_us")), "raster"),
+        (
+            StreamSpec(shape=(3,), events=True, n_units=20, labels=("unit", "amplitude_ua", "width_us")),
+            "raster",
+        ),
         (StreamSpec(dtype="uint8", shape=(3, 240, 320), units="DN"), "image"),
         (StreamSpec(shape=(3, 3), units="rad", labels=tuple(f"a{i}" for i in range(9))), "lines"),
         (StreamSpec(categories=("strawberry", "bottle")), "categorical"),

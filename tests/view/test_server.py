@@ -18,11 +18,11 @@ import pytest
 
 pytest.importorskip("aiohttp")
 
-import aiohttp  # noqa: E402
+import aiohttp
 
-from flowtact.chunk import Chunk, StreamSpec  # noqa: E402
-from flowtact.view.buffers import ViewBuffers  # noqa: E402
-from flowtact.view.server import CLIENT_QUEUE, ViewServer, listen  # noqa: E402
+from flowtact.chunk import Chunk, StreamSpec
+from flowtact.view.buffers import ViewBuffers
+from flowtact.view.server import CLIENT_QUEUE, ViewServer, listen
 
 FORCE = StreamSpec(shape=(3,), units="N", rate_hz=1000.0, labels=("Fx", "Fy", "Fz"))
 
@@ -52,7 +52,7 @@ def test_the_page_needs_the_token_and_loads_nothing_from_elsewhere(server):
     assert _get(base + "?token=" + server.token[:-1] + "x")[0] == 403
     status, page = _get(server.url)
     assert status == 200 and "uPlot" in page and "leeoniya/uPlot" in page  # vendored, inlined
-    assert "<script src" not in page and "<link rel=\"stylesheet\"" not in page
+    assert "<script src" not in page and '<link rel="stylesheet"' not in page
 
 
 def test_the_websocket_needs_the_token(server):
@@ -71,19 +71,19 @@ def test_a_browser_gets_the_streams_then_frames_then_the_end(server):
     got: list[dict] = []
 
     async def go() -> None:
-        async with aiohttp.ClientSession() as s:
-            async with s.ws_connect(server.url.replace("http", "ws").replace("/?", "/ws?")) as ws:
-                got.append(json.loads((await ws.receive()).data))
-                k = 0
-                while True:
-                    server.buffers.append("force.f", Chunk(np.array([k / 1000]), np.full((1, 3), float(k))))
-                    k += 1
-                    msg = await ws.receive(timeout=60)
-                    if msg.type != aiohttp.WSMsgType.TEXT:
-                        return
-                    got.append(json.loads(msg.data))
-                    if len([m for m in got if m["type"] == "frame"]) == 3:
-                        threading.Thread(target=server.stop).start()  # as the end of a run does
+        ws_url = server.url.replace("http", "ws").replace("/?", "/ws?")
+        async with aiohttp.ClientSession() as s, s.ws_connect(ws_url) as ws:
+            got.append(json.loads((await ws.receive()).data))
+            k = 0
+            while True:
+                server.buffers.append("force.f", Chunk(np.array([k / 1000]), np.full((1, 3), float(k))))
+                k += 1
+                msg = await ws.receive(timeout=60)
+                if msg.type != aiohttp.WSMsgType.TEXT:
+                    return
+                got.append(json.loads(msg.data))
+                if len([m for m in got if m["type"] == "frame"]) == 3:
+                    threading.Thread(target=server.stop).start()  # as the end of a run does
 
     asyncio.run(go())
     meta = got[0]

@@ -38,10 +38,17 @@ def touch():
 
 def test_no_names_view_the_recorded_streams_and_names_are_checked(touch):
     assert chosen_streams(touch, []) == touch.record
-    assert chosen_streams(touch, ["sa1.spikes", "force.f", "sa1.spikes"]) == [("sa1", "spikes"), ("force", "f")]
-    with pytest.raises(UsageError, match=r"^--view force\.x: not a stream of the graph \('force' has outputs f\)$"):
+    assert chosen_streams(touch, ["sa1.spikes", "force.f", "sa1.spikes"]) == [
+        ("sa1", "spikes"),
+        ("force", "f"),
+    ]
+    with pytest.raises(
+        UsageError, match=r"^--view force\.x: not a stream of the graph \('force' has outputs f\)$"
+    ):
         chosen_streams(touch, ["force.x"])
-    with pytest.raises(UsageError, match=r"^--view nosuch\.y: not a stream of the graph \(no node 'nosuch'\)$"):
+    with pytest.raises(
+        UsageError, match=r"^--view nosuch\.y: not a stream of the graph \(no node 'nosuch'\)$"
+    ):
         chosen_streams(touch, ["nosuch.y"])
     with pytest.raises(UsageError, match=r"\(expected NODE\.PORT, e\.g\. force\.f\)$"):
         chosen_streams(touch, ["force"])
@@ -66,6 +73,7 @@ class _Recorder:
         self.flushes = 0
 
     def write(self, stream: str, chunk: Chunk) -> None:
+        assert len(chunk) == 1
         self.got.append(stream)
 
     def maybe_flush(self) -> None:
