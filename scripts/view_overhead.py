@@ -33,7 +33,13 @@ def browser() -> Any:
     from selenium.webdriver.chrome.service import Service
 
     o = Options()
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,1000"):
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1400,1000",
+    ):
         o.add_argument(a)
     o.binary_location = CHROMIUM
     return webdriver.Chrome(service=Service(CHROMEDRIVER), options=o)
@@ -55,10 +61,10 @@ def paused_client(url: str) -> socket.socket:
     return sock
 
 
-def run(graph: str, duration: float, mode: str, driver: Any) -> dict[str, float]:
+def run(graph: str, duration: float, mode: str, driver: Any, streams: list[str]) -> dict[str, float]:
     args = [sys.executable, "-m", "flowtact.cli", "run", graph, "--duration", str(duration), "--json"]
     if mode != "off":
-        args.append("--view")
+        args += ["--view", *streams]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     url: list[str] = []
     got = threading.Event()
@@ -96,6 +102,9 @@ def main() -> None:
     ap.add_argument("--graph", default="touch")
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument(
+        "--streams", nargs="*", default=[], help="the streams viewed (default: the recorded ones)"
+    )
     a = ap.parse_args()
     driver = browser()
     modes = ("off", "browser", "paused")
@@ -104,19 +113,25 @@ def main() -> None:
     try:
         for _ in range(a.repeats):
             for m in modes:
-                got[m].append(run(a.graph, a.duration, m, driver))
+                got[m].append(run(a.graph, a.duration, m, driver, a.streams))
     finally:
         driver.quit()
     load1 = os.getloadavg()
     base = statistics.median(r["cpu_pct"] for r in got["off"])
-    print(f"{a.graph}, {a.duration:g} s real time across processes, median of {a.repeats}; "
-          f"load average {load0[0]:.2f} -> {load1[0]:.2f} (2 cores)")  # fmt: skip
-    print(f"{'view':<10}{'graph CPU %':>12}{'vs off':>9}{'supervisor %':>14}{'latency p99 ms':>16}")
+    viewed = " ".join(a.streams) or "the recorded streams"
+    print(f"{a.graph} viewing {viewed}, {a.duration:g} s real time across processes, median of "
+          f"{a.repeats}; load average {load0[0]:.2f} -> {load1[0]:.2f} (2 cores)")  # fmt: skip
+    print("| view | graph CPU % (min–max) | vs off | supervisor CPU % | worst link p99 ms (min–max) |")
+    print("|---|---|---|---|---|")
     for m in modes:
-        cpu = statistics.median(r["cpu_pct"] for r in got[m])
+        cpus = [r["cpu_pct"] for r in got[m]]
+        p99s = [r["p99_ms"] for r in got[m]]
+        cpu, p99 = statistics.median(cpus), statistics.median(p99s)
         sup = statistics.median(r["supervisor_pct"] for r in got[m])
-        p99 = statistics.median(r["p99_ms"] for r in got[m])
-        print(f"{m:<10}{cpu:>12.1f}{cpu / base - 1:>+9.0%}{sup:>14.1f}{p99:>16.2f}")
+        print(
+            f"| {m} | {cpu:.1f} ({min(cpus):.1f}–{max(cpus):.1f}) | {cpu / base - 1:+.0%} | {sup:.1f} "
+            f"| {p99:.2f} ({min(p99s):.2f}–{max(p99s):.2f}) |"
+        )
 
 
 if __name__ == "__main__":

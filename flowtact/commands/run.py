@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib.util
 import json
 import signal
 import sys
@@ -146,10 +147,8 @@ def open_view(plan: Any, args: argparse.Namespace) -> Any:
         if args.view_port:
             raise UsageError("--view-port: only with --view")
         return None
-    try:
-        import aiohttp  # noqa: F401
-    except ImportError:
-        raise UsageError("--view needs aiohttp: pip install 'flowtact[view]'") from None
+    if importlib.util.find_spec("aiohttp") is None:
+        raise UsageError("--view needs aiohttp: pip install 'flowtact[view]'")
     from flowtact.view.session import ViewSession
 
     return ViewSession(plan, args.view, port=args.view_port)

@@ -24,7 +24,13 @@ RUN_ELSEWHERE = {
     "docs/sweeps.md": "tests/sweeps/test_sweeps_doc.py",
 }
 #: Pages whose commands this test runs, in page order.
-RUN_HERE = ("docs/braille.md", "docs/recordings.md", "docs/touch-encoding.md", "docs/touchsim.md")
+RUN_HERE = (
+    "docs/braille.md",
+    "docs/recordings.md",
+    "docs/touch-encoding.md",
+    "docs/touchsim.md",
+    "docs/view.md",
+)
 #: Commands too long for the test suite (minutes on a busy 2-core machine): replaced by a check
 #: that the same program starts and parses its arguments. Everything else runs in full.
 CHECKED_ONLY = {
@@ -42,6 +48,8 @@ CHECKED_ONLY = {
     "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",
     # installs TouchSim from GitHub into a throw-away venv, then 400 noisy runs: minutes, and a network
     "python scripts/touchsim_noise_reference.py --repeats 400": "python scripts/touchsim_noise_reference.py --help",
+    # 3 x 3 real-time runs of 10 s with a headless Chromium: minutes (tests/view has the browser tests)
+    "python scripts/view_overhead.py --graph touch --duration 10 --repeats 3": "python scripts/view_overhead.py --help",
     # the TouchSim benchmark with its peer (a throw-away venv from GitHub): a minute and more
     "flowtact bench touchsim --quick --peers --out bench-touchsim": "flowtact bench --list",
 }

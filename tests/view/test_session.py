@@ -123,3 +123,23 @@ def test_view_usage_errors_are_one_line_with_status_2():
         busy = flowtact("run", TOUCH, "--fast", "--duration", "1", "--view", "--view-port", port)
     assert busy.returncode == 2 and busy.stderr.strip().count("\n") == 0
     assert f"--view-port {port}: cannot listen on 127.0.0.1:{port}" in busy.stderr
+
+
+def test_no_thread_starts_before_the_first_write_so_workers_can_still_be_forked(touch):
+    """A worker is forked only while the supervisor runs one thread (flowtact.runtime.forked):
+    the view's server thread starts at the tee's first call, made by the pump after the forks."""
+    import threading
+
+    from flowtact.runtime.forked import can_fork
+    from flowtact.view.session import ViewSession
+
+    before = threading.active_count()
+    with ViewSession(touch, ["force.f"], say=lambda _text: None) as view:
+        tee = view.sink(None, [])
+        view.plan_for(touch)
+        assert threading.active_count() == before and view.server is None
+        if before == 1:
+            assert can_fork()
+        tee.maybe_flush()  # the pump's first call
+        assert view.server is not None and threading.active_count() == before + 1
+    assert threading.active_count() == before  # stopped and joined at the end
