@@ -66,9 +66,11 @@ class ViewSession:
         self.buffers = ViewBuffers({f"{n}.{p}": plan.specs[(n, p)] for n, p in self.streams})
         self.graph = plan.graph.name
         self.server: Any = None
-        self._sock = self._listen()  # now: a port in use is a usage error before the run starts
+        self._listen().close()  # a port in use is a usage error now, before the run starts
 
     def _listen(self) -> Any:
+        """The listening socket; made again at :meth:`start` (after the forks: a forked worker must
+        not hold a copy of it)."""
         from flowtact.view.server import listen
 
         try:
@@ -103,7 +105,12 @@ class ViewSession:
 
         if self.server is not None:
             return
-        self.server = ViewServer(self.buffers, self.graph, self._sock)
+        try:
+            sock = self._listen()
+        except UsageError as e:  # taken since the check: rare; the run goes on without the view
+            self.say(f"flowtact: no view: {e}")
+            return
+        self.server = ViewServer(self.buffers, self.graph, sock)
         self.server.start()
         self.say(f"flowtact: view at {self.server.url}")
 
@@ -111,8 +118,6 @@ class ViewSession:
         """Tell the browsers the run ended, stop serving (the page stays, saying so)."""
         if self.server is not None:
             self.server.stop(reason)
-        else:
-            self._sock.close()
 
     def __enter__(self) -> ViewSession:
         return self
