@@ -35,6 +35,8 @@ CHECKED_ONLY = {
     "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",
     # installs TouchSim from GitHub into a throw-away venv, then 400 noisy runs: minutes, and a network
     "python scripts/touchsim_noise_reference.py --repeats 400": "python scripts/touchsim_noise_reference.py --help",
+    # 3 x 3 real-time runs of 10 s with a headless Chromium: minutes (tests/view has the browser tests)
+    "python scripts/view_overhead.py --graph touch --duration 10 --repeats 3": "python scripts/view_overhead.py --help",
     # the TouchSim benchmark with its peer (a throw-away venv from GitHub): a minute and more
     "flowtact bench touchsim --quick --peers --out bench-touchsim": "flowtact bench --list",
     # the start-up table: 4 graphs x 2 caches x idle and loaded (CPU-bound loops) x 3 rounds, a quarter

@@ -50,6 +50,7 @@ ROOMS = {
     "benchmark": "`flowtact bench`",
     "sweeps": "`flowtact sweep`",
     "commands": "the command line's commands, one module each, found through one entry-point group",
+    "view": "`flowtact run --view`: live streams in a browser",
 }
 TEST_ONLY_ROOMS = ("blocks", "docs")
 """Test folders with no framework room: the block library's tests, the docs' own tests."""

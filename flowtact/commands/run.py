@@ -7,6 +7,8 @@ group) or all in this one (``--inproc``); record streams to HDF5.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib.util
 import json
 import signal
 import sys
@@ -16,8 +18,16 @@ from typing import TYPE_CHECKING, Any
 
 from flowtact.commands import Command
 from flowtact.commands.graph_args import add_graph_arguments, load_graph_plan
+from flowtact.errors import UsageError
 from flowtact.graphfile.deployment import MAX_STARTUP_S
-from flowtact.inputs.limits import MAX_TICK_S, MIN_TICK_S, cli_duration_seconds, cli_float, cli_tick_seconds
+from flowtact.inputs.limits import (
+    MAX_TICK_S,
+    MIN_TICK_S,
+    cli_duration_seconds,
+    cli_float,
+    cli_int,
+    cli_tick_seconds,
+)
 
 if TYPE_CHECKING:
     from flowtact.console.terminal_bar import TerminalBar
@@ -30,7 +40,8 @@ RUN_EXAMPLES = """examples:
   flowtact run touch.h5 --fast                         # re-run what a recording was made with
   flowtact run touch --replay sensor=touch.h5 --fast   # feed a recorded sensor back in
   flowtact run graphs/slip.yaml --set sa1.n=200 --set sa1_stim.max_units=200 --fast
-  flowtact run envelope.yaml --allow-module envelope   # a graph using your own block (envelope.py)"""
+  flowtact run envelope.yaml --allow-module envelope   # a graph using your own block (envelope.py)
+  flowtact run touch --view sensor.force sa1.spikes    # watch streams live in a browser (docs/view.md)"""
 
 
 def add_arguments(run: argparse.ArgumentParser) -> None:
@@ -65,6 +76,21 @@ def add_arguments(run: argparse.ArgumentParser) -> None:
         action="store_true",
         help="run every node in this process (default: one worker process per process group)",
     )
+    run.add_argument(
+        "--view",
+        nargs="*",
+        metavar="STREAM",
+        help="draw streams live in a browser: serve a page on 127.0.0.1 and print its address (with "
+        "a token); STREAM is NODE.PORT, recorded or not (none named: the graph's record: streams); "
+        "needs the view extra (docs/view.md)",
+    )
+    run.add_argument(
+        "--view-port",
+        type=cli_int(1, 65535),
+        default=0,
+        metavar="PORT",
+        help="the --view page's port on 127.0.0.1 (default: a free one)",
+    )
     run.add_argument("--json", action="store_true", help="print the final summary as JSON")
     run.add_argument(
         "--quiet", action="store_true", help="no live view, progress or summary (errors still print)"
@@ -87,8 +113,9 @@ def run(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_term)
+    view = open_view(plan, args)
     try:
-        with live:
+        with view or contextlib.nullcontext(), live:
             summary = run_compiled(
                 plan,
                 duration_s=args.duration,
@@ -101,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
                 argv=["flowtact", *sys.argv[1:]],
                 startup_s=args.startup_s,
                 launched_at=process_started_at(),
+                view=view,
             )
     finally:
         bar.close()
@@ -111,6 +139,19 @@ def run(args: argparse.Namespace) -> int:
         if args.record:
             print(f"  recorded {', '.join(f'{n}.{p}' for n, p in plan.record)} -> {args.record}")
     return 0
+
+
+def open_view(plan: Any, args: argparse.Namespace) -> Any:
+    """The run's :class:`~flowtact.view.session.ViewSession` (``--view``), or None."""
+    if args.view is None:
+        if args.view_port:
+            raise UsageError("--view-port: only with --view")
+        return None
+    if importlib.util.find_spec("aiohttp") is None:
+        raise UsageError("--view needs aiohttp: pip install 'flowtact[view]'")
+    from flowtact.view.session import ViewSession
+
+    return ViewSession(plan, args.view, port=args.view_port)
 
 
 def run_progress(bar: TerminalBar) -> Callable[[float, float | None], None]:

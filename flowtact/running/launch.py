@@ -205,6 +205,7 @@ def run_compiled(
     startup_s: float | None = None,
     executor: str | None = None,
     launched_at: float | None = None,
+    view: Any = None,
 ) -> RunSummary:
     """Run a compiled plan across processes (or, with ``inproc``, in this one), recording its
     ``record:`` streams to ``record``. A failing worker raises
@@ -213,7 +214,8 @@ def run_compiled(
     ``startup_s`` (``--startup-s``) replaces every process group's start-up window. ``executor``
     names the executor (:data:`~flowtact.runtime.executors.EXECUTORS`); ``inproc`` is short for
     ``executor="inproc"``. A multi-process run counts its start-up from ``launched_at``
-    (monotonic) when given."""
+    (monotonic) when given. ``view`` (a :class:`flowtact.view.session.ViewSession`) is handed
+    its streams by a tee in the recorder's place; the file records only the graph's own."""
     duration = default_duration(
         plan, duration_s
     )  # --duration, else the replayed files' end, else the graph's
@@ -225,7 +227,11 @@ def run_compiled(
     name = executor or ("inproc" if inproc else DEFAULT_EXECUTOR)
     make = executor_for(name)
 
+    run_plan = plan if view is None else view.plan_for(plan)
+
     def executor_with(recorder: Any) -> Executor:
+        if view is not None:
+            recorder = view.sink(recorder, [f"{n}.{p}" for n, p in plan.record])
         options = RunOptions(
             fast=fast,
             tick_s=tick_s,
@@ -236,7 +242,7 @@ def run_compiled(
             startup_s=startup_s,
             launched_at=launched_at,
         )
-        return make.for_run(plan, options)
+        return make.for_run(run_plan, options)
 
     if record is None:
         summary = executor_with(sink).run(duration)

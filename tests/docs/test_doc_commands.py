@@ -33,6 +33,7 @@ RUN_HERE = (
     "docs/schema.md",
     "docs/touch-encoding.md",
     "docs/touchsim.md",
+    "docs/view.md",
 )
 
 
