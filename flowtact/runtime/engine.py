@@ -75,7 +75,8 @@ class Engine:
         self.recorder = recorder
         self.watch = watch
         if wired is None:
-            assert plan is not None
+            if plan is None:
+                raise ValueError("an engine needs a plan or nodes already wired")
             wired = build_plans(plan, blocks, link)
         self.nodes, self.links = wired
         self._holding = [ln for ln in self.links if ln.holds]  # act once the tick ends
