@@ -258,7 +258,7 @@ class NodeFailure(FlowtactError):
             "block": getattr(block, "name", str(block)),
             "now": now,
             "message": f"{type(cause).__name__}: {cause}",
-            "traceback": traceback.format_exc(),
+            "traceback": "".join(traceback.format_exception(cause)),
         }
 
 

@@ -9,13 +9,20 @@ recorder. At the end every link is ended and every node is flushed in order, so 
 (a centred filter's tail) reach the sinks.
 
 What joins two nodes is a link (:mod:`flowtact.runtime.links`): the in-process executor runs the
-engine with ``local`` links; another kind is one module registering one class.
+engine with ``local`` links; a worker process (:mod:`flowtact.runtime.worker`) runs it with local
+links between its own nodes and ZeroMQ links to and from the others
+(:mod:`flowtact.runtime.links.zeromq.stream_links`); another kind is one module registering one class.
+
+An optional :class:`Watch` sees every node-step: a worker's takes what its remote links hold due
+before the node is gathered, and times the step, tracks latency origins and deadlines
+(:mod:`flowtact.runtime.worker_watch`). In process there is none: the hot loop pays one ``is
+None`` check per node-step for it.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Protocol
 
 import numpy as np
@@ -24,10 +31,11 @@ from flowtact.block import Block
 from flowtact.chunk import Chunk, StreamSpec, concat
 from flowtact.errors import NodeError
 from flowtact.running.compile import CompiledGraph
+from flowtact.runtime.links import Link
 from flowtact.runtime.sealing import sealed
 from flowtact.runtime.step_plan import OutPlan, WiredNode, build_plans, takes_first, tallies
 
-__all__ = ["Engine", "NodeError", "Sink", "check_chunk"]
+__all__ = ["Engine", "NodeError", "Sink", "Watch", "check_chunk"]
 
 
 class Sink(Protocol):
@@ -38,27 +46,50 @@ class Sink(Protocol):
     def maybe_flush(self) -> None: ...
 
 
+class Watch(Protocol):
+    """What sees every node-step of an engine (a worker's :class:`~flowtact.runtime.worker_watch.StepWatch`)."""
+
+    def enter(self, nd: WiredNode, flush: bool) -> None:
+        """Node ``nd`` is next (to step, or to flush): take what its pulling links hold due."""
+
+    def timed(self, nd: WiredNode, step: Callable[..., dict[str, Chunk]]) -> Callable[..., dict[str, Chunk]]:
+        """``step`` wrapped: what the engine calls for ``nd`` (timed, its outputs' origins known)."""
+        ...
+
+
 class Engine:
     """The tick schedule of a plan's nodes, joined by links of one kind (``local`` by default)."""
 
     def __init__(
         self,
-        plan: CompiledGraph,
+        plan: CompiledGraph | None,
         blocks: dict[str, Block],
         *,
         recorder: Sink | None = None,
         link: str = "local",
+        wired: tuple[list[WiredNode], list[Link]] | None = None,
+        watch: Watch | None = None,
     ) -> None:
+        """The nodes of ``plan`` joined by links of kind ``link``, or nodes already ``wired`` with
+        their links (a worker's: local and ZeroMQ links, :meth:`flowtact.runtime.worker_setup.WorkerSetup._plan_nodes`)."""
         self.recorder = recorder
-        self.nodes, self.links = build_plans(plan, blocks, link)
-        self._holding = [ln for ln in self.links if ln.holds]  # due only once the tick ends
+        self.watch = watch
+        if wired is None:
+            if plan is None:
+                raise ValueError("an engine needs a plan or nodes already wired")
+            wired = build_plans(plan, blocks, link)
+        self.nodes, self.links = wired
+        self._holding = [ln for ln in self.links if ln.holds]  # act once the tick ends
         self._delivered: list[OutPlan] = []  # outputs counted in the summary, by first delivery
 
     def bind_steps(self) -> None:
-        """Look up every block's ``step`` (per run, so a test may replace it)."""
+        """Look up every block's ``step`` (per run, so a test may replace it); with a watch, the
+        engine calls its wrapper of ``step`` (:meth:`Watch.timed`)."""
+        watch = self.watch
         for nd in self.nodes:
-            nd.call = nd.block.step
-            nd.solo = takes_first(nd.call, nd.inputs)
+            step = nd.block.step
+            nd.solo = takes_first(step, nd.inputs)
+            nd.call = step if watch is None else watch.timed(nd, step)
 
     def tick(self, now: float) -> None:
         """One tick at graph time ``now``: every node in order, then what links held becomes due."""
@@ -72,13 +103,18 @@ class Engine:
             link.drop()
 
     def finish(self, now: float) -> None:
-        """End of stream: every link ends, then each node steps on what is pending and flushes, in order."""
+        """End of stream: every link ends, then each node steps on what is pending and flushes, in
+        order, and its output links are told it is done (a loop leaving the process and coming
+        back would otherwise wait for its own end)."""
         for link in self.links:
             link.end()
         for nd in self.nodes:
             if not nd.source:
                 self.step((nd,), now)
             self.step((nd,), now, flush=True)
+            for o in nd.outs:
+                for link in o.links:
+                    link.done()
 
     def tallies(self) -> tuple[dict[str, int], dict[str, int]]:
         """Samples and events per delivered stream, in the order they first delivered."""
@@ -98,8 +134,10 @@ class Engine:
         block returned walked: each call or dict walk costs a tenth of the 1 µs per node-step the
         executor is allowed here (``flowtact bench executor``).
         """
-        recorder, delivered = self.recorder, self._delivered
+        recorder, delivered, watch = self.recorder, self._delivered, self.watch
         for nd in nodes:
+            if watch is not None:
+                watch.enter(nd, flush)
             given = None  # the one input, handed to ``step`` by position
             try:
                 if flush:

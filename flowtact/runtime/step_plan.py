@@ -9,7 +9,7 @@ spec lookups.
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,7 +20,7 @@ from flowtact.chunk import Chunk, StreamSpec
 from flowtact.running.compile import CompiledGraph
 from flowtact.runtime.links import Link, link_kind
 
-__all__ = ["OutPlan", "WiredNode", "build_plans", "takes_first", "tallies"]
+__all__ = ["OutPlan", "WiredNode", "build_plans", "takes_first", "tallies", "wire_inputs", "wire_outputs"]
 
 
 @dataclass(slots=True, eq=False)
@@ -66,31 +66,82 @@ class WiredNode:
     in_kind: tuple[np.dtype, tuple[int, ...]] | None = None
     """The :attr:`OutPlan.kind` of its first input's stream: a chunk it hands on from there
     unchanged to an output of this kind is already checked and sealed."""
+    state: Any = None
+    """What an engine's watcher keeps per node (a worker's timings, origins and remote links,
+    :mod:`flowtact.runtime.worker_watch`); None in process."""
+
+
+def wire_inputs(
+    order: list[str], blocks: dict[str, Block], drained: Mapping[str, Iterable[str]]
+) -> tuple[dict[str, WiredNode], dict[tuple[str, str], list[Chunk]]]:
+    """Each node of ``order`` wired with an inbox per input it steps on (its block's ``needed``) or
+    only drains (``drained[node]``: the inputs fed by an edge); the inboxes by (node, port)."""
+    nodes: dict[str, WiredNode] = {}
+    boxes: dict[tuple[str, str], list[Chunk]] = {}
+    for n in order:
+        block = blocks[n]
+        passed = block.needed
+        inputs = []
+        for p in sorted(set(drained[n]) | passed):
+            box: list[Chunk] = []
+            boxes[(n, p)] = box
+            spec = block.input_specs[p]
+            inputs.append((p if p in passed else None, box, Chunk.empty(spec).readonly(), spec))
+        nodes[n] = WiredNode(n, block, isinstance(block, Source), tuple(inputs))
+    return nodes, boxes
+
+
+def wire_outputs(
+    nodes: dict[str, WiredNode],
+    demanded: Mapping[str, Iterable[str]],
+    spec_of: Callable[[str, str], StreamSpec],
+    routes: Mapping[tuple[str, str], list[Link]],
+    recorded: Mapping[tuple[str, str], str],
+    *,
+    count_all: bool = False,
+) -> None:
+    """Give each node its demanded outputs (and its first input's kind, :attr:`WiredNode.in_kind`): the links ``routes`` holds for them, the name it is
+    recorded under (``recorded``), and the name it is counted under (a recorded or an event stream;
+    every output with ``count_all``)."""
+    kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
+    for nd in nodes.values():  # the inputs' kinds first: an output of the same kind is the same object
+        for _, _, _, spec in nd.inputs[:1]:
+            nd.in_kind = _kind_of(spec, kinds)
+    for n, nd in nodes.items():
+        outs = []
+        for p in sorted(demanded[n]):
+            spec = spec_of(n, p)
+            name = recorded.get((n, p))
+            kind = _kind_of(spec, kinds)
+            counted = count_all or name is not None or spec.events
+            outs.append(
+                OutPlan(
+                    port=p,
+                    spec=spec,
+                    dtype=kind[0],
+                    tail=kind[1],
+                    kind=kind,
+                    links=tuple(routes.get((n, p), ())),
+                    record=name,
+                    tally=f"{n}.{p}" if counted else None,
+                    events=spec.events,
+                )
+            )
+        nd.outs = tuple(outs)
+
+
+def _kind_of(
+    spec: StreamSpec, kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]]
+) -> tuple[np.dtype, tuple[int, ...]]:
+    kind = (np.dtype(spec.dtype), tuple(spec.shape))
+    return kinds.setdefault(kind, kind)
 
 
 def build_plans(
     plan: CompiledGraph, blocks: dict[str, Block], link: str = "local"
 ) -> tuple[list[WiredNode], list[Link]]:
     """Node plans in execution order, every edge a link of kind ``link``, and every link made."""
-    nodes: dict[str, WiredNode] = {}
-    boxes: dict[tuple[str, str], list[Chunk]] = {}
-    kinds: dict[tuple[np.dtype, tuple[int, ...]], tuple[np.dtype, tuple[int, ...]]] = {}
-
-    def kind_of(spec: StreamSpec) -> tuple[np.dtype, tuple[int, ...]]:
-        kind = (np.dtype(spec.dtype), tuple(spec.shape))
-        return kinds.setdefault(kind, kind)
-
-    for n in plan.order:
-        block = blocks[n]
-        drained, passed = plan.needed[n], block.needed
-        inputs = []
-        for p in sorted(drained | passed):
-            box: list[Chunk] = []
-            boxes[(n, p)] = box
-            spec = block.input_specs[p]
-            inputs.append((p if p in passed else None, box, Chunk.empty(spec).readonly(), spec))
-        in_kind = kind_of(inputs[0][3]) if inputs else None
-        nodes[n] = WiredNode(n, block, isinstance(block, Source), tuple(inputs), in_kind=in_kind)
+    nodes, boxes = wire_inputs(list(plan.order), blocks, plan.needed)
     make = link_kind(link)
     links: list[Link] = []
     routes: dict[tuple[str, str], list[Link]] = {}
@@ -103,27 +154,7 @@ def build_plans(
         routes.setdefault((e.src, e.src_port), []).append(made)
         links.append(made)
     recorded = {(n, p): f"{n}.{p}" for n, p in plan.record if n in blocks}
-    for n, nd in nodes.items():
-        outs = []
-        for p in sorted(plan.demanded[n]):
-            spec = plan.specs[(n, p)]
-            dst = routes.get((n, p), [])
-            name = recorded.get((n, p))
-            kind = kind_of(spec)
-            outs.append(
-                OutPlan(
-                    port=p,
-                    spec=spec,
-                    dtype=kind[0],
-                    tail=kind[1],
-                    kind=kind,
-                    links=tuple(dst),
-                    record=name,
-                    tally=name if name is not None else (f"{n}.{p}" if spec.events else None),
-                    events=spec.events,
-                )
-            )
-        nd.outs = tuple(outs)
+    wire_outputs(nodes, plan.demanded, lambda n, p: plan.specs[(n, p)], routes, recorded)
     return list(nodes.values()), links
 
 

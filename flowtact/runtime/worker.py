@@ -1,22 +1,28 @@
 """A worker process: runs one process group's nodes, joined to the others by ZeroMQ streams.
 
-The worker follows the same tick schedule as the in-process executor, so a ``--fast`` run gives
-the same chunks, hence the same results, in both modes. Tick ``k`` covers graph time up to
-``k * tick_s``; every chunk a node emits at tick ``k`` becomes available to its consumers at tick
-``k`` (or ``k + 1`` through a delay port). A ``block`` stream carries one message per tick (an
-empty one when nothing came out), so a consumer knows when it has all of tick ``k``; a ``latest``
-stream carries only data and the consumer takes whatever is newest. ``END`` messages carry each
-node's end-of-stream output (its flush). Nodes wait for remote input just before they step, so
-chains that leave a process and come back within a tick do not deadlock.
+A worker is the engine (:class:`~flowtact.runtime.engine.Engine`, the tick schedule the in-process
+executor runs) with ZeroMQ links, plus its control loop, so a ``--fast`` run gives the same chunks,
+hence the same results, in both modes. Its nodes are joined within the process by ``local`` links
+and across processes by the links of :mod:`flowtact.runtime.links.zeromq.stream_links`. Tick ``k``
+covers graph time up to ``k * tick_s``; every chunk a node emits at tick ``k`` becomes available to
+its consumers at tick ``k`` (or ``k + 1`` through a delay port). A ``block`` stream carries one
+message per tick (an empty one when nothing came out), so a consumer knows when it has all of tick
+``k``; a ``latest`` stream carries only data and the consumer takes whatever is newest. ``END``
+messages follow each node's end-of-stream output (its flush). A node's remote inputs are read just
+before it is gathered, so chains that leave a process and come back within a tick do not deadlock.
 
-The hot path: every node's step plan (input queues, output routes, the block's ``step`` itself)
-is resolved once (:mod:`flowtact.runtime.worker_plan`); ``step`` is called directly on read-only
-inputs (received messages are read-only views, local outputs are sealed as they are delivered);
-a block stream is read by blocking ``recv`` calls, one message each, without catching
-``zmq.Again`` on the way; control is read every :data:`CONTROL_NS`, not every tick; recorded
-chunks are coalesced for :data:`RECORD_FLUSH_NS`; a source's data is stamped once its step has
-made it, so latency is transport, not the source's own work. In ``--fast`` runs a worker without
-sources that already holds ticks ``k+1..K`` on every input steps once at ``K`` when
+What is the worker's own stays out of the engine: which tick to run (the clock, catch-up when
+behind it, ``--fast`` merging, the stop tick: :mod:`flowtact.runtime.worker_ticks`), control and
+heartbeats (:mod:`flowtact.runtime.worker_control`), and what it measures per node-step, through
+the engine's one watch (:mod:`flowtact.runtime.worker_watch`): CPU time per node, the node being
+stepped, steps, latency origins and deadlines. Its recorder is an engine sink
+(:mod:`flowtact.runtime.worker_records`).
+
+The hot path: a block stream is read by blocking ``recv`` calls, one message each, without
+catching ``zmq.Again`` on the way; control is read every :data:`CONTROL_NS`, not every tick;
+recorded chunks are coalesced for :data:`RECORD_FLUSH_NS`; a source's data is stamped once its
+step has made it, so latency is transport, not the source's own work. In ``--fast`` runs a worker
+without sources that already holds ticks ``k+1..K`` on every input steps once at ``K`` when
 :func:`~flowtact.runtime.worker_plan.ticks_mergeable` says no result can depend on it.
 
 Lifecycle, driven by the supervisor over the control socket (typed messages, :mod:`flowtact.runtime.protocol`): hello -> plan ->

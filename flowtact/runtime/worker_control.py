@@ -13,12 +13,10 @@ from typing import TypeVar
 
 import zmq
 
-from flowtact.chunk import concat
 from flowtact.errors import WorkerStop
 from flowtact.runtime.links.zeromq.streams import (
     POLL_MS,
 )
-from flowtact.runtime.links.zeromq.wire import send_message
 from flowtact.runtime.protocol import (
     Abort,
     Exit,
@@ -98,32 +96,18 @@ class WorkerControl:
         self._check_orphan()
         now_ns = time.monotonic_ns()
         self.next_service = now_ns + CONTROL_NS
-        if now_ns >= self.next_record:
-            self._flush_records()
+        self.records.maybe_flush()
         now = now_ns / 1e9
         if now >= self.next_beat:
             self.next_beat = now + HEARTBEAT_S
             self._send(self._stats())
 
-    def _flush_records(self) -> None:
-        """Send every recorded stream's coalesced chunks to the recorder (one message each)."""
-        self.next_record = time.monotonic_ns() + RECORD_FLUSH_NS
-        for o in self.recorded_ports:
-            if o.rec_buf:
-                chunk = concat(o.rec_buf, o.spec)
-                o.rec_buf = []
-                self._send_lossless(self.rec, o.record, 0, self.k, chunk)  # type: ignore[arg-type]
-
     def _salvage_records(self) -> None:
         """On an abort or a failure, hand the recorder what was coalesced but not yet sent, without
-        waiting: the recording keeps everything that came before (the supervisor drains it)."""
-        if self.rec is None:
-            return
-        for o in getattr(self, "recorded_ports", ()):
-            if o.rec_buf:
-                chunk = concat(o.rec_buf, o.spec)
-                o.rec_buf = []
-                send_message(self.rec, o.record, 0, self.k, chunk, nowait=True)  # type: ignore[arg-type]
+        waiting (:meth:`~flowtact.runtime.worker_records.RecordSink.salvage`)."""
+        records = getattr(self, "records", None)
+        if self.rec is not None and records is not None:
+            records.salvage()
 
     def _phase(self, text: str) -> None:
         """Enter a start-up phase: the heartbeat reports it, and the supervisor counts it as progress."""
@@ -149,8 +133,8 @@ class WorkerControl:
             lag_s=self.lag_s,
             max_lag_s=self.max_lag_s,
             merged_ticks=self.merged_ticks,
-            node_ns={nd.name: nd.ns for nd in self.plans},
-            counts={o.key: o.samples for nd in self.plans for o in nd.outputs.values()},
+            node_ns={nd.name: nd.state.ns for nd in self.engine.nodes},
+            counts={o.tally: o.count for nd in self.engine.nodes for o in nd.outs},
             inbound={
                 ib.id: InboundStats(ib.messages, ib.samples, ib.dropped, ib.gaps, ib.hist)
                 for ib in self.inbound.values()

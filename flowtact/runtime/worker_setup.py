@@ -14,15 +14,18 @@ from flowtact.block import Block, Source
 from flowtact.catalog.blocks import load_block
 from flowtact.chunk import StreamSpec
 from flowtact.errors import NodeFailure
-from flowtact.runtime.links.zeromq.streams import (
-    ZmqInbound,
-    ZmqOutbound,
-    record_socket,
-)
+from flowtact.runtime.engine import Engine
+from flowtact.runtime.links import Link
+from flowtact.runtime.links.local import LocalLink
+from flowtact.runtime.links.zeromq.stream_links import InboundLink, OutboundLink
+from flowtact.runtime.links.zeromq.streams import ZmqInbound, ZmqOutbound, record_socket
 from flowtact.runtime.protocol import DeadlinePlan, WorkerPlan
 from flowtact.runtime.stats import LatencyHistogram
+from flowtact.runtime.step_plan import wire_inputs, wire_outputs
 from flowtact.runtime.warm_up import settle_heap, warm_up
-from flowtact.runtime.worker_plan import OutPort, WorkerNode
+from flowtact.runtime.worker_plan import frozen_empty
+from flowtact.runtime.worker_records import RecordBuffer, RecordSink
+from flowtact.runtime.worker_watch import NodeWatch, StepWatch
 
 __all__ = ["Deadline", "WorkerSetup"]
 
@@ -76,11 +79,6 @@ class WorkerSetup:
         self.merged_ticks = 0  # real-time ticks taken together to catch up with the clock
         self.sources = [n for n in self.order if isinstance(self.blocks[n], Source)]
         self.inbound = {d.id: ZmqInbound(d) for d in plan.inbound}
-        self.remote_inputs: dict[str, list[tuple[ZmqInbound, bool]]] = {n: [] for n in self.order}
-        for ib in self.inbound.values():
-            for dst, _port, delayed in ib.dsts:
-                if (ib, delayed) not in self.remote_inputs[dst]:
-                    self.remote_inputs[dst].append((ib, delayed))
         self.outbound = [ZmqOutbound(d) for d in plan.outbound]
         self.recorded = {(r.node, r.port): r.id for r in plan.record}
         self.deadlines = {}
@@ -94,33 +92,66 @@ class WorkerSetup:
         self.now = 0.0
         self.next_beat = 0.0
         self.next_service = 0
-        self.next_record = 0
         self.warm_ns = 0  # data that left its source before this is start-up, not transport
         self.ends_seen = 0  # END markers received (of any input)
 
     def _plan_nodes(self, plan: WorkerPlan) -> None:
-        """Resolve once what every node's step reads and where each output goes (see worker_plan)."""
-        self.plans = [WorkerNode(n, self.blocks[n], self.needed[n], self.src_idx.get(n)) for n in self.order]
-        by_name = {nd.name: nd for nd in self.plans}
-        for nd in self.plans:
-            for port in sorted(self.demanded[nd.name]):
-                nd.outputs[port] = OutPort(nd.name, port, self.out_specs[nd.name][port])
-            nd.deadlines = self.deadlines.get(nd.name, [])
-            nd.remote = self.remote_inputs[nd.name]
-        queue = {(nd.name, ip.name): ip.queue for nd in self.plans for ip in nd.inputs}
-        for src, sport, dst, dport, delayed in (
-            (e.src, e.src_port, e.dst, e.dst_port, e.delayed) for e in plan.edges
-        ):
-            if sport in by_name[src].outputs:  # an output nobody demands is never delivered
-                by_name[src].outputs[sport].local.append((queue[(dst, dport)], delayed))
+        """Wire the engine this worker runs: its nodes joined by local links, and by ZeroMQ links
+        to and from the other processes (:mod:`~flowtact.runtime.links.zeromq.stream_links`); its
+        watch (:class:`~flowtact.runtime.worker_watch.StepWatch`) and its recorder (a
+        :class:`~flowtact.runtime.worker_records.RecordSink`)."""
+        self.watch = watch = StepWatch(self)
+        nodes, boxes = wire_inputs(self.order, self.blocks, self.needed)
+        states = {n: NodeWatch(n, self.src_idx.get(n), self.deadlines.get(n, [])) for n in self.order}
+        for n, nd in nodes.items():
+            nd.state = states[n]
+        links: list[Link] = []
+        routes: dict[tuple[str, str], list[Link]] = {}
+        for e in plan.edges:
+            if e.src_port not in self.demanded[e.src]:  # an output nobody demands is never delivered
+                continue
+            local = LocalLink(
+                self.out_specs[e.src][e.src_port], boxes[(e.dst, e.dst_port)], delayed=e.delayed
+            )
+            routes.setdefault((e.src, e.src_port), []).append(local)
+            links.append(local)
+            states[e.src].feeds(e.src_port, states[e.dst], e.delayed)
+            if e.delayed and states[e.dst] not in watch.delayed:
+                watch.delayed.append(states[e.dst])
         for ib in self.inbound.values():
-            ib.targets = [(queue[(dst, dport)], delayed) for dst, dport, delayed in ib.dsts]
+            for dst, dport, delayed in ib.dsts:
+                inbound = InboundLink(
+                    ib.spec,
+                    boxes[(dst, dport)],
+                    delayed=delayed,
+                    stream=ib,
+                    into=states[dst],
+                    accept=self._accept,
+                    service=self._service,
+                )
+                ib.targets.append((inbound.queue, delayed))
+                states[dst].pulls += (inbound,)
+                links.append(inbound)
         for ob in self.outbound:
-            ob.empty = by_name[ob.node].outputs[ob.port].empty
-            by_name[ob.node].outputs[ob.port].outbound.append(ob)
-        for (n, p), sid in self.recorded.items():
-            by_name[n].outputs[p].record = sid
-        self.recorded_ports = [o for nd in self.plans for o in nd.outputs.values() if o.record is not None]
+            spec = self.out_specs[ob.node][ob.port]
+            ob.empty = frozen_empty(spec)
+            outbound = OutboundLink(spec, ob, watch, self._service)
+            routes.setdefault((ob.node, ob.port), []).append(outbound)
+            links.append(outbound)
+        names = {(n, p): f"{n}.{p}" for n, p in self.recorded}
+        self.records = RecordSink(
+            self,
+            {names[(n, p)]: RecordBuffer(sid, self.out_specs[n][p]) for (n, p), sid in self.recorded.items()},
+            self._service,
+        )
+        wire_outputs(nodes, self.demanded, lambda n, p: self.out_specs[n][p], routes, names, count_all=True)
+        self.engine = Engine(
+            None,
+            self.blocks,
+            recorder=self.records if self.recorded else None,
+            wired=(list(nodes.values()), links),
+            watch=watch,
+        )
         self.lossless_out = [ob for ob in self.outbound if ob.flow.policy == "block"]
 
     def _warm_up(self) -> None:

@@ -1,7 +1,11 @@
-"""A worker's tick loop: the tick schedule over its local queues and ZeroMQ streams, and the end of stream.
+"""A worker's tick loop: which tick to run next (the clock, catch-up, ``--fast`` merging, a stop),
+each run by the engine, and the end of stream.
 
-Part of :class:`flowtact.runtime.worker.Worker` (which holds the state these methods share); the
-schedule is the one :mod:`flowtact.runtime.worker` describes.
+Part of :class:`flowtact.runtime.worker.Worker` (which holds the state these methods share). The
+schedule of a tick is :class:`~flowtact.runtime.engine.Engine`'s, the one the in-process executor
+runs, over local links and ZeroMQ links (:mod:`flowtact.runtime.links.zeromq.stream_links`); this
+loop chooses ``k`` and hears the supervisor, and :meth:`WorkerTicks._accept` takes a stream's
+messages in (statistics, latency, END).
 """
 
 from __future__ import annotations
@@ -10,21 +14,13 @@ import math
 import time
 from typing import Any
 
-import zmq
-
-from flowtact.chunk import Chunk
-from flowtact.errors import NodeFailure
-from flowtact.runtime.inproc import block_summaries, check_chunk
-from flowtact.runtime.links.zeromq.streams import (
-    POLL_MS,
-    ZmqInbound,
-    ZmqOutbound,
-    send_lossless,
-)
+from flowtact.errors import NodeError, NodeFailure
+from flowtact.runtime.inproc import block_summaries
+from flowtact.runtime.links.zeromq.stream_links import FOREVER
+from flowtact.runtime.links.zeromq.streams import POLL_MS, ZmqInbound
 from flowtact.runtime.links.zeromq.wire import END
 from flowtact.runtime.protocol import Done
-from flowtact.runtime.worker_control import HEARTBEAT_S, RECORD_MAX_CHUNKS
-from flowtact.runtime.worker_plan import NO_ORIGINS, WorkerNode, merge_origins, take
+from flowtact.runtime.worker_control import HEARTBEAT_S
 
 __all__ = ["COALESCE_S", "COALESCE_TICKS", "FOREVER", "MERGE_MAX_S", "STOP_MERGE_MAX_S", "WorkerTicks"]
 
@@ -41,7 +37,6 @@ batch. On 2 cores a consumer that keeps pace with its producer wakes for every m
 wake-ups take the CPU the producer needs: bench/graphs/fast.yaml moved 42-53 k samples/s without
 the wait and 62 k with it (raw pyzmq: 62 k), frames 460-590 MB/s against 630-720 (3 runs each)."""
 INF = math.inf
-FOREVER = 2**62
 
 
 class WorkerTicks:
@@ -53,6 +48,7 @@ class WorkerTicks:
         return k * self.tick_s
 
     def _run(self, *, resume: bool) -> None:
+        self.engine.bind_steps()
         sources = bool(self.sources)
         clocked = sources or bool(self.block_inputs)  # k follows the graph clock (else: arrivals)
         if resume and self.sources and not self.fast:  # skip what the clock already passed
@@ -169,127 +165,14 @@ class WorkerTicks:
         return False
 
     def _tick(self, k: int, now: float) -> None:
-        for nd in self.plans:
-            for ib, delayed in nd.remote:
-                ib.fetch(k - 1 if delayed else k, self._accept, self._service)
-            self._step(nd, k, now, k)
-        for ob in self.lossless_out:  # a block stream carries every tick, empty or not
-            if ob.sent_tick < k:
-                ob.send(k, ob.empty, {}, self._service)  # type: ignore[arg-type]
-
-    def _step(self, nd: WorkerNode, k: int, now: float, avail: float) -> None:
-        """Step node ``nd`` on what reached it up to tick ``avail`` (a source: every tick).
-
-        ``step`` is called directly (``WorkerNode.call``) with every needed input, an empty chunk
-        where nothing came; a node other than a source steps only when something came (data or a
-        watermark). A node whose one input is ``step``'s first parameter gets it by position.
-        """
-        if nd.solo:
-            c, origins = take(nd.inputs[0], avail)
-            if c is None:
-                return
-            samples = c.t.shape[0] > 0
-            if not samples and c.end is None:
-                return
-        else:
-            ins, origins, came, samples = self._gather(nd, avail)
-            if not came and not nd.source:
-                return
-        self.busy, self.busy_first = nd.name, not nd.warmed
-        t0 = time.perf_counter_ns()
+        """Tick ``k`` at graph time ``now``: the engine's tick (what is due taken from the streams
+        before each node, outputs sent with ``k``, every lossless stream closing the tick)."""
+        self.watch.k = k
         try:
-            if nd.solo:
-                out = nd.call(c)
-            elif nd.source:
-                out = nd.call(now, **ins)
-            else:
-                out = nd.call(**ins)
-        except Exception as e:
-            raise NodeFailure(nd.name, nd.block, now, e) from e
-        nd.ns += time.perf_counter_ns() - t0
-        self.busy = None
-        self.steps += 1
-        if not nd.warmed and (nd.source or samples):
-            nd.warmed = True
-        if nd.deadlines:
-            self._deadlines(nd, origins)
-        if nd.source:  # stamped once the source has made its data: its own step is not transport
-            origins = {nd.src_idx: time.monotonic_ns()} if nd.src_idx is not None else NO_ORIGINS
-        self._deliver(nd, out, k, origins)
-
-    @staticmethod
-    def _gather(nd: WorkerNode, avail: float) -> tuple[dict[str, Chunk], dict[int, int], bool, bool]:
-        """Node ``nd``'s inputs up to tick ``avail`` (see :func:`~flowtact.runtime.worker_plan.take`),
-        the oldest origin per source behind their data, whether anything came (data or a
-        watermark) and whether samples came."""
-        ins: dict[str, Chunk] = {}
-        origins = NO_ORIGINS
-        came = samples = False
-        for ip in nd.inputs:
-            c, o = take(ip, avail)
-            if c is None:
-                ins[ip.name] = ip.empty
-                continue
-            ins[ip.name] = c
-            if c.t.shape[0]:
-                came = samples = True
-            elif c.end is not None:
-                came = True
-            if o:
-                if origins:
-                    origins = dict(origins)  # never write a chunk's own (shared) origins
-                    merge_origins(origins, o)
-                else:
-                    origins = o
-        return ins, origins, came, samples
-
-    def _deadlines(self, nd: WorkerNode, origins: dict[int, int]) -> None:
-        t = time.monotonic_ns()
-        for d in nd.deadlines:
-            if origins.get(d.src, 0) >= self.warm_ns:
-                lat = t - origins[d.src]
-                d.hist.add(lat)
-                if lat > d.budget_ns:
-                    d.violations += 1
-                    d.worst_ns = max(d.worst_ns, lat)
-
-    def _deliver(self, nd: WorkerNode, out: dict[str, Chunk], k: int, origins: dict[int, int]) -> None:
-        """Hand each demanded output to its local consumers (sealed read-only), its remote streams
-        and the recorder, once it has passed the common case of :func:`check_chunk` (the full
-        check names a bug)."""
-        outputs = nd.outputs
-        for port, chunk in out.items():
-            o = outputs.get(port)
-            if o is None:  # not demanded
-                continue
-            t, d = chunk.t, chunk.data
-            shape = d.shape
-            if (
-                t.ndim != 1
-                or not shape
-                or shape[0] != t.shape[0]
-                or shape[1:] != o.tail
-                or (d.dtype is not o.dtype and d.dtype != o.dtype)
-            ):
-                check_chunk(nd.name, port, chunk, o.spec, self.now)
-            n = shape[0]
-            if n:
-                o.samples += n
-            if o.local:
-                if t.flags.writeable or d.flags.writeable:
-                    chunk = chunk.readonly()
-                for q, delayed in o.local:
-                    q.append((k + 1 if delayed else k, chunk, origins))
-            for ob in o.outbound:
-                ob.send(k, chunk, origins, self._service)
-            if o.record is not None and (n or chunk.end is not None):
-                o.keep_record(chunk)
-                if len(o.rec_buf) >= RECORD_MAX_CHUNKS:
-                    self._flush_records()
-
-    def _send_lossless(self, sock: zmq.Socket, *args: Any, **kw: Any) -> None:
-        """Send, waiting while the consumer's queue is full, and still hear the supervisor meanwhile."""
-        send_lossless(sock, self._service, *args, **kw)
+            self.engine.tick(now)
+        except NodeError as e:
+            raise NodeFailure(e.node, e.block, e.now, e.cause) from e.cause
+        self.watch.tick_done()
 
     def _accept(self, ib: ZmqInbound, m: Any, tick: float) -> None:
         if m.seq != ib.next_seq and not m.flags & END:
@@ -313,32 +196,17 @@ class WorkerTicks:
             q.append((tick + 1 if delayed and tick != INF else tick, m.chunk, m.origins))
 
     def _finish(self) -> None:
-        """Flush every node in order, feeding it what its producers flushed, then say done.
-
-        As in the in-process executor: each node steps once more on everything that reached it,
-        then flushes; consumers later in the order receive both. A remote consumer receives them
-        as ordinary messages, then an ``END`` marker, sent as soon as the node has flushed: a loop
-        that leaves this process and comes back would otherwise wait for its own END.
-        """
-        k = self.k + 1
-        ends: dict[str, list[ZmqOutbound]] = {}
-        for ob in self.outbound:
-            ends.setdefault(ob.node, []).append(ob)
-        for nd in self.plans:
-            n, block = nd.name, nd.block
-            if not nd.source:
-                for ib, delayed in nd.remote:
-                    ib.fetch(self.k if delayed else FOREVER, self._accept, self._service)
-                self._step(nd, k, self.now, INF)
-            try:
-                out = block.flush()
-            except Exception as e:
-                raise NodeFailure(n, block, self.now, e) from e
-            self._deliver(nd, out, k, {})
-            for ob in ends.get(n, ()):
-                self._send_lossless(ob.sock, ob.id, ob.seq, k, ob.empty, flags=END)  # type: ignore[arg-type]
+        """The engine's end of stream (:meth:`~flowtact.runtime.engine.Engine.finish`), one tick
+        after the last: each node steps once more on everything that reached it (its streams read
+        to their END), then flushes, and its streams to other processes say END at once (a loop
+        that leaves this process and comes back would otherwise wait for its own END). Then the
+        recording is sent whole, and the supervisor told."""
+        self.watch.k = self.k + 1
+        try:
+            self.engine.finish(self.now)
+        except NodeError as e:
+            raise NodeFailure(e.node, e.block, e.now, e.cause) from e.cause
         if self.rec is not None:
-            self._flush_records()
-            self._send_lossless(self.rec, -1, 0, k, Chunk.empty(), flags=END)
+            self.records.end(self.k + 1)
         counters = {n: b.counters for n, b in self.blocks.items() if b.counters}
         self._send(Done(self._stats(), counters, block_summaries(self.blocks)))

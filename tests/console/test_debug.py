@@ -66,7 +66,7 @@ def test_debug_prints_the_blocks_own_traceback_after_the_line(boom, mode):
     assert 'brokenblocks.py", line' in rest and "in _explode" in rest and "self._explode(" in rest
     assert rest.rstrip().endswith("ZeroDivisionError: boom at t=0.999")
     if not mode:
-        assert "flowtact/runtime/worker_ticks.py" in rest  # formatted in the worker, sent to the supervisor
+        assert "flowtact/runtime/worker_watch.py" in rest  # formatted in the worker, sent to the supervisor
 
 
 @pytest.mark.cli

@@ -8,6 +8,9 @@ going through the interface, never through the local link's lists.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
@@ -172,3 +175,106 @@ def test_run_plan_finds_its_executor_by_name_in_the_registry():
             executor_for("nope")
     finally:
         EXECUTORS.pop("toy_copying", None)
+
+
+LOOP_ACROSS = """
+name: loop_across
+nodes:
+  src: {block: "toyblocks:Ramp", process: p, params: {noise: 0.5, channels: 2}}
+  a:   {block: "toyblocks:Loop", process: q}
+  b:   {block: "toyblocks:Scale", process: p, params: {gain: 3.0}}
+  c:   {block: "toyblocks:Scale", process: p, params: {gain: -2.0}}
+  sum: {block: "toyblocks:Add", process: q, params: {wb: -0.25}}
+edges:
+  - src.y -> a.x
+  - a.y -> b.x
+  - b.y -> a.fb
+  - b.y -> c.x
+  - src.y -> sum.a
+  - a.y -> sum.b
+record: [b.y, c.y, sum.y, src.y]
+"""
+
+WATCHED_RUN = """
+import os, sys
+from flowtact.runtime import engine
+from flowtact.running.launch import load_compiled, run_compiled
+
+seen, graph, record = sys.argv[1:4]
+step = engine.Engine.step
+told = set()
+
+
+def watched(self, nodes, now, flush=False):
+    nodes = tuple(nodes)
+    for nd in nodes:
+        if (os.getpid(), nd.name) not in told:  # once per process and node: what it ran on
+            told.add((os.getpid(), nd.name))
+            kinds = sorted({type(link).__name__ for link in self.links})
+            with open(os.path.join(seen, f"{os.getpid()}-{nd.name}"), "w") as f:
+                f.write(" ".join(kinds))
+    return step(self, nodes, now, flush)
+
+
+engine.Engine.step = watched  # the forked workers inherit it
+summary = run_compiled(
+    load_compiled(graph, allow_modules=("toyblocks",)), duration_s=0.5, fast=True, record=record
+)
+print(os.getpid(), " ".join(sorted(summary.processes)))
+"""
+
+
+@pytest.mark.slow
+def test_a_worker_steps_its_nodes_through_the_engine_over_zeromq_links_bit_identically(tmp_path):
+    """A worker IS the engine with ZeroMQ links: every node-step of both workers goes through
+    ``Engine.step`` (wrapped in a fresh supervisor process; its forked workers inherit the wrapper),
+    over local links within a process and the stream links across; a loop that crosses processes
+    twice (a -> b -> a's delayed input) and a fan-in of a remote and a local stream (sum) record
+    the same bits as in process."""
+    from flowtact.recording.hdf5 import read_recording
+    from flowtact.running.launch import load_compiled, run_compiled
+    from flowtact.runtime.placement import place
+
+    seen = tmp_path / "seen"
+    seen.mkdir()
+    graph = tmp_path / "loop.yaml"
+    graph.write_text(LOOP_ACROSS)
+    plan = load_compiled(graph, allow_modules=TEST_BLOCKS)
+    assert place(plan, fast=True).groups == {"p": ["src", "b", "c"], "q": ["a", "sum"]}
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]),
+    }
+    env.pop("FLOWTACT_NO_FORK", None)
+    proc = subprocess.run(
+        [sys.executable, "-c", WATCHED_RUN, str(seen), str(graph), str(tmp_path / "procs.h5")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    supervisor, groups = proc.stdout.split()[0], proc.stdout.split()[1:]
+    assert groups == ["p", "q"]
+    ran = {}
+    for f in seen.iterdir():
+        pid, node = f.name.split("-", 1)
+        assert pid != supervisor  # nothing stepped in the supervisor
+        ran[node] = (pid, f.read_text())
+    assert set(ran) == {"src", "a", "b", "c", "sum"}  # every node stepped inside Engine.step
+    assert ran["src"][0] == ran["b"][0] == ran["c"][0] != ran["a"][0] == ran["sum"][0]
+    assert {kinds for _, kinds in ran.values()} == {"InboundLink LocalLink OutboundLink"}
+    run_compiled(
+        load_compiled(graph, allow_modules=TEST_BLOCKS),
+        duration_s=0.5,
+        fast=True,
+        inproc=True,
+        record=tmp_path / "inproc.h5",
+    )
+    procs, inproc = read_recording(tmp_path / "procs.h5"), read_recording(tmp_path / "inproc.h5")
+    assert set(procs.streams) == set(inproc.streams) == {"b.y", "c.y", "sum.y", "src.y"}
+    for name, s in inproc.streams.items():
+        assert len(s.t) == 500, name  # every sample, the last tick's included
+        assert np.array_equal(procs.streams[name].t, s.t) and np.array_equal(
+            procs.streams[name].data, s.data
+        ), name

@@ -16,7 +16,8 @@ from flowtact.running.launch import load_compiled, run_compiled
 from flowtact.runtime.links.zeromq.streams import MERGE_MAX_BYTES, ZmqInbound
 from flowtact.runtime.protocol import InboundStream
 from flowtact.runtime.worker import Worker
-from flowtact.runtime.worker_plan import OutPort, ticks_mergeable
+from flowtact.runtime.worker_plan import ticks_mergeable
+from flowtact.runtime.worker_records import RecordBuffer
 from flowtact.runtime.worker_ticks import FOREVER
 
 pytestmark = pytest.mark.slow
@@ -249,13 +250,13 @@ def test_recorded_watermarks_fold_into_the_last_chunk_kept_and_join_to_the_same_
         n = int(rng.integers(0, 3)) if rng.random() < 0.2 else 0
         times = np.sort(rng.uniform(t - 0.001, t, n))
         chunks.append(Chunk(times, rng.integers(0, 4, n), t if rng.random() < 0.9 else None))
-    port = OutPort("nlif", "spikes", spec)
+    buf = RecordBuffer(7, spec)
     for c in chunks:
         if len(c) or c.end is not None:  # what the worker keeps for the recorder
-            port.keep_record(c)
-    assert len(port.rec_buf) <= 1 + sum(1 for c in chunks if len(c))
+            buf.keep(c)
+    assert len(buf.chunks) <= 1 + sum(1 for c in chunks if len(c))
     joined, want = (
-        concat(port.rec_buf, spec),
+        buf.take(),
         concat([c for c in chunks if len(c) or c.end is not None], spec),
     )
     assert np.array_equal(joined.t, want.t) and np.array_equal(joined.data, want.data)

@@ -5,9 +5,14 @@ of the way between two nodes. A link is made per edge for the consumer's input, 
 engine takes that input's due chunks from, and offers:
 
 - ``put(chunk)``: hand on a chunk produced this tick (an attribute, so the hot loop pays one call);
-- ``holds``: whether it keeps what it is given until the tick ends (a delay port's edge);
+- ``holds``: whether it acts when the tick ends (a delay port's edge keeps what it is given until
+  then; a lossless stream to another process closes the tick);
 - ``tick_done()``: the tick ended: what it holds is now due (moved into the inbox);
+- ``pull(k)``: take what is due by tick ``k`` from elsewhere (another process) into the inbox;
+  called before the consumer is gathered, only for a link whose ``pulls`` is true (never for a
+  local one: the in-process engine calls no ``pull``);
 - ``end()``: the stream ends (the final flush): from now on what it is given is due at once;
+- ``done()``: its producer has flushed: nothing more comes (a stream to another process says END);
 - ``drop()``: the run was interrupted: what it holds never arrives.
 
 Kinds are found by name in :data:`LINKS` (as Brian2 finds its devices): the built-ins ``local``
@@ -32,6 +37,7 @@ class Link:
 
     kind: ClassVar[str] = ""
     holds: bool = False
+    pulls: ClassVar[bool] = False
     put: Callable[[Chunk], None]
 
     def __init__(self, spec: StreamSpec, inbox: list[Chunk], *, delayed: bool = False) -> None:
@@ -42,8 +48,14 @@ class Link:
     def tick_done(self) -> None:
         """The tick ended: what this link holds becomes due."""
 
+    def pull(self, k: int) -> None:
+        """Move what is due by tick ``k`` into the inbox (a link whose chunks come from elsewhere)."""
+
     def end(self) -> None:
         """End of stream: what is put from now on is due at once."""
+
+    def done(self) -> None:
+        """Its producer has flushed: nothing more comes."""
 
     def drop(self) -> None:
         """The run was interrupted: forget what is held."""
