@@ -10,7 +10,7 @@ the current are computed a sample at a time into buffers the block owns (nothing
 spikes), s is filtered only where a model weighs it (TouchSim filters s for SA1 only; RA and PC
 have p1 = p2 = 0), and the membranes run on nlif's own kernel.
 
-The arithmetic is the generic blocks', term for term and in the same order (:func:`chain_rows`
+The arithmetic is the generic blocks', term for term and in the same order (:func:`chain_tiles`
 against ``iir.sos_apply`` and ``rectified_gain.fused_current``), so spikes and current are
 bit-identical to the chain bound with the same seeds (tests/blocks/touch/test_touchsim_chain.py).
 """
@@ -28,114 +28,190 @@ from numba import njit
 import flowtact.api as ft
 from flowtact.blocks.signal.iir import design_sos
 from flowtact.blocks.signal.rectified_gain import NOISE_GROUP
+from flowtact.blocks.spiking._bitops import select
+from flowtact.blocks.spiking._lif_kernels import DRIVE_MAX
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state
 from flowtact.blocks.touch.touchsim import touchsim_models
 
-__all__ = ["TouchsimChain", "TouchsimChainConfig", "chain_rows"]
+__all__ = ["FIELDS", "TILE", "TouchsimChain", "TouchsimChainConfig", "chain_tiles", "draw_rows", "tiled"]
 
 _EMPTY = np.empty(0, np.int64)
 
 
-@njit(cache=True)
-def _filter_row(x, i, units, sos, zi, v):  # type: ignore[no-untyped-def]
-    """Sample ``i`` of ``x`` through the sections of channels ``units`` (``iir.sos_apply``'s update
-    in its order); the output in ``v``."""
-    nu = units.shape[0]
-    for j in range(nu):
-        c = units[j]
-        v[c] = x[i, c]
-    for s in range(sos.shape[0]):
-        b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
-        z0, z1 = zi[s, 0], zi[s, 1]
-        for j in range(nu):
-            c = units[j]
-            out = b0[c] * v[c] + z0[c]
-            z0[c] = b1[c] * v[c] - a1[c] * out + z1[c]
-            z1[c] = b2[c] * v[c] - a2[c] * out
-            v[c] = out
+#: Afferents per cache tile: a tile's filter, gain and membrane state (:data:`FIELDS` doubles an
+#: afferent, ~80 KB) stays in L1/L2 while every sample of the chunk passes through it.
+TILE = 256
+#: Second-order sections of TouchSim's prefilter (a 3rd-order Butterworth: 2).
+NSEC = 2
+#: Post-spike basis columns a TouchSim membrane weighs (nlif's ``w`` rows; 2: p10 and p11).
+NB = 2
+
+# A tile's workspace: fields of TILE doubles at these offsets (× TILE) in one flat array. The
+# offsets are compile-time constants and the loops run over the whole tile, so LLVM proves the
+# fields never overlap and vectorises without runtime alias checks (4x faster than separate arrays).
+_XS, _XD, _HS, _HD, _Y = 0, 1, 2, 3, 4  # filter s, filter d (then Δd's next sample), held s, d, current
+_SOS = 5  # b0, b1, b2, a1, a2 per section
+_ZS = _SOS + 5 * NSEC  # z0, z1 per section: prefilter of s
+_ZD = _ZS + 2 * NSEC  # the same for d
+_G = _ZD + 2 * NSEC  # p1 … p6
+_SD = _G + 6
+_SAT = _SD + 1
+_C0, _C1, _C3, _C4 = _SAT + 1, _SAT + 2, _SAT + 3, _SAT + 4  # nlif's coef rows a, b, v_leak, gain
+_THR = _SAT + 5
+_W = _THR + 1  # NB basis weights
+_V = _W + NB
+#: Doubles per afferent in a tile's workspace.
+FIELDS = _V + 1
 
 
 @njit(cache=True)
-def _filter_row_all(x, i, sos, zi, v):  # type: ignore[no-untyped-def]
-    """:func:`_filter_row` over every channel (contiguous: the loops vectorise)."""
-    nc = v.shape[0]
-    for c in range(nc):
-        v[c] = x[i, c]
-    for s in range(sos.shape[0]):
-        b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
-        z0, z1 = zi[s, 0], zi[s, 1]
-        for c in range(nc):
-            out = b0[c] * v[c] + z0[c]
-            z0[c] = b1[c] * v[c] - a1[c] * out + z1[c]
-            z1[c] = b2[c] * v[c] - a2[c] * out
-            v[c] = out
+def draw_rows(rng, xi, rows, nc):  # type: ignore[no-untyped-def]
+    """The noise of ``rows`` samples into ``xi`` (rows × ≥ ``nc``): per sample, each group of
+    :data:`NOISE_GROUP` channels from its stream ``rng[g]`` (``rectified_gain``'s draw order)."""
+    for r in range(rows):
+        for q in range(rng.shape[0]):
+            fill_normal(rng[q], xi[r, q * NOISE_GROUP : min(nc, (q + 1) * NOISE_GROUP)])
 
 
-@njit(cache=True)
-def _current_row(hs, hd, qd, g, sd, sat, noisy, xi, y):  # type: ignore[no-untyped-def]
-    """One sample's current from the held filtered s, d and the next d (``rectified_gain``'s
-    ``fused_current``, term for term): ``y``. Returns the values that are not finite."""
-    bad = 0
-    for c in range(y.shape[0]):
+@njit(cache=True, inline="always")
+def _sections(ws, xf, zf):  # type: ignore[no-untyped-def]
+    """Field ``xf`` through the sections (state fields from ``zf``), in place: ``iir.sos_apply``'s
+    update in its order."""
+    x0 = xf * TILE
+    for q in range(NSEC):
+        o = (_SOS + 5 * q) * TILE
+        z = (zf + 2 * q) * TILE
+        for k in range(TILE):
+            x = ws[x0 + k]
+            out = ws[o + k] * x + ws[z + k]
+            ws[z + k] = ws[o + TILE + k] * x - ws[o + 3 * TILE + k] * out + ws[z + TILE + k]
+            ws[z + TILE + k] = ws[o + 2 * TILE + k] * x - ws[o + 4 * TILE + k] * out
+            ws[x0 + k] = out
+
+
+@njit(cache=True, inline="always")
+def _current(ws, noisy, xi, xo):  # type: ignore[no-untyped-def]
+    """The held row's current into field _Y (``rectified_gain.fused_current`` term for term)."""
+    for k in range(TILE):
         acc = 0.0
-        v = hs[c]
-        acc += g[0, c] * max(v, 0.0) - g[1, c] * min(v, 0.0)
-        v = hd[c]
-        acc += g[2, c] * max(v, 0.0) - g[3, c] * min(v, 0.0)
-        v = qd[c] - hd[c]
-        acc += g[4, c] * max(v, 0.0) - g[5, c] * min(v, 0.0)
+        x = ws[_HS * TILE + k]
+        acc += ws[_G * TILE + k] * max(x, 0.0) - ws[(_G + 1) * TILE + k] * min(x, 0.0)
+        x = ws[_HD * TILE + k]
+        acc += ws[(_G + 2) * TILE + k] * max(x, 0.0) - ws[(_G + 3) * TILE + k] * min(x, 0.0)
+        x = ws[_XD * TILE + k] - ws[_HD * TILE + k]
+        acc += ws[(_G + 4) * TILE + k] * max(x, 0.0) - ws[(_G + 5) * TILE + k] * min(x, 0.0)
         if noisy:
-            acc = acc + sd[c] * xi[c]
-        p = sat[c]
-        if p > 0.0:
-            acc = p * acc / (p + abs(acc))
-            if acc != acc:
-                acc = 0.0
-        y[c] = acc
-        if not math.isfinite(acc):
-            bad += 1
-    return bad
+            acc = acc + ws[_SD * TILE + k] * xi[xo + k]
+        p = ws[_SAT * TILE + k]
+        sa = p * acc / (p + abs(acc))
+        sa = select(sa != sa, 0.0, sa)
+        ws[_Y * TILE + k] = select(p > 0.0, sa, acc)
 
 
-@njit(cache=True)
-def chain_rows(  # type: ignore[no-untyped-def]
-    s, d, s_units, sos_s, zi_s, sos_d, zi_d, held, has_held, last, g, sd, sat, noisy, rng, xi, cur
-):
-    """Prefilter the rows of ``s`` (channels ``s_units`` only) and ``d`` (every channel) and make the
-    current of each held sample once the next has come (its Δd = d[n+1] − d[n]); with ``last`` the
-    held sample's own current (Δd = 0, the stream's end) after them. ``held`` (2, C): the held
-    filtered s and d (s is 0 where not filtered: those channels' s gains are 0). Writes the current
-    rows into ``cur`` and returns (rows, whether a sample is held, values not finite). The noise
-    ``xi`` (C) of a row is drawn per group of :data:`NOISE_GROUP` channels from its stream
-    ``rng[g]`` (``rectified_gain``'s draw order: a stream continues whatever the chunking)."""
-    n, nc = s.shape[0], held.shape[1]
-    vs = np.zeros(nc)
-    vd = np.empty(nc)
-    rows = 0
-    bad = 0
+@njit(cache=True, inline="always")
+def _membranes(ws, lag, basis, n_block, fired):  # type: ignore[no-untyped-def]
+    """``lif_units``' last-spike update of the tile's membranes driven by field _Y; flags in ``fired``."""
+    cap = basis.shape[1] - 1
+    n_fired = 0
+    for k in range(TILE):
+        lk = lag[k]
+        h = 0.0
+        for j in range(NB):
+            h += ws[(_W + j) * TILE + k] * basis[j, lk]
+        drv = ws[_C3 * TILE + k] + ws[_C4 * TILE + k] * ws[_Y * TILE + k] + h
+        dd = min(max(drv, -DRIVE_MAX), DRIVE_MAX)
+        vn = ws[_V * TILE + k] * ws[_C0 * TILE + k] + dd * ws[_C1 * TILE + k]
+        spike = (vn > ws[_THR * TILE + k]) and (lk > n_block)
+        ws[_V * TILE + k] = select(spike, 0.0, vn)
+        lag[k] = select(spike, 1, min(lk + 1, cap))
+        fired[k] = spike
+        n_fired += spike
+    return n_fired
+
+
+@njit(cache=True, error_model="numpy")  # x/0 is inf or NaN (never selected), not a raise: loops vectorise
+def chain_tiles(  # noqa: C901 — one hot loop nest; see the module doc
+    s, d, s_tile, work, lag, basis, n_block, has_held, last, noisy, xi, cur, spk_row, spk_unit
+):  # type: ignore[no-untyped-def]
+    """The rows of ``s``, ``d`` (C afferents) through the whole model, a tile of :data:`TILE`
+    afferents at a time; ``work`` (tiles, FIELDS·TILE) holds each tile's workspace (see the offsets
+    above), ``lag`` (tiles, TILE) its lags since the last spike.
+
+    Per input row: the prefilters (s only in tiles where ``s_tile`` is set: the others' s gains are
+    0), then, once the next row has come, the held row's current (``rectified_gain``'s
+    ``fused_current`` term for term: Δd = d[n+1] − d[n], noise ``sd·xi`` of its output row, then
+    saturation) and its membranes (``lif_units``' last-spike update: no summed history, no membrane
+    noise or clamp). With ``last``, the held row's own current after them (Δd = 0). ``xi`` (rows ×
+    tiles·TILE, zero past C): the noise. ``cur`` (rows × C, or no rows): the current, if wanted.
+    Spikes go to ``spk_row``/``spk_unit`` tile by tile (sort them by row, stably, for step-then-unit
+    order). Returns (output rows, whether a row is held, spikes, current values not finite)."""
+    n, nc = s.shape[0], s.shape[1]
     total = n + (1 if last and (has_held or n > 0) else 0)
-    for i in range(total):
-        if i < n:
-            _filter_row(s, i, s_units, sos_s, zi_s, vs)
-            _filter_row_all(d, i, sos_d, zi_d, vd)
-        else:
-            vd[:] = held[1]  # the end: Δd = held − held = 0
-        if has_held:
-            if noisy:
-                for q in range(rng.shape[0]):
-                    fill_normal(rng[q], xi[q * NOISE_GROUP : min(nc, (q + 1) * NOISE_GROUP)])
-            bad += _current_row(held[0], held[1], vd, g, sd, sat, noisy, xi, cur[rows])
-            rows += 1
-        if i < n:
-            for j in range(s_units.shape[0]):
-                c = s_units[j]
-                held[0, c] = vs[c]
-            held[1, :] = vd
-            has_held = True
-        else:
-            has_held = False
-    return rows, has_held, bad
+    want_cur = cur.shape[0] > 0
+    fired = np.zeros(TILE, np.uint8)
+    n_spk = 0
+    bad = 0
+    row = 0
+    hh = has_held
+    for tt in range(work.shape[0]):
+        t0 = tt * TILE
+        m = min(nc, t0 + TILE) - t0
+        filt_s = s_tile[tt]
+        ws = work[tt]
+        lg = lag[tt]
+        hh = has_held
+        row = 0
+        for i in range(total):
+            if i < n:
+                if filt_s:
+                    for k in range(m):
+                        ws[_XS * TILE + k] = s[i, t0 + k]
+                    _sections(ws, _XS, _ZS)
+                for k in range(m):
+                    ws[_XD * TILE + k] = d[i, t0 + k]
+                _sections(ws, _XD, _ZD)
+            else:
+                for k in range(TILE):
+                    ws[_XD * TILE + k] = ws[_HD * TILE + k]
+            if hh:
+                _current(ws, noisy, xi[row], t0)
+                n_fired = _membranes(ws, lg, basis, n_block, fired)
+                for k in range(m):
+                    if not math.isfinite(ws[_Y * TILE + k]):
+                        bad += 1
+                if want_cur:
+                    for k in range(m):
+                        cur[row, t0 + k] = ws[_Y * TILE + k]
+                k = 0
+                while n_fired > 0:
+                    if fired[k]:
+                        spk_row[n_spk] = row
+                        spk_unit[n_spk] = t0 + k
+                        n_spk += 1
+                        n_fired -= 1
+                    k += 1
+                row += 1
+            if i < n:
+                if filt_s:
+                    for k in range(TILE):
+                        ws[_HS * TILE + k] = ws[_XS * TILE + k]
+                for k in range(TILE):
+                    ws[_HD * TILE + k] = ws[_XD * TILE + k]
+                hh = True
+            else:
+                hh = False
+    return row, hh, n_spk, bad
+
+
+def tiled(a: np.ndarray, tile: int = TILE) -> np.ndarray:
+    """``a`` (…, N) as (tiles, …, tile), C-contiguous, zero past N: a tile's rows contiguous."""
+    a = np.asarray(a)
+    n = a.shape[-1]
+    k = -(-n // tile)
+    pad = np.zeros((*a.shape[:-1], k * tile), a.dtype)
+    pad[..., :n] = a
+    return np.ascontiguousarray(np.moveaxis(pad.reshape(*a.shape[:-1], k, tile), -2, 0))
 
 
 @dataclass(frozen=True)
@@ -255,31 +331,45 @@ class TouchsimChain(ft.Block):
         self._dt = 1.0 / rate
         p = np.array([touchsim_models()[m] for m in cfg.models], np.float64)
         nyq = 0.5 * rate
-        sos = [design_sos("butter", 3, "lowpass", f / nyq) for f in (10.0 * p[:, 0]).tolist()]
-        self._sos = np.ascontiguousarray(np.stack(sos, axis=-1), np.float64)  # (S, 6, C), as iir
-        self._zi_s = np.zeros((self._sos.shape[0], 2, n))
-        self._zi_d = np.zeros((self._sos.shape[0], 2, n))
-        self._s_units = np.flatnonzero((p[:, 1] != 0) | (p[:, 2] != 0)).astype(np.int64)
-        self._g = np.ascontiguousarray(p[:, 1:7].T)  # rows p1 … p6
-        self._sd = cfg.noise_scale * p[:, 8]
-        self._sat = p[:, 7].copy()
-        self._noisy = bool(self._sd.any())
+        sos = np.stack([design_sos("butter", 3, "lowpass", f / nyq) for f in (10.0 * p[:, 0]).tolist()], -1)
+        weighs_s = (p[:, 1] != 0) | (p[:, 2] != 0)  # TouchSim: SA1 (RA and PC have p1 = p2 = 0)
+        self._s_tile = np.array([weighs_s[i : i + TILE].any() for i in range(0, n, TILE)], np.bool_)
+        sd = cfg.noise_scale * p[:, 8]
+        self._noisy = bool(sd.any())
         self._rng = np.zeros((0, 1), np.uint64)
         if self._noisy:
             for _ in range(cfg.noise_offset // NOISE_GROUP):  # the streams of afferents before the shard
                 seed_state(self.rng)
             self._rng = np.stack([seed_state(self.rng) for _ in range(-(-n // NOISE_GROUP))])
-        self._xi = np.zeros(n)
-        self._held = np.zeros((2, n))
-        self._has_held = False
-        self._held_t = np.empty(0)
-        self._cur = np.empty((0, n))
         self._neurons = Nlif(models=list(cfg.models))
         self._neurons.bind(
             {"x": ft.StreamSpec(dtype="float64", shape=(n,), rate_hz=rate)},
             seed=self.seed,
             demanded=frozenset({"spikes"}),
         )
+        u = self._neurons.unit_arrays()  # its membranes, run here on the tiles' copies
+        if sos.shape[0] != NSEC or u.w.shape[0] > NB or u.summed or u.noisy or u.n_clamp:
+            raise ValueError(
+                "touchsim_chain: TouchSim's model is 2 sections, 2 basis columns, last-spike history"
+            )
+        fields = np.zeros((FIELDS, n))
+        fields[_SOS : _SOS + 5 * NSEC] = sos[:, [0, 1, 2, 4, 5]].reshape(5 * NSEC, n)
+        fields[_G : _G + 6] = p[:, 1:7].T
+        fields[_SD], fields[_SAT] = sd, p[:, 7]
+        fields[[_C0, _C1, _C3, _C4]] = u.coef[[0, 1, 3, 4], :n]
+        fields[_THR] = u.thr
+        fields[_W : _W + u.w.shape[0]] = u.w
+        fields[_V] = u.v
+        self._work = tiled(fields).reshape(len(self._s_tile), FIELDS * TILE)
+        self._lag = tiled(u.lag)
+        self._basis = np.zeros((NB, u.basis.shape[1]))
+        self._basis[: u.basis.shape[0]] = u.basis
+        self._n_block = u.n_block
+        self._xi = np.zeros((0, self._work.shape[0] * TILE))
+        self._has_held = False
+        self._held_t = np.empty(0)
+        self._no_cur = np.empty((0, n))
+        self._spk = (np.empty(0, np.int64), np.empty(0, np.int64))
         self._align = ft.Aligner(self.node, self.input_specs, ["s", "d"], tol_s=1e-6 / rate)
         self._last: dict[str, np.ndarray | None] = {"s": None, "d": None}
         self._end: float | None = None
@@ -287,13 +377,20 @@ class TouchsimChain(ft.Block):
 
     def _run(self, t: np.ndarray, s: np.ndarray, d: np.ndarray, last: bool) -> dict[str, ft.Chunk]:
         """The rows of s, d (and with ``last`` the held sample) through the whole model."""
-        m = len(t)
-        if self._cur.shape[0] < m + 1:  # the block's own scratch: reused, never handed out
-            self._cur = np.empty((m + 1, self._n))
+        m, n = len(t), self._n
         had = self._has_held
-        rows, self._has_held, bad = chain_rows(
-            s, d, self._s_units, self._sos, self._zi_s, self._sos, self._zi_d, self._held, had, last,
-            self._g, self._sd, self._sat, self._noisy, self._rng, self._xi, self._cur,
+        total = m + (1 if last and (had or m > 0) else 0)
+        rows = total - (0 if had else 1) if total else 0
+        if self._xi.shape[0] < max(rows, 1):  # the block's own scratch: reused, never handed out
+            self._xi = np.zeros((max(rows, 1), self._xi.shape[1]))  # zero past n, for ever
+        if self._noisy:
+            draw_rows(self._rng, self._xi, rows, n)
+        if self._spk[0].shape[0] < rows * n:
+            self._spk = (np.empty(rows * n, np.int64), np.empty(rows * n, np.int64))
+        cur = np.empty((rows, n)) if self._want_current else self._no_cur
+        _, self._has_held, n_spk, bad = chain_tiles(
+            s, d, self._s_tile, self._work, self._lag, self._basis, self._n_block, had, last, self._noisy,
+            self._xi, cur, *self._spk,
         )  # fmt: skip
         self.count("overflow", bad)
         t_out = np.concatenate([self._held_t, t])[:rows] if had else t[:rows]
@@ -303,14 +400,14 @@ class TouchsimChain(ft.Block):
         if not rows:
             out["spikes"] = ft.Chunk.empty(dtype="int64", end=self._end)
             if self._want_current:
-                out["current"] = ft.Chunk.empty(shape=(self._n,))
+                out["current"] = ft.Chunk.empty(shape=(n,))
             return out
-        cur = self._cur[:rows]
-        steps, _, idx = self._neurons.integrate(cur)
+        steps, idx = self._spk[0][:n_spk], self._spk[1][:n_spk]
+        order = np.argsort(steps, kind="stable")  # tile by tile → step, then afferent
         self._end = t_out[-1].item() + self._dt
-        out["spikes"] = ft.Chunk(t_out[steps], idx.copy() if len(idx) else _EMPTY, self._end)
+        out["spikes"] = ft.Chunk(t_out[steps[order]], idx[order] if n_spk else _EMPTY, self._end)
         if self._want_current:
-            out["current"] = ft.Chunk(t_out, cur.copy())
+            out["current"] = ft.Chunk(t_out, cur)
         return out
 
     def step(self, s: ft.Chunk, d: ft.Chunk) -> dict[str, ft.Chunk]:
