@@ -39,6 +39,14 @@ __all__ = ["FIELDS", "TILE", "TouchsimChain", "TouchsimChainConfig", "chain_tile
 _EMPTY = np.empty(0, np.int64)
 
 
+def _readonly(a: np.ndarray) -> np.ndarray:
+    """A read-only view: the kernel sees one array type whether an input came sealed (read-only)
+    from another node or fresh from the aligner, so it compiles once (in the warm-up)."""
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
 #: Afferents per cache tile: a tile's filter, gain and membrane state (:data:`FIELDS` doubles an
 #: afferent, ~80 KB) stays in L1/L2 while every sample of the chunk passes through it.
 TILE = 256
@@ -415,14 +423,14 @@ class TouchsimChain(ft.Block):
         if len(t):
             t, data = ft.screen_aligned(self, self.config.on_bad_data, t, data, self._last)
         m = len(t)
-        sd = [np.ascontiguousarray(data[p].reshape(m, self._n), np.float64) for p in ("s", "d")]
+        sd = [_readonly(np.ascontiguousarray(data[p].reshape(m, self._n), np.float64)) for p in ("s", "d")]
         return self._run(t, sd[0], sd[1], False)
 
     def flush(self) -> dict[str, ft.Chunk]:
         self.count("unpaired_at_end", sum(self._align.pending().values()))
         if not self._has_held:
             return {}
-        none = np.empty((0, self._n))
+        none = _readonly(np.empty((0, self._n)))
         return self._run(np.empty(0), none, none, True)
 
     @classmethod

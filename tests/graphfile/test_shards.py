@@ -179,8 +179,8 @@ def test_the_hand_graph_is_16900_afferents_in_two_processes():
     assert plan.specs[("afferents", "spikes")].n_units == 16900
     assert set(place(plan, fast=True).groups) == {"probe_s0", "probe_s1"}
     nodes = plan.graph.nodes
-    assert nodes["afferents__s0"].config.size == 8192
-    assert nodes["current__s1"].config.noise_offset == 8192
+    assert len(nodes["afferents__s0"].config.models) == 8192
+    assert nodes["afferents__s1"].config.noise_offset == 8192
 
 
 @pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
