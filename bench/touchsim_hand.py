@@ -45,8 +45,8 @@ def run_hand(src: Path, shards: int, duration_s: float) -> dict[str, Any]:
         graph = hand_graph(src, shards, Path(tmp) / f"hand_{shards}.yaml")
         load0 = os.getloadavg()[0]
         proc = subprocess.run(
-            [sys.executable, "-m", "flowtact", "run", str(graph), "--duration", f"{duration_s:g}", "--json",
-             "--quiet"],
+            [sys.executable, "-c", "import sys; from flowtact.cli import main; sys.exit(main())", "run", str(graph),
+             "--duration", f"{duration_s:g}", "--json", "--quiet"],
             capture_output=True, text=True, timeout=600 + 20 * duration_s, check=False,
         )  # fmt: skip
         load1 = os.getloadavg()[0]
