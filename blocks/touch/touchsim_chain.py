@@ -75,11 +75,14 @@ FIELDS = _V + 1
 
 @njit(cache=True)
 def draw_rows(rng, xi, rows, nc):  # type: ignore[no-untyped-def]
-    """The noise of ``rows`` samples into ``xi`` (rows × ≥ ``nc``): per sample, each group of
+    """The noise of ``rows`` samples of ``nc`` afferents into flat ``xi`` (row-major): per sample, each group of
     :data:`NOISE_GROUP` channels from its stream ``rng[g]`` (``rectified_gain``'s draw order)."""
+    if rng.shape[0] == 1:  # one stream: the rows in one request (the same values, fewer calls)
+        fill_normal(rng[0], xi[: rows * nc])
+        return
     for r in range(rows):
         for q in range(rng.shape[0]):
-            fill_normal(rng[q], xi[r, q * NOISE_GROUP : min(nc, (q + 1) * NOISE_GROUP)])
+            fill_normal(rng[q], xi[r * nc + q * NOISE_GROUP : r * nc + min(nc, (q + 1) * NOISE_GROUP)])
 
 
 @njit(cache=True, inline="always")
@@ -150,8 +153,8 @@ def chain_tiles(  # noqa: C901 — one hot loop nest; see the module doc
     0), then, once the next row has come, the held row's current (``rectified_gain``'s
     ``fused_current`` term for term: Δd = d[n+1] − d[n], noise ``sd·xi`` of its output row, then
     saturation) and its membranes (``lif_units``' last-spike update: no summed history, no membrane
-    noise or clamp). With ``last``, the held row's own current after them (Δd = 0). ``xi`` (rows ×
-    tiles·TILE, zero past C): the noise. ``cur`` (rows × C, or no rows): the current, if wanted.
+    noise or clamp). With ``last``, the held row's own current after them (Δd = 0). ``xi`` (flat,
+    rows × C then a tile of zeros): the noise. ``cur`` (rows × C, or no rows): the current, if wanted.
     Spikes go to ``spk_row``/``spk_unit`` tile by tile (sort them by row, stably, for step-then-unit
     order). Returns (output rows, whether a row is held, spikes, current values not finite)."""
     n, nc = s.shape[0], s.shape[1]
@@ -183,7 +186,7 @@ def chain_tiles(  # noqa: C901 — one hot loop nest; see the module doc
                 for k in range(TILE):
                     ws[_XD * TILE + k] = ws[_HD * TILE + k]
             if hh:
-                _current(ws, noisy, xi[row], t0)
+                _current(ws, noisy, xi, row * nc + t0)
                 n_fired = _membranes(ws, lg, basis, n_block, fired)
                 for k in range(m):
                     if not math.isfinite(ws[_Y * TILE + k]):
@@ -373,7 +376,7 @@ class TouchsimChain(ft.Block):
         self._basis = np.zeros((NB, u.basis.shape[1]))
         self._basis[: u.basis.shape[0]] = u.basis
         self._n_block = u.n_block
-        self._xi = np.zeros((0, self._work.shape[0] * TILE))
+        self._xi = np.zeros(TILE)
         self._has_held = False
         self._held_t = np.empty(0)
         self._no_cur = np.empty((0, n))
@@ -389,8 +392,8 @@ class TouchsimChain(ft.Block):
         had = self._has_held
         total = m + (1 if last and (had or m > 0) else 0)
         rows = total - (0 if had else 1) if total else 0
-        if self._xi.shape[0] < max(rows, 1):  # the block's own scratch: reused, never handed out
-            self._xi = np.zeros((max(rows, 1), self._xi.shape[1]))  # zero past n, for ever
+        if self._xi.shape[0] < rows * n + TILE:  # the block's own scratch: reused, never handed out
+            self._xi = np.zeros(rows * n + TILE)  # a tile past the rows: the last tile's lanes read it
         if self._noisy:
             draw_rows(self._rng, self._xi, rows, n)
         if self._spk[0].shape[0] < rows * n:
