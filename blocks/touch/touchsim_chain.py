@@ -278,7 +278,7 @@ class TouchsimChain(ft.Block):
     >>> d = np.tile((4.0 * (t < 0.05))[:, None], (1, 2))
     >>> out = run_offline(TouchsimChain(models=["SA1.0", "RA.3"], noise_scale=0.0), s=s, d=d, rate_hz=5000.0)
     >>> np.bincount(out["spikes"].data, minlength=2).tolist()     # spikes per afferent
-    [28, 1]
+    [10, 14]
     """
 
     config_cls = TouchsimChainConfig
