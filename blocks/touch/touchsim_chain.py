@@ -342,7 +342,10 @@ class TouchsimChain(ft.Block):
         self._dt = 1.0 / rate
         p = np.array([touchsim_models()[m] for m in cfg.models], np.float64)
         nyq = 0.5 * rate
-        sos = np.stack([design_sos("butter", 3, "lowpass", f / nyq) for f in (10.0 * p[:, 0]).tolist()], -1)
+        designs = {f: design_sos("butter", 3, "lowpass", f / nyq) for f in set((10.0 * p[:, 0]).tolist())}
+        sos = np.stack(
+            [designs[f] for f in (10.0 * p[:, 0]).tolist()], -1
+        )  # one design per model, not per afferent
         weighs_s = (p[:, 1] != 0) | (p[:, 2] != 0)  # TouchSim: SA1 (RA and PC have p1 = p2 = 0)
         self._s_tile = np.array([weighs_s[i : i + TILE].any() for i in range(0, n, TILE)], np.bool_)
         sd = cfg.noise_scale * p[:, 8]
