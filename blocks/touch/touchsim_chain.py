@@ -133,7 +133,7 @@ def _membranes(ws, lag, basis, n_block, fired):  # type: ignore[no-untyped-def]
         drv = ws[_C3 * TILE + k] + ws[_C4 * TILE + k] * ws[_Y * TILE + k] + h
         dd = min(max(drv, -DRIVE_MAX), DRIVE_MAX)
         vn = ws[_V * TILE + k] * ws[_C0 * TILE + k] + dd * ws[_C1 * TILE + k]
-        spike = (vn > ws[_THR * TILE + k]) and (lk > n_block)
+        spike = (vn > ws[_THR * TILE + k]) & (lk > n_block)
         ws[_V * TILE + k] = select(spike, 0.0, vn)
         lag[k] = select(spike, 1, min(lk + 1, cap))
         fired[k] = spike
