@@ -279,7 +279,7 @@ SUITE = Suite(
     "afferents and stimulus",
     run=run,
     minutes_quick=2.0,
-    minutes_full=8.0,
+    minutes_full=5.0,
     processes=(1, 1),
     needs=("scipy",),
 )
