@@ -1,18 +1,19 @@
 """``touchsim_chain``: TouchSim's whole per-afferent model (prefilter, rectified gains, noise,
-saturation, membrane) in one block, one pass over memory per sample — the chain
-``iir → iir → rectified_gain → nlif`` of graphs/touchsim_afferents.yaml, fused for speed.
+saturation, membrane) in one block — the chain ``iir → iir → rectified_gain → nlif`` of
+graphs/touchsim_afferents.yaml, fused for speed.
 
 Why: the chain of generic blocks writes and reads a (samples × afferents) float64 array per stage
 and tick, fresh each time (chunks are sealed and shared, so no stage may reuse its output); for the
-whole hand (8 450 afferents a shard, 25-sample ticks) that is 1.7 MB a stage a tick, and most of the
-CPU went to memory traffic and to the kernel's zero-filling of fresh pages. Here the prefilters and
-the current are computed a sample at a time into buffers the block owns (nothing leaves it but the
-spikes), s is filtered only where a model weighs it (TouchSim filters s for SA1 only; RA and PC
-have p1 = p2 = 0), and the membranes run on nlif's own kernel.
+whole hand (8 450 afferents a shard, 25-sample ticks) that is 1.7 MB a stage a tick: memory traffic,
+and page faults the OS zero-fills. Here each tile of :data:`TILE` afferents keeps its whole state
+(filters, gains, membranes) in one contiguous workspace the block owns, and every sample of the
+tick passes through it while it is in cache (nothing leaves the block but the spikes); s is filtered
+only where a model weighs it (TouchSim filters s for SA1 only; RA and PC have p1 = p2 = 0).
 
 The arithmetic is the generic blocks', term for term and in the same order (:func:`chain_tiles`
-against ``iir.sos_apply`` and ``rectified_gain.fused_current``), so spikes and current are
-bit-identical to the chain bound with the same seeds (tests/blocks/touch/test_touchsim_chain.py).
+against ``iir.sos_apply``, ``rectified_gain.fused_current`` and ``lif_units``' last-spike update,
+on nlif's own coefficients: :meth:`Nlif.unit_arrays`), so spikes and current are bit-identical to
+the chain bound with the same seeds (tests/blocks/touch/test_touchsim_chain.py).
 """
 
 from __future__ import annotations
@@ -266,7 +267,9 @@ class TouchsimChain(ft.Block):
     sample later). It holds back one sample, as rectified_gain does (Δd needs the next one), and
     emits it at the end with Δd = 0. s is filtered only for afferents whose model weighs it (SA1):
     the others' s terms are 0 in the chain too. Inputs are paired by arrival (equal stamps);
-    ``current`` (optional) is the input current of the membranes.
+    ``current`` (optional) is the input current of the membranes. A current that overflows float64
+    (inputs far off) is counted (``overflow``) and integrated as it is, where the chain's nlif would
+    apply its ``on_bad_data``: the one place the two may differ.
 
     Example
     -------
