@@ -15,6 +15,7 @@ from flowtact.blocks.signal.iir import Iir
 from flowtact.blocks.signal.rectified_gain import RectifiedGain
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.touchsim import TOUCHSIM_RATE_HZ, touchsim_models
+from flowtact.blocks.touch.touchsim_chain import TouchsimChain
 from flowtact.chunk import Chunk, StreamSpec
 
 __all__ = ["CLASSES", "TouchSimChain", "model_params"]
@@ -36,9 +37,21 @@ class TouchSimChain:
     show that a comparison notices)."""
 
     def __init__(
-        self, models: list[str], *, noise: bool = True, seed: int = 0, noise_scale: float = 1.0
+        self,
+        models: list[str],
+        *,
+        noise: bool = True,
+        seed: int = 0,
+        noise_scale: float = 1.0,
+        fused: bool = False,
     ) -> None:
         p = model_params(models)
+        self.fused: TouchsimChain | None = None
+        if fused:  # the one block: the same computation, bit for bit with these seeds
+            self.fused = TouchsimChain(models=list(models), noise_scale=noise_scale if noise else 0.0)
+            self._fused_seed = seed + 2
+            self._fused_demand = frozenset({"spikes"})
+            self._bind_fused(self._fused_demand)
         n = len(models)
         cut = (10.0 * p[:, 0]).tolist()
         self.prefilter_s = Iir(family="butter", order=3, cutoff_hz=cut)
@@ -62,6 +75,8 @@ class TouchSimChain:
         """Spikes of each afferent (sample indices: nlif stamps sample n at n/fs) for s, d from rest;
         with ``keep_current`` the current (samples × afferents) is left in ``self.current_out``."""
         t_all = np.arange(len(s)) / TOUCHSIM_RATE_HZ
+        if self.fused is not None:
+            return self._run_fused(s, d, t_all, chunk, keep_current)
         parts, currents = [], []
         for i in range(0, len(s), chunk):
             t = t_all[i : i + chunk]
@@ -81,6 +96,41 @@ class TouchSimChain:
         tail = self.afferents.flush().get("spikes")
         if tail is not None:
             parts.append(tail)
+        return self._by_unit(parts)
+
+    def _run_fused(
+        self, s: np.ndarray, d: np.ndarray, t_all: np.ndarray, chunk: int, keep_current: bool
+    ) -> list[np.ndarray]:
+        """:meth:`run` through the fused block (``touchsim_chain``)."""
+        block = self.fused
+        assert block is not None
+        want = frozenset({"spikes", "current"} if keep_current else {"spikes"})
+        if want != self._fused_demand or self._fused_ran:  # from rest (bound in __init__: not timed)
+            self._bind_fused(want)
+        self._fused_ran = True
+        parts, currents = [], []
+        for i in range(0, len(s), chunk):
+            t = t_all[i : i + chunk]
+            out = block(s=Chunk(t, s[i : i + chunk]), d=Chunk(t, d[i : i + chunk]))
+            parts.append(out["spikes"])
+            currents.append(out.get("current"))
+        out = block.flush()
+        if out:
+            parts.append(out["spikes"])
+            currents.append(out.get("current"))
+        if keep_current:
+            self.current_out = np.concatenate([c.data for c in currents])
+        return self._by_unit(parts)
+
+    def _bind_fused(self, demanded: frozenset[str]) -> None:
+        """Bind the fused block from rest (filter design included: seconds for 17 000 afferents)."""
+        assert self.fused is not None
+        spec = StreamSpec(dtype="float64", shape=(len(self.fused.config.models),), rate_hz=TOUCHSIM_RATE_HZ)
+        self.fused.bind({"s": spec, "d": spec}, seed=self._fused_seed, demanded=demanded)
+        self._fused_demand, self._fused_ran = demanded, False
+
+    def _by_unit(self, parts: list[Chunk]) -> list[np.ndarray]:
+        """Each afferent's spikes (sample indices) from the spike chunks."""
         t = np.concatenate([c.t for c in parts])
         unit = np.concatenate([c.data for c in parts]).astype(np.int64)
         idx = np.rint(t * TOUCHSIM_RATE_HZ).astype(np.int64)

@@ -1,7 +1,8 @@
 """CPU time of each stage of a whole hand's afferents: the synthetic stimulus (touchsim_probe),
 TouchSim's prefilter (iir), current (rectified_gain) and membranes (nlif, graphs/hand.yaml's
-models), 17 000 channels at 5 kHz in 50-sample chunks (10 ms ticks), noise and saturation on;
-median of 40 chunks.
+models), and the whole model fused in one block (touchsim_chain, what graphs/hand.yaml runs),
+17 000 channels at 5 kHz in 50-sample chunks (10 ms ticks), noise and saturation on; median of 40
+chunks.
 
     python scripts/touchsim_stage_costs.py
 
@@ -21,6 +22,7 @@ from flowtact.blocks.signal.iir import Iir
 from flowtact.blocks.signal.rectified_gain import RectifiedGain
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.touch.hand import hand_models
+from flowtact.blocks.touch.touchsim_chain import TouchsimChain
 from flowtact.blocks.touch.touchsim_probe import TouchsimProbe
 
 N, FS, CHUNK = 17_000, 5000.0, 50
@@ -55,6 +57,10 @@ def main() -> None:
     neurons.bind({"x": spec})
     drive = 0.02 * x  # TouchSim-sized currents: the afferents fire now and then
     m = cost(lambda c: neurons(x=Chunk(c.t, drive)))
+    fused = TouchsimChain(models=list(neurons.config.models))
+    fused.bind({"s": spec, "d": spec})
+    s_in = np.abs(x) * 0.01
+    f = cost(lambda c: fused(s=Chunk(c.t, s_in), d=c))
     per = 1e3 * CHUNK / FS
     print(f"N={N:,} at {FS:g} Hz, {CHUNK}-sample chunks: CPU ms per {per:g} ms of signal")
     print(f"  iir (butter 3, per-channel cut-offs): {a * 1e3:.1f}")
@@ -62,6 +68,8 @@ def main() -> None:
     print(f"  touchsim_probe (synthetic s and d): {p * 1e3:.1f}")
     print(f"  nlif (the hand's TouchSim models, last-spike history): {m * 1e3:.1f}")
     print(f"  a hand's chain (probe, 2 iir, rectified_gain, nlif): {(p + 2 * a + b + m) * 1e3:.1f}")
+    print(f"  touchsim_chain (the same model fused, one block): {f * 1e3:.1f}")
+    print(f"  a hand's fused chain (probe, touchsim_chain): {(p + f) * 1e3:.1f}")
     print(f"  load average {os.getloadavg()[0]:.1f}")
 
 

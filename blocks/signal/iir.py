@@ -183,11 +183,14 @@ class Iir(ft.Block):
         cfg = self.config
         spec = self.input_specs["x"]
         self._shape, self._nc = spec.shape, spec.size
-        sos = [
-            design_sos(cfg.family, cfg.order, cfg.btype, wn, cfg.ripple_db, cfg.stop_db)
-            for wn in self._edges(self._nc, float(spec.rate_hz or 0.0))
-        ]
-        self._sos = np.ascontiguousarray(np.stack(sos, axis=-1), np.float64)  # (S, 6, C)
+        edges = self._edges(self._nc, float(spec.rate_hz or 0.0))
+        designs = {  # one design per distinct edge (a hand of 17 000 afferents has 17 cut-offs)
+            wn: design_sos(cfg.family, cfg.order, cfg.btype, wn, cfg.ripple_db, cfg.stop_db)
+            for wn in set(edges)
+        }
+        self._sos = np.ascontiguousarray(
+            np.stack([designs[wn] for wn in edges], axis=-1), np.float64
+        )  # (S, 6, C)
         self._zi = np.zeros((self._sos.shape[0], 2, self._nc))
         self._last: np.ndarray | None = None
 

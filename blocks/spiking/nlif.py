@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -28,7 +28,7 @@ from flowtact.blocks.spiking._lif_unit_kernels import lif_units
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.blocks.spiking.nlif_models import per_unit_models
 
-__all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig"]
+__all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig", "UnitArrays"]
 
 _MODEL = (
     "tau_s",
@@ -284,6 +284,25 @@ def _spike_buffers(cap: int, offsets: bool) -> tuple[np.ndarray, ...]:
 
 NLIF_DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(NlifConfig) if f.name in _MODEL}
 """Every model parameter's default: the config fields' own (for bench and tests)."""
+
+
+class UnitArrays(NamedTuple):
+    """The per-unit kernel's state (``lif_units``' arguments of the same names): rows ``a, b, s,
+    v_leak, gain`` of ``coef``, thresholds, basis weights (J, N) and columns (J, L + 2), membranes,
+    lags since the last spike (capped at L + 1), refractory counts, threshold block and membrane
+    clamp in steps, and whether the history is summed and the membrane noisy."""
+
+    coef: np.ndarray
+    thr: np.ndarray
+    w: np.ndarray
+    basis: np.ndarray
+    v: np.ndarray
+    lag: np.ndarray
+    refc: np.ndarray
+    n_block: int
+    n_clamp: int
+    summed: bool
+    noisy: bool
 
 
 class Nlif(ft.Block):
@@ -545,6 +564,17 @@ class Nlif(ft.Block):
         if self._interp:
             return self._step_interp(x.t, u2)
         return self._step_grid(x.t, u2)
+
+    def unit_arrays(self) -> UnitArrays:
+        """The bound per-unit kernel's arrays (``models:`` or any per-unit parameter), shared, not
+        copied: a fused kernel that runs these membranes itself (touchsim_chain) updates ``v`` and
+        ``lag`` in place, so the block's state stays one. See :class:`UnitArrays`."""
+        if not self._units:
+            raise ValueError("nlif: unit_arrays() needs the per-unit kernel (models: or per-unit parameters)")
+        return UnitArrays(
+            self._coef, self._thr, self._w, self._basis, self._v, self._lag, self._refc, self._n_block,
+            self._n_clamp, self._unit_ring.shape[1] > 0, self._noise != NOISE_OFF,
+        )  # fmt: skip
 
     def integrate(
         self, u: np.ndarray, u_first: np.ndarray | None = None, v_out: np.ndarray | None = None

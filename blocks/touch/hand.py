@@ -85,4 +85,5 @@ def hand_presets() -> dict[str, dict[str, Any]]:
             "noise_sd": col(8),
         },
         "nlif": {"models": list(models)},
+        "touchsim_chain": {"models": list(models)},
     }

@@ -16,8 +16,8 @@ def add_arguments(bench: argparse.ArgumentParser) -> None:
     bench.add_argument(
         "--quick",
         action="store_true",
-        help="shorter runs, fewer repeats: every suite in about 10 min on an idle 2-core machine "
-        "(about 45 without; --list gives each suite's share)",
+        help="shorter runs, fewer repeats: every suite in about 11 min on an idle 2-core machine "
+        "(about 47 without; --list gives each suite's share)",
     )
     bench.add_argument("--peers", action="store_true", help="also measure peers that need extra packages")
     bench.add_argument(

@@ -400,6 +400,7 @@ def _build(
     errors.extend(deadline_path_errors(deployment.deadlines, edges))
     if not errors:
         nodes, edges = _split_shards(nodes, edges, record, seed, y, errors)
+        deployment.deadlines = _shard_deadlines(deployment.deadlines, nodes)
     if errors:
         raise GraphFileError(sorted(errors, key=lambda e: (e.loc.path != path, e.loc.line, e.loc.col)))
     return Graph(
@@ -416,6 +417,15 @@ def _build(
         overrides={o: parse_override(o)[2] for o in overrides},
         deployment=deployment,
     )
+
+
+def _shard_deadlines(deadlines: list[Any], nodes: dict[str, NodeDef]) -> list[Any]:
+    """:func:`flowtact.graphfile.shards.shard_deadlines` (imported here only when shards are used)."""
+    if not any("__s" in n for n in nodes):
+        return deadlines
+    from flowtact.graphfile.shards import shard_deadlines
+
+    return shard_deadlines(deadlines, nodes)
 
 
 def _split_shards(

@@ -468,3 +468,16 @@ def _merge_edges(
                 continue
             out += [Edge(f"{name}__s{i}", p, name, f"{p}_{i}", loc) for i in range(len(b) - 1)]
     return out
+
+
+def shard_deadlines(deadlines: list[Any], nodes: Mapping[str, NodeDef]) -> list[Any]:
+    """Deadlines with a sharded source split: ``from: X`` becomes one deadline from each shard
+    ``X__s{i}`` (the sources the runtime stamps; ``X`` itself is then a merge, or gone)."""
+    out = []
+    for d in deadlines:
+        shards = [n for n in nodes if n.rpartition("__s")[0] == d.src and n.rpartition("__s")[2].isdigit()]
+        if d.src in nodes and not shards:
+            out.append(d)
+            continue
+        out += [replace(d, src=n) for n in shards] or [d]
+    return out

@@ -358,14 +358,18 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
         now = self.stop_at = time.monotonic()
         # No worker may have started a tick past the stop tick when the stop reaches it: in a loop
         # through several processes one would wait inside that tick for a peer that stopped.
-        # Real time: no worker runs ahead of the wall clock. --fast: extrapolate from heartbeats.
+        # Extrapolate from heartbeats (each worker's tick and its rate lately, a margin ahead).
+        # Real time: no worker runs ahead of the wall clock, so that bounds it; workers far behind
+        # the clock stop near where they are instead of first computing their whole backlog (an
+        # overloaded whole hand, seconds behind, would not drain within its stop grace).
+        procs = self.procs.values()
         reach = max(
-            (p.last_k + p.tick_rate * (now - p.beat_at + STOP_MARGIN_S) for p in self.procs.values()),
-            default=0.0,
+            (p.last_k + p.tick_rate * (now - p.beat_at + STOP_MARGIN_S) for p in procs), default=0.0
         )
         if not self.fast:
-            wall = (time.monotonic_ns() - self.t0_ns) / 1e9 + STOP_MARGIN_S
-            reach = max(reach, wall / self.tick_s)
+            wall = ((time.monotonic_ns() - self.t0_ns) / 1e9 + STOP_MARGIN_S) / self.tick_s
+            measured = all(p.tick_rate > 0 for p in procs)  # else the wall clock is the only bound
+            reach = min(reach, wall) if measured else max(reach, wall)
         k = math.ceil(reach) + 1
         self.stop_k = k
         for p in self.procs.values():

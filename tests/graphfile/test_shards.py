@@ -179,8 +179,8 @@ def test_the_hand_graph_is_16900_afferents_in_two_processes():
     assert plan.specs[("afferents", "spikes")].n_units == 16900
     assert set(place(plan, fast=True).groups) == {"probe_s0", "probe_s1"}
     nodes = plan.graph.nodes
-    assert nodes["afferents__s0"].config.size == 8192
-    assert nodes["current__s1"].config.noise_offset == 8192
+    assert len(nodes["afferents__s0"].config.models) == 8192
+    assert nodes["afferents__s1"].config.noise_offset == 8192
 
 
 @pytest.mark.parametrize("check", CHECKS, ids=lambda c: c.__name__.removeprefix("check_"))
@@ -200,3 +200,21 @@ def test_a_processes_section_may_configure_the_shards_groups(tmp_path):
     path.write_text(yaml.safe_dump(doc))
     plan = load_compiled(path)
     assert place(plan, fast=True).processes["pop_s1"].restart == "on-failure"
+
+
+def test_a_deadline_from_a_sharded_source_is_one_deadline_per_shard(tmp_path):
+    """The runtime stamps latency at sources: `from: probe` on a sharded probe must become a path
+    from each shard (else no worker measures it: issue 33's p99 lateness of the whole hand)."""
+    nodes = {
+        "probe": {"block": "touchsim_probe", "params": {"n": 6}},
+        "pop": {"block": "nlif", "params": {"n": 6}},
+    }
+    path = _graph(tmp_path, "late", nodes, ["probe.s -> pop.x"], ["pop.spikes"], {"probe": 2, "pop": 2})
+    doc = yaml.safe_load(path.read_text())
+    doc["deadlines"] = [{"from": "probe", "to": "pop", "budget": "5ms"}]
+    path.write_text(yaml.safe_dump(doc))
+    paths = [(d.src, d.dst) for d in load_graph(path).deployment.deadlines]
+    assert paths == [("probe__s0", "pop"), ("probe__s1", "pop")]
+    where = place(load_compiled(path), fast=False)
+    plans = [where.worker_plan(g, fast=False, tick_s=0.005, duration_s=1.0) for g in where.groups]
+    assert {d.name for p in plans for d in p.deadlines} == {"probe__s0 -> pop", "probe__s1 -> pop"}

@@ -371,3 +371,36 @@ def test_a_stop_tick_is_not_pushed_ahead_by_heartbeats_that_arrive_together():
 
     assert _tick_rate(beat(100, 1_000_000_000), beat(150, 1_250_000_000)) == pytest.approx(200.0)
     assert _tick_rate(beat(100, 1_000_000_000), beat(150, 1_000_000_000)) == 0.0  # no time between: no rate
+
+
+def _stop_tick(*, fast: bool, behind_s: float, rates: tuple[float, ...]) -> int:
+    """The stop tick ``ProcessExecutor._stop_all`` names for workers at tick 100 whose last beat
+    just came, ``behind_s`` of wall clock past their tick (tick 10 ms)."""
+    from types import SimpleNamespace
+
+    from flowtact.runtime.supervisor import ProcessExecutor
+
+    now_ns = time.monotonic_ns()
+    procs = {
+        f"p{i}": SimpleNamespace(last_k=100, tick_rate=r, beat_at=time.monotonic(), ident=None)
+        for i, r in enumerate(rates)
+    }
+    ex = SimpleNamespace(
+        procs=procs, fast=fast, tick_s=0.01, t0_ns=now_ns - int((1.0 + behind_s) * 1e9), _send=None
+    )
+    ProcessExecutor._stop_all(ex)  # type: ignore[arg-type]
+    return ex.stop_k
+
+
+def test_a_stop_names_a_tick_near_workers_far_behind_the_wall_clock_not_the_clock_s():
+    """Real time, workers 8 s behind (tick 100 at 9 s): they stop a margin past where they are
+    (0.25 s at their 40 ticks/s: 10 ticks), not at the wall clock's tick 925 — a backlog an
+    overloaded graph could not compute within its stop grace. Keeping up, the clock bounds it;
+    before any rate is measured, the clock alone (no worker can be past it)."""
+    behind = _stop_tick(fast=False, behind_s=8.0, rates=(40.0, 35.0))
+    assert 110 <= behind <= 112, behind
+    keeping_up = _stop_tick(fast=False, behind_s=0.0, rates=(400.0,))  # a fast spell: clock bounds it
+    assert 125 <= keeping_up <= 127, keeping_up
+    unmeasured = _stop_tick(fast=False, behind_s=8.0, rates=(40.0, 0.0))
+    assert 925 <= unmeasured <= 927, unmeasured
+    assert 110 <= _stop_tick(fast=True, behind_s=8.0, rates=(40.0,)) <= 112  # --fast: heartbeats alone
