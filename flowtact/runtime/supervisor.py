@@ -28,7 +28,6 @@ liveness are handled alike while starting, running and stopping. Failures are to
 from __future__ import annotations
 
 import contextlib
-import math
 import signal
 import subprocess
 import sys
@@ -69,10 +68,10 @@ from flowtact.runtime.summary import RunSummary
 from flowtact.runtime.supervisor_liveness import SupervisorLiveness
 from flowtact.runtime.supervisor_procs import (
     PING_S,
-    STOP_MARGIN_S,
     WATCH_S,
     Proc,
     describe_failure,
+    stop_tick,
 )
 from flowtact.runtime.supervisor_startup import SupervisorStartup
 from flowtact.runtime.supervisor_stats import SupervisorStats
@@ -356,21 +355,8 @@ class ProcessExecutor(SupervisorStartup, SupervisorLiveness, SupervisorStats):
         """Ctrl-C: every worker ends on one tick ahead, then drains and flushes."""
         self.stopped = True
         now = self.stop_at = time.monotonic()
-        # No worker may have started a tick past the stop tick when the stop reaches it: in a loop
-        # through several processes one would wait inside that tick for a peer that stopped.
-        # Extrapolate from heartbeats (each worker's tick and its rate lately, a margin ahead).
-        # Real time: no worker runs ahead of the wall clock, so that bounds it; workers far behind
-        # the clock stop near where they are instead of first computing their whole backlog (an
-        # overloaded whole hand, seconds behind, would not drain within its stop grace).
-        procs = self.procs.values()
-        reach = max(
-            (p.last_k + p.tick_rate * (now - p.beat_at + STOP_MARGIN_S) for p in procs), default=0.0
-        )
-        if not self.fast:
-            wall = ((time.monotonic_ns() - self.t0_ns) / 1e9 + STOP_MARGIN_S) / self.tick_s
-            measured = all(p.tick_rate > 0 for p in procs)  # else the wall clock is the only bound
-            reach = min(reach, wall) if measured else max(reach, wall)
-        k = math.ceil(reach) + 1
+        wall_s = None if self.fast else (time.monotonic_ns() - self.t0_ns) / 1e9
+        k = stop_tick(self.procs.values(), now, wall_s, self.tick_s)
         self.stop_k = k
         for p in self.procs.values():
             if p.ident is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import subprocess
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -13,7 +14,7 @@ import zmq
 from flowtact.runtime.forked import ForkedWorker
 from flowtact.runtime.protocol import Beat, ErrorReport, Stats
 
-__all__ = ["Proc", "describe_failure"]
+__all__ = ["Proc", "describe_failure", "stop_tick"]
 
 PING_S = 0.25
 WATCH_S = 0.02
@@ -32,6 +33,26 @@ SILENT_PROBE_S = 0.3
 """How long a worker without progress has its CPU time watched, to tell a hung process from a busy one."""
 IDLE_CPU = 0.05
 """A worker without progress that uses less than this share of a core is not working: it has stalled."""
+
+
+def stop_tick(procs: Iterable[Any], now: float, wall_s: float | None, tick_s: float) -> int:
+    """The tick every worker ends on after Ctrl-C: one past the furthest any can have reached.
+
+    No worker may have started a tick past the stop tick when the stop reaches it: in a loop
+    through several processes one would wait inside that tick for a peer that stopped. Each
+    worker's reach is extrapolated from its heartbeats (``last_k``, its ``tick_rate`` lately,
+    :data:`STOP_MARGIN_S` ahead). In real time (``wall_s``: seconds since graph time 0) no worker
+    runs ahead of the wall clock, so that bounds it: workers far behind the clock stop near where
+    they are instead of first computing their whole backlog (an overloaded whole hand, seconds
+    behind, would not drain within its stop grace). Before every worker's rate is measured, the
+    clock alone bounds it. ``--fast`` (``wall_s`` None): the heartbeats alone.
+    """
+    procs = list(procs)
+    reach = max((p.last_k + p.tick_rate * (now - p.beat_at + STOP_MARGIN_S) for p in procs), default=0.0)
+    if wall_s is not None:
+        wall = (wall_s + STOP_MARGIN_S) / tick_s
+        reach = min(reach, wall) if all(p.tick_rate > 0 for p in procs) else max(reach, wall)
+    return math.ceil(reach) + 1
 
 
 @dataclass

@@ -374,22 +374,15 @@ def test_a_stop_tick_is_not_pushed_ahead_by_heartbeats_that_arrive_together():
 
 
 def _stop_tick(*, fast: bool, behind_s: float, rates: tuple[float, ...]) -> int:
-    """The stop tick ``ProcessExecutor._stop_all`` names for workers at tick 100 whose last beat
-    just came, ``behind_s`` of wall clock past their tick (tick 10 ms)."""
+    """The stop tick named for workers at tick 100 whose last beat just came, ``behind_s`` of
+    wall clock past their tick (tick 10 ms, so tick 100 is 1 s)."""
     from types import SimpleNamespace
 
-    from flowtact.runtime.supervisor import ProcessExecutor
+    from flowtact.runtime.supervisor_procs import stop_tick
 
-    now_ns = time.monotonic_ns()
-    procs = {
-        f"p{i}": SimpleNamespace(last_k=100, tick_rate=r, beat_at=time.monotonic(), ident=None)
-        for i, r in enumerate(rates)
-    }
-    ex = SimpleNamespace(
-        procs=procs, fast=fast, tick_s=0.01, t0_ns=now_ns - int((1.0 + behind_s) * 1e9), _send=None
-    )
-    ProcessExecutor._stop_all(ex)  # type: ignore[arg-type]
-    return ex.stop_k
+    now = time.monotonic()
+    procs = [SimpleNamespace(last_k=100, tick_rate=r, beat_at=now) for r in rates]
+    return stop_tick(procs, now, None if fast else 1.0 + behind_s, 0.01)
 
 
 def test_a_stop_names_a_tick_near_workers_far_behind_the_wall_clock_not_the_clock_s():
