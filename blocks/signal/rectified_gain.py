@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 import flowtact.api as ft
-from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state
+from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state, shard_noise_offset
 
 __all__ = [
     "RectifiedGain",
@@ -263,10 +263,7 @@ class RectifiedGain(ft.Block):
     @classmethod
     def shard_params(cls, params: dict[str, Any], lo: int, hi: int, n: int) -> dict[str, Any]:
         out = super().shard_params(params, lo, hi, n)
-        offset = int(params.get("noise_offset", 0)) + lo
-        if offset % NOISE_GROUP == 0:  # always so with noise (shard_align); without, it changes nothing
-            out["noise_offset"] = offset
-        return out
+        return shard_noise_offset(out, params, lo, NOISE_GROUP)
 
     def needs(self, connected: frozenset[str]) -> frozenset[str]:
         g, ahead = self.config.gains(), self.config.ahead

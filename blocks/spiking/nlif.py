@@ -27,6 +27,7 @@ from flowtact.blocks.spiking._lif_kernels import (
 from flowtact.blocks.spiking._lif_unit_kernels import lif_units
 from flowtact.blocks.spiking._spike_history import history_table
 from flowtact.blocks.spiking.nlif_models import per_unit_models
+from flowtact.blocks.spiking.normal_draws import shard_noise_offset
 
 __all__ = ["NLIF_DEFAULTS", "Nlif", "NlifConfig", "UnitArrays"]
 
@@ -427,10 +428,7 @@ class Nlif(ft.Block):
             out["h_weights"] = list(w[lo:hi])
         if "n" in out and out.get("models"):
             out["n"] = 1 if params["n"] == 1 else hi - lo
-        offset = int(params.get("noise_offset", 0)) + lo
-        if offset % NOISE_GROUP == 0:  # always so with noise (shard_align); without, it changes nothing
-            out["noise_offset"] = offset
-        return out
+        return shard_noise_offset(out, params, lo, NOISE_GROUP)
 
     # -- specs -------------------------------------------------------------------------------
     def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:

@@ -22,6 +22,8 @@ buffered values (float64 bits) | BATCH + BATCH/64 scratch words]``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -36,6 +38,7 @@ __all__ = [
     "fill_normal",
     "fill_normal_py",
     "seed_state",
+    "shard_noise_offset",
     "stream_words",
 ]
 
@@ -85,6 +88,17 @@ def _numpy_layout_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 ZIG_X, ZIG_ACCEPT, ZIG_F = _numpy_layout_tables()
+
+
+def shard_noise_offset(out: dict[str, Any], params: Mapping[str, Any], lo: int, group: int) -> dict[str, Any]:
+    """A shard's parameters ``out`` given its ``noise_offset`` (the units before unit ``lo``), so it
+    draws what those units draw in the unsharded population: set when the offset falls on a noise
+    stream's boundary (``group`` units each), always so with noise, which shards are aligned to;
+    without noise it changes nothing."""
+    offset = int(params.get("noise_offset", 0)) + lo
+    if offset % group == 0:
+        out["noise_offset"] = offset
+    return out
 
 
 def seed_state(rng: np.random.Generator) -> np.ndarray:

@@ -32,7 +32,7 @@ from flowtact.blocks.signal.rectified_gain import NOISE_GROUP
 from flowtact.blocks.spiking._bitops import select
 from flowtact.blocks.spiking._lif_kernels import DRIVE_MAX
 from flowtact.blocks.spiking.nlif import Nlif
-from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state
+from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state, shard_noise_offset
 from flowtact.blocks.touch.touchsim import touchsim_models
 
 __all__ = ["FIELDS", "TILE", "TouchsimChain", "TouchsimChainConfig", "chain_tiles", "draw_rows", "tiled"]
@@ -315,10 +315,7 @@ class TouchsimChain(ft.Block):
     @classmethod
     def shard_params(cls, params: dict[str, Any], lo: int, hi: int, n: int) -> dict[str, Any]:
         out = super().shard_params(params, lo, hi, n)
-        offset = int(params.get("noise_offset", 0)) + lo
-        if offset % NOISE_GROUP == 0:  # always so with noise (shard_align); without, it changes nothing
-            out["noise_offset"] = offset
-        return out
+        return shard_noise_offset(out, params, lo, NOISE_GROUP)
 
     def specs(self, inputs: Mapping[str, ft.StreamSpec]) -> dict[str, ft.StreamSpec]:
         s = inputs["s"]
