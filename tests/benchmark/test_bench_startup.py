@@ -12,16 +12,20 @@ from flowtact.bench import startup
 from flowtact.bench.startup import COMPILED
 from flowtact.runtime.compile_notice import CompileNotices
 from flowtact.runtime.forked import NO_FORK_ENV
+from flowtact.runtime.protocol import Beat, Ready
+
+
+def _beat(compiling: str, compiled: int, node: str) -> Beat:
+    """A heartbeat of a worker compiling ``compiling`` in ``node``."""
+    return Beat("w", 1, 0, 0, node, False, 0.0, compiling, compiled, "warming", (0, 0, 0), 0)
 
 
 def test_the_suite_parses_the_supervisors_compile_lines():
     said = []
     notices = CompileNotices(said.append)
-    notices.on_beat(
-        "sink", "process 'sink' (nodes nlif)", False, {"compiling": "m.k", "compiled": 0, "node": "nlif"}
-    )
-    notices.on_ready("process 'sink' (nodes nlif)", {"compiled": 12, "compile_s": 23.75})
-    notices.on_ready("process 'filter' (nodes savgol)", {"compiled": 1, "compile_s": 0.5})
+    notices.on_beat("sink", "process 'sink' (nodes nlif)", False, _beat("m.k", 0, "nlif"))
+    notices.on_ready("process 'sink' (nodes nlif)", Ready({}, compiled=12, compile_s=23.75))
+    notices.on_ready("process 'filter' (nodes savgol)", Ready({}, compiled=1, compile_s=0.5))
     assert said[0] == (
         "process 'sink' (nodes nlif): compiling kernels for nlif (first run after an install or upgrade; "
         "numba caches them for the next runs)..."
@@ -32,9 +36,9 @@ def test_the_suite_parses_the_supervisors_compile_lines():
 def test_compiling_after_the_start_is_told_once():
     said = []
     notices = CompileNotices(said.append)
-    notices.on_beat("w", "process 'w'", False, {"compiling": "m.a", "compiled": 3, "node": "n"})
-    notices.on_beat("w", "process 'w'", True, {"compiling": "m.b", "compiled": 4, "node": "n"})
-    notices.on_beat("w", "process 'w'", True, {"compiling": "m.c", "compiled": 5, "node": "n"})
+    notices.on_beat("w", "process 'w'", False, _beat("m.a", 3, "n"))
+    notices.on_beat("w", "process 'w'", True, _beat("m.b", 4, "n"))
+    notices.on_beat("w", "process 'w'", True, _beat("m.c", 5, "n"))
     late = [s for s in said if "after the start" in s]
     assert late == [
         "process 'w': compiling kernel m.b in node 'n' after the start: the run stalls meanwhile "
