@@ -49,8 +49,9 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 
 #: Afferents per cache tile: a tile's filter, gain and membrane state (:data:`FIELDS` doubles an
-#: afferent, ~80 KB) stays in L1/L2 while every sample of the chunk passes through it.
-TILE = 256
+#: afferent, ~21 KB) stays in L1 while every sample of the chunk passes through it (256 afferents,
+#: ~86 KB, spilled to L2 once the loops vectorised: 10-15 % slower per afferent-sample).
+TILE = 64
 #: Second-order sections of TouchSim's prefilter (a 3rd-order Butterworth: 2).
 NSEC = 2
 #: Post-spike basis columns a TouchSim membrane weighs (nlif's ``w`` rows; 2: p10 and p11).

@@ -112,7 +112,7 @@ def test_the_fused_block_equals_the_generic_chain_bit_for_bit_with_noise(chunk):
 
 
 def test_many_tiles_and_noise_streams_equal_the_chain_bit_for_bit():
-    """4 352 afferents (17 tiles, 2 noise streams of 4 096), the traces' columns shuffled so SA1
+    """4 352 afferents (68 tiles, 2 noise streams of 4 096), the traces' columns shuffled so SA1
     (whose s is filtered) and the others share tiles: still the chain's current and spikes."""
     _, models, s, d = _dev()
     cols = np.random.default_rng(3).permutation(np.arange(4352) % len(models))
