@@ -29,7 +29,7 @@ from numba import njit
 import flowtact.api as ft
 from flowtact.blocks.signal.iir import design_sos
 from flowtact.blocks.signal.rectified_gain import NOISE_GROUP
-from flowtact.blocks.spiking._bitops import select
+from flowtact.blocks.spiking._bitops import select, trailing_zeros
 from flowtact.blocks.spiking._lif_kernels import DRIVE_MAX
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state, shard_noise_offset
@@ -48,7 +48,7 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return v
 
 
-#: Afferents per cache tile: a tile's filter, gain and membrane state (:data:`FIELDS` doubles an
+#: Afferents per cache tile (64: the one-pass row returns its spikes as the bits of one uint64): a tile's filter, gain and membrane state (:data:`FIELDS` doubles an
 #: afferent, ~21 KB) stays in L1 while every sample of the chunk passes through it (256 afferents,
 #: ~86 KB, spilled to L2 once the loops vectorised: 10-15 % slower per afferent-sample).
 TILE = 64
@@ -168,13 +168,13 @@ def _biquad(ws, o, z, k, x):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
-def _one_pass(ws, lag, n_block, cap, fired, filt_s, noisy):  # type: ignore[no-untyped-def]
+def _one_pass(ws, lag, n_block, cap, filt_s, noisy):  # type: ignore[no-untyped-def]
     """A full tile's common row in one pass over the lanes: the input row (fields _XS, _XD, its
     noise _XI) through the prefilters, the held row's current and its membranes (history in _H),
     then the new row held — per lane the same operations, in the same order, as :func:`_sections`,
     :func:`_current` and :func:`_membranes`, with the intermediates in registers. Returns (spikes,
-    non-finite currents)."""
-    n_fired = 0
+    non-finite currents), the spikes as a mask, bit k for lane k (a tile is 64 lanes)."""
+    mask = np.uint64(0)
     bad = 0
     for k in range(TILE):
         xs = 0.0
@@ -206,13 +206,12 @@ def _one_pass(ws, lag, n_block, cap, fired, filt_s, noisy):  # type: ignore[no-u
         spike = (vn > ws[_THR * TILE + k]) & (lk > n_block)
         ws[_V * TILE + k] = select(spike, 0.0, vn)
         lag[k] = select(spike, 1, min(lk + 1, cap))
-        fired[k] = spike
-        n_fired += spike
+        mask |= np.uint64(spike) << np.uint64(k)
         bad += not (abs(y) < math.inf)
         if filt_s:
             ws[_HS * TILE + k] = xs
         ws[_HD * TILE + k] = xd
-    return n_fired, bad
+    return mask, bad
 
 
 @njit(cache=True, error_model="numpy")  # x/0 is inf or NaN (never selected), not a raise: loops vectorise
@@ -262,25 +261,22 @@ def chain_tiles(  # noqa: C901 — one hot loop nest; see the module doc
                 cap = basis.shape[1] - 1
                 if filt_s:
                     if noisy:
-                        n_fired, b = _one_pass(ws, lg, n_block, cap, fired, True, True)
+                        mask, b = _one_pass(ws, lg, n_block, cap, True, True)
                     else:
-                        n_fired, b = _one_pass(ws, lg, n_block, cap, fired, True, False)
+                        mask, b = _one_pass(ws, lg, n_block, cap, True, False)
                 elif noisy:
-                    n_fired, b = _one_pass(ws, lg, n_block, cap, fired, False, True)
+                    mask, b = _one_pass(ws, lg, n_block, cap, False, True)
                 else:
-                    n_fired, b = _one_pass(ws, lg, n_block, cap, fired, False, False)
+                    mask, b = _one_pass(ws, lg, n_block, cap, False, False)
                 bad += b
                 if want_cur:
                     for k in range(TILE):
                         cur[row, t0 + k] = ws[_Y * TILE + k]
-                k = 0
-                while n_fired > 0:
-                    if fired[k]:
-                        spk_row[n_spk] = row
-                        spk_unit[n_spk] = t0 + k
-                        n_spk += 1
-                        n_fired -= 1
-                    k += 1
+                while mask:  # the spiking lanes, in order
+                    spk_row[n_spk] = row
+                    spk_unit[n_spk] = t0 + np.intp(trailing_zeros(mask))
+                    n_spk += 1
+                    mask &= mask - np.uint64(1)
                 row += 1
                 continue
             if i < n:
