@@ -128,7 +128,7 @@ def _current(ws, noisy, xi, xo):  # type: ignore[no-untyped-def]
 def _history(ws, lag, basis):  # type: ignore[no-untyped-def]
     """The membranes' history term of each lane into field _H, in its own loop: its loads are
     indexed by the lags, so LLVM cannot prove a loop that also stores anything free of aliasing and
-    leaves it scalar. Here that is only the lookups (cheap scalar loads); the update, with no indexed
+    leaves it scalar. Here that loop is only the lookups (~0.5-0.9 ns an afferent); the update, with no indexed
     load, vectorises (1.97 → 0.85 ns per afferent for lookup and update)."""
     for k in range(TILE):
         lk = lag[k]
