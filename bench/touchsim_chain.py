@@ -135,4 +135,6 @@ class TouchSimChain:
         unit = np.concatenate([c.data for c in parts]).astype(np.int64)
         idx = np.rint(t * TOUCHSIM_RATE_HZ).astype(np.int64)
         order = np.argsort(unit, kind="stable")  # by unit, each unit's spikes in time order
-        return np.split(idx[order], np.cumsum(np.bincount(unit, minlength=self.n))[:-1])
+        ends = np.cumsum(np.bincount(unit, minlength=self.n)).tolist()
+        by_unit = idx[order]
+        return [by_unit[lo:hi] for lo, hi in zip([0, *ends[:-1]], ends, strict=True)]  # np.split: 3x slower

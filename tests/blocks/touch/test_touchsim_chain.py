@@ -112,12 +112,22 @@ def test_the_fused_block_equals_the_generic_chain_bit_for_bit_with_noise(chunk):
 
 
 def test_many_tiles_and_noise_streams_equal_the_chain_bit_for_bit():
-    """4 352 afferents (17 tiles, 2 noise streams of 4 096), the traces' columns shuffled so SA1
+    """4 352 afferents (68 tiles, 2 noise streams of 4 096), the traces' columns shuffled so SA1
     (whose s is filtered) and the others share tiles: still the chain's current and spikes."""
     _, models, s, d = _dev()
     cols = np.random.default_rng(3).permutation(np.arange(4352) % len(models))
     s, d = np.ascontiguousarray(s[:1200, cols]), np.ascontiguousarray(d[:1200, cols])
     assert _equal_to_the_chain([models[c] for c in cols], s, d, 50) > 1000
+
+
+def test_tiles_without_sa1_equal_the_chain_bit_for_bit():
+    """The one-pass row's other form: tiles whose afferents are all RA or PC (s not filtered).
+    The columns sorted so SA1 comes last: 256 afferents, the first three tiles of 64 have no SA1."""
+    _, models, s, d = _dev()
+    cols = sorted(np.arange(256) % len(models), key=lambda c: models[c].startswith("SA1"))
+    assert not any(models[c].startswith("SA1") for c in cols[:192])
+    s, d = np.ascontiguousarray(s[:1200, cols]), np.ascontiguousarray(d[:1200, cols])
+    assert _equal_to_the_chain([models[c] for c in cols], s, d, 50) > 100
 
 
 def test_the_fused_block_fires_touchsims_spikes_on_every_dev_trace():
