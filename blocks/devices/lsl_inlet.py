@@ -246,8 +246,7 @@ class LslInlet(ft.Source):
         self._anchor: float | None = 0.0 if self.config.sim else None
         self._lost: str | None = None
         self._last_good: np.ndarray | None = None
-        self._first_now: float | None = None
-        self._first_mono = 0.0
+        self._opened_at = 0.0  # the LSL clock when open() returned: graph time 0 comes later
         if self.config.sim:
             self._sim_i = 0
             self._sim_arrival = -math.inf
@@ -287,6 +286,7 @@ class LslInlet(ft.Source):
         self.count("clock_probes")
         anchor.acquire()
         self._holding = True
+        self._opened_at = pylsl.local_clock()
 
     def close(self) -> None:
         if self._inlet is not None:
@@ -316,13 +316,13 @@ class LslInlet(ft.Source):
         return self._emit(now)
 
     def _check_realtime(self, now: float) -> None:
+        """Refuse a run whose graph time outruns the wall clock (``--fast``). Graph time 0 comes
+        after ``open``, and a real-time step never runs before its graph time, so graph time can
+        never exceed the wall time since ``open``; measured from the first step instead, a worker
+        that started late and catches up (merged ticks) would look ahead by its lateness."""
         import pylsl
 
-        mono = pylsl.local_clock()
-        if self._first_now is None:
-            self._first_now, self._first_mono = now, mono
-            return
-        ahead = (now - self._first_now) - (mono - self._first_mono)
+        ahead = now - (pylsl.local_clock() - self._opened_at)
         if ahead > FAST_RUN_SLACK_S:
             raise RuntimeError(
                 f"{self.node} (lsl_inlet): graph time runs {ahead:.1f} s ahead of the wall clock — a live "

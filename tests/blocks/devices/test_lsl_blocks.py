@@ -230,6 +230,26 @@ def test_a_live_stream_refuses_a_fast_run(sender):
         block.close()
 
 
+def test_a_late_first_step_that_catches_up_is_not_taken_for_a_fast_run(sender, monkeypatch):
+    """A loaded worker whose first tick comes 2.3 s after graph time 0 merges ticks to catch up:
+    its steps jump to graph times the wall clock has passed, never beyond the time since open
+    (the LSL clock is moved 2.3 s on after open, as if the worker had been that late)."""
+    import pylsl
+
+    name = _name()
+    sender(name, 10)
+    block = LslInlet(name=name, node="force")
+    block.bind({})
+    block.open()
+    clock = pylsl.local_clock
+    monkeypatch.setattr(pylsl, "local_clock", lambda: clock() + 2.3)
+    try:
+        block(0.01)  # its first tick, 2.3 s late
+        block(2.25)  # caught up in one merged tick: behind the wall clock, not ahead of it
+    finally:
+        block.close()
+
+
 def test_nan_samples_stop_the_run_by_default_naming_node_and_port(sender):
     name = _name()
     peer = sender(name, 50, nan_at=10)
