@@ -339,7 +339,7 @@ class SerialIo(ft.Source):
         self._prev_ticks: int | None = None
         self._prev_read: float | None = None
         self._anchor: float | None = None
-        self._mono0 = self._now0 = 0.0
+        self._opened_mono = 0.0
         self._next_retry = -math.inf
         self._down_since: float | None = None
         if c.port == "sim":
@@ -365,7 +365,7 @@ class SerialIo(ft.Source):
         else:
             self._path = c.port
         mono = time.monotonic()
-        self._down_since = mono
+        self._down_since = self._opened_mono = mono
         if not self._connect(mono):
             self._say("waiting", logging.WARNING, f"{self.node}: waiting for serial port {self._path}")
 
@@ -460,11 +460,12 @@ class SerialIo(ft.Source):
 
     # -- clock ----------------------------------------------------------------------------------
     def _track_clock(self, now: float, mono: float) -> None:
-        if self._anchor is None:
-            self._anchor, self._mono0, self._now0 = mono - now, mono, now
-            return
-        self._anchor = min(self._anchor, mono - now)
-        ahead = (now - self._now0) - (mono - self._mono0)
+        """Move the anchor; refuse a run whose graph time outruns the wall clock (``--fast``).
+        Graph time 0 comes after ``open`` and a real-time step never runs before its graph time,
+        so graph time never exceeds the wall time since ``open``; measured from the first step
+        instead, a worker that started late and catches up (merged ticks) would look ahead."""
+        self._anchor = mono - now if self._anchor is None else min(self._anchor, mono - now)
+        ahead = now - (mono - self._opened_mono)
         if ahead > FAST_RUN_SLACK_S:
             raise RuntimeError(
                 f"{self.node} (serial_io): graph time runs {ahead:.1f} s ahead of the wall clock — a real "

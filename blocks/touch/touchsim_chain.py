@@ -29,15 +29,22 @@ from numba import njit
 import flowtact.api as ft
 from flowtact.blocks.signal.iir import design_sos
 from flowtact.blocks.signal.rectified_gain import NOISE_GROUP
-from flowtact.blocks.spiking._bitops import select, trailing_zeros
+from flowtact.blocks.spiking._bitops import prefetch, select, trailing_zeros
 from flowtact.blocks.spiking._lif_kernels import DRIVE_MAX
 from flowtact.blocks.spiking.nlif import Nlif
 from flowtact.blocks.spiking.normal_draws import fill_normal, seed_state, shard_noise_offset
 from flowtact.blocks.touch.touchsim import touchsim_models
 
-__all__ = ["FIELDS", "TILE", "TouchsimChain", "TouchsimChainConfig", "chain_tiles", "draw_rows", "tiled"]
-
-_EMPTY = np.empty(0, np.int64)
+__all__ = [
+    "FIELDS",
+    "TILE",
+    "TouchsimChain",
+    "TouchsimChainConfig",
+    "by_row",
+    "chain_tiles",
+    "draw_rows",
+    "tiled",
+]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -52,6 +59,8 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 #: afferent, ~21 KB) stays in L1 while every sample of the chunk passes through it (256 afferents,
 #: ~86 KB, spilled to L2 once the loops vectorised: 10-15 % slower per afferent-sample).
 TILE = 64
+#: Rows ahead whose lanes a tile's row prefetches (s, d and noise rows are a row of the population apart).
+AHEAD = 4
 #: Second-order sections of TouchSim's prefilter (a 3rd-order Butterworth: 2).
 NSEC = 2
 #: Post-spike basis columns a TouchSim membrane weighs (nlif's ``w`` rows; 2: p10 and p11).
@@ -234,6 +243,7 @@ def chain_tiles(  # noqa: C901 — one hot loop nest; see the module doc
     total = n + (1 if last and (has_held or n > 0) else 0)
     want_cur = cur.shape[0] > 0
     fired = np.zeros(TILE, np.uint8)
+    xi2 = xi[: (xi.shape[0] // nc) * nc].reshape(-1, nc) if nc else xi[:0].reshape(0, 1)
     n_spk = 0
     bad = 0
     row = 0
@@ -248,6 +258,13 @@ def chain_tiles(  # noqa: C901 — one hot loop nest; see the module doc
         row = 0
         for i in range(total):
             if m == TILE and hh and i < n:  # the common row: one pass over the lanes
+                if i + AHEAD < n:  # this tile's lanes AHEAD rows on: a page or more away
+                    for q in range(0, TILE, 8):
+                        if filt_s:
+                            prefetch(s, i + AHEAD, t0 + q)
+                        prefetch(d, i + AHEAD, t0 + q)
+                        if noisy:
+                            prefetch(xi2, row + AHEAD, t0 + q)
                 if filt_s:
                     for k in range(TILE):
                         ws[_XS * TILE + k] = s[i, t0 + k]
@@ -318,6 +335,25 @@ def chain_tiles(  # noqa: C901 — one hot loop nest; see the module doc
             else:
                 hh = False
     return row, hh, n_spk, bad
+
+
+@njit(cache=True)
+def by_row(spk_row, spk_unit, n_spk, rows, out_row, out_unit):  # type: ignore[no-untyped-def]
+    """The first ``n_spk`` spikes (found tile by tile) into ``out_row``/``out_unit`` in step-then-unit
+    order: a stable counting sort on the row (rows are few; a few times faster than ``argsort``).
+    Returns ``n_spk`` (a function returning nothing or new arrays costs ~8 µs more a call)."""
+    start = np.zeros(rows + 1, np.int64)
+    for j in range(n_spk):
+        start[spk_row[j] + 1] += 1
+    for r in range(rows):
+        start[r + 1] += start[r]
+    for j in range(n_spk):
+        r = spk_row[j]
+        q = start[r]
+        out_row[q] = r
+        out_unit[q] = spk_unit[j]
+        start[r] = q + 1
+    return n_spk
 
 
 def tiled(a: np.ndarray, tile: int = TILE) -> np.ndarray:
@@ -520,10 +556,10 @@ class TouchsimChain(ft.Block):
             if self._want_current:
                 out["current"] = ft.Chunk.empty(shape=(n,))
             return out
-        steps, idx = self._spk[0][:n_spk], self._spk[1][:n_spk]
-        order = np.argsort(steps, kind="stable")  # tile by tile → step, then afferent
+        steps, idx = np.empty(n_spk, np.int64), np.empty(n_spk, np.int64)
+        by_row(*self._spk, n_spk, rows, steps, idx)  # tile by tile → step, then afferent
         self._end = t_out[-1].item() + self._dt
-        out["spikes"] = ft.Chunk(t_out[steps[order]], idx[order] if n_spk else _EMPTY, self._end)
+        out["spikes"] = ft.Chunk(t_out[steps], idx, self._end)
         if self._want_current:
             out["current"] = ft.Chunk(t_out, cur)
         return out

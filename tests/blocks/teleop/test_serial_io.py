@@ -227,6 +227,25 @@ def test_a_fast_run_is_refused_for_a_real_port(pty_pair):
         block.close()
 
 
+def test_a_late_first_step_that_catches_up_is_not_taken_for_a_fast_run(pty_pair, monkeypatch):
+    """A loaded worker whose first tick comes 2.3 s after graph time 0 merges ticks to catch up:
+    its steps jump to graph times the wall clock has passed, never beyond the time since open
+    (the monotonic clock is moved 2.3 s on after open, as if the worker had been that late)."""
+    pytest.importorskip("serial")
+    _, name = pty_pair
+    block = SerialIo(port=name)
+    block.bind({})
+    block.open()
+    clock = time.monotonic
+    monkeypatch.setattr(time, "monotonic", lambda: clock() + 2.3)
+    try:
+        block(0.005)  # its first tick, 2.3 s late
+        block(2.25)  # caught up in one merged tick: behind the wall clock, not ahead of it
+    finally:
+        monkeypatch.undo()
+        block.close()
+
+
 def test_a_missing_port_is_retried_then_given_up(tmp_path):
     pytest.importorskip("serial")
     block = SerialIo(port=str(tmp_path / "ttyNONE"), reconnect_s=0.02)
