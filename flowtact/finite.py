@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["all_finite", "all_finite_kernel"]
+__all__ = ["all_finite", "all_finite_kernel", "all_finite_wide"]
 
 COMPILED_MAX = 4096
 """Up to this many values the compiled loop is faster; above, numpy's vectorised test is."""
@@ -30,7 +30,7 @@ def all_finite_kernel(a: np.ndarray) -> bool:
 
 
 @njit(cache=True, fastmath={"reassoc", "nsz"})  # no nnan/ninf: x·0 stays NaN for NaN and ±inf
-def _all_finite_wide(a: np.ndarray) -> bool:
+def all_finite_wide(a: np.ndarray) -> bool:
     """The vectorised test of a 1-D contiguous array: the sum of ``x · 0`` is 0 (no early exit:
     bad values are rare, and a loop that may leave does not vectorise)."""
     acc = 0.0
@@ -44,5 +44,5 @@ def all_finite(a: np.ndarray) -> bool:
     if a.size <= COMPILED_MAX and a.dtype.char in "df":  # float64, float32: what numba compiles
         return bool(all_finite_kernel(a))
     if a.dtype.char == "d" and a.flags.c_contiguous:
-        return bool(_all_finite_wide(a.reshape(-1)))
+        return bool(all_finite_wide(a.reshape(-1)))
     return bool(np.isfinite(a).all())

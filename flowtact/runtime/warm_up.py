@@ -194,9 +194,9 @@ def warm_shared_kernels(specs: Iterable[StreamSpec], say: Callable[[str], None] 
     workers load it themselves, and loading it here first cost 0.8 s of every cached start-up
     (measured at load 8.6 on 2 cores); a signature missing from a warm cache is compiled by the
     worker that needs it, as before."""
-    from flowtact.finite import all_finite, all_finite_kernel
+    from flowtact.finite import all_finite, all_finite_kernel, all_finite_wide
 
-    if _in_cache(all_finite_kernel):
+    if _in_cache(all_finite_kernel) and _in_cache(all_finite_wide):
         return 0
     watch = CompileWatch(
         on_first=lambda _k: (
@@ -220,9 +220,9 @@ def load_shared_kernels(specs: Iterable[StreamSpec]) -> bool:
     up before workers are forked from this process, they start with numba's first dispatch (its
     target set-up, ~0.4 s of CPU) made. On a cold cache nothing is done (False): compiling here
     would hold every fork back; :func:`warm_shared_kernels` compiles them beside the workers."""
-    from flowtact.finite import all_finite, all_finite_kernel
+    from flowtact.finite import all_finite, all_finite_kernel, all_finite_wide
 
-    if not _in_cache(all_finite_kernel):
+    if not (_in_cache(all_finite_kernel) and _in_cache(all_finite_wide)):
         return False
     _screen_shapes(all_finite, specs)
     return True
@@ -230,8 +230,12 @@ def load_shared_kernels(specs: Iterable[StreamSpec]) -> bool:
 
 def _screen_shapes(all_finite: Callable[[np.ndarray], bool], specs: Iterable[StreamSpec]) -> None:
     """Call the bad-data screen on each float stream's sample shape as workers get it: one tick
-    and several, read-only, aligned and not (numba types each apart)."""
+    and several, read-only, aligned and not (numba types each apart); and on a float64 block too
+    large for the compiled loop (a wide population's tick), which takes the vectorised test."""
+    from flowtact.finite import COMPILED_MAX
+
     shapes = {(np.dtype(s.dtype or "float64"), s.shape) for s in specs if not s.events}
+    wide = any(dtype == np.float64 for dtype, _ in shapes)
     for dtype, shape in sorted(shapes, key=str):
         if dtype.kind != "f":
             continue
@@ -240,6 +244,12 @@ def _screen_shapes(all_finite: Callable[[np.ndarray], bool], specs: Iterable[Str
             a.setflags(write=False)
             all_finite(a)
             all_finite(_unaligned(a))
+    if wide:
+        a = np.zeros(COMPILED_MAX + 1)
+        all_finite(a)
+        a.setflags(write=False)
+        all_finite(a)
+        all_finite(_unaligned(a))
 
 
 def _in_cache(dispatcher: Any) -> bool:

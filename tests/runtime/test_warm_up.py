@@ -160,7 +160,7 @@ if sys.argv[1] == "supervisor":
     print(warm_shared_kernels([spec]))
 else:  # a worker's bad-data screen on the inputs it gets: read-only, aligned or not
     watch = CompileWatch().install()
-    for n in (1, 7):
+    for n in (1, 7, 2000):  # 2000 x 3: a wide tick, the vectorised test
         a = np.ones((n, 3))
         a.setflags(write=False)
         all_finite(a)
