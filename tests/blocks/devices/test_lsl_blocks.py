@@ -80,6 +80,18 @@ def _name() -> str:
 # -- time: the sim's truth as the oracle ---------------------------------------------------------
 
 
+def _validate(graph, env) -> subprocess.CompletedProcess:
+    """``flowtact validate GRAPH`` in a fresh interpreter with ``env``."""
+    return subprocess.run(
+        [sys.executable, "-m", "flowtact.cli", "validate", str(graph)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=BOUND_S,
+        check=False,
+    )
+
+
 def test_sim_stamps_map_onto_graph_time_with_offset_and_drift():
     """A remote clock 0.5 s ahead and 50 ppm fast, its offset read once a second with 20 µs noise:
     the mapped times match the true sampling times (i / rate). Tolerances from that noise: the
@@ -138,14 +150,7 @@ def test_a_stream_not_found_is_a_located_one_line_error(tmp_path, lsl_env):
         "  out: {block: lsl_outlet}\n"
         "edges:\n  - src.x -> out.x\n"
     )
-    done = subprocess.run(
-        [sys.executable, "-m", "flowtact.cli", "validate", str(graph)],
-        env=lsl_env,
-        capture_output=True,
-        text=True,
-        timeout=BOUND_S,
-        check=False,
-    )
+    done = _validate(graph, lsl_env)
     assert done.returncode == 2, done.stderr
     first = next(ln for ln in done.stderr.splitlines() if str(graph) in ln)
     assert first.startswith(
@@ -310,14 +315,7 @@ def test_an_outlet_needs_exactly_one_input(tmp_path, lsl_env):
     graph.write_text(
         "nodes:\n  src: {block: lsl_inlet, params: {sim: true}}\n  out: {block: lsl_outlet}\nedges: []\n"
     )
-    done = subprocess.run(
-        [sys.executable, "-m", "flowtact.cli", "validate", str(graph)],
-        env=lsl_env,
-        capture_output=True,
-        text=True,
-        timeout=BOUND_S,
-        check=False,
-    )
+    done = _validate(graph, lsl_env)
     assert done.returncode == 2
     assert f"{graph}:3:3: node 'out' (lsl_outlet): connect exactly one of x" in done.stderr
 
