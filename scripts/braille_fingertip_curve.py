@@ -55,7 +55,9 @@ def overrides(items: list[str]) -> dict[str, dict[str, Any]]:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--reps", type=int, default=10, help="alphabets of held-out text per speed (26 letters each)")
+    p.add_argument(
+        "--reps", type=int, default=10, help="alphabets of held-out text per speed (26 letters each)"
+    )
     p.add_argument("--speeds", type=float, nargs="+", default=list(SPEEDS))
     p.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE", help="graph override")
     p.add_argument("--plot", help="draw the curve into this PNG")

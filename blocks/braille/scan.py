@@ -71,6 +71,11 @@ class BrailleScanConfig(ft.BadDataConfig):
     speed_jitter_tau_s: float = ft.param(0.1, doc="correlation time of the speed jitter", gt=0)
     gain_sd: float = ft.param(0.0, doc="sd of the per-trial log sensor gain", ge=0, le=1)
     gain_drift: float = ft.param(0.0, doc="sd of the slow drift of the log sensor gain", ge=0, le=1)
+    cover_tau_s: float = ft.param(
+        0.0,
+        doc="the cover's relaxation time: the compression reaches the taxels low-passed by it (0: at once)",
+        ge=0,
+    )
     wear_per_m: float = ft.param(
         0.0, doc="cover wear: growth of its spread per metre slid, as a fraction of spread·cover_mm", ge=0
     )
@@ -126,6 +131,21 @@ class BrailleScanConfig(ft.BadDataConfig):
 
 SUMMARY_TEXT_CHARS = 60
 """At most this many characters of the line in :meth:`BrailleScan.summary`."""
+
+
+@njit(cache=True)
+def _relax(u: np.ndarray, a: float, state: np.ndarray, started: bool) -> np.ndarray:
+    """First-order low-pass of each column of ``u``: ``y_i = a·y_{i−1} + (1 − a)·u_i``, continuing
+    from ``state`` (updated in place); the first sample of a run starts at rest on ``u_0``."""
+    out = np.empty_like(u)
+    for i in range(u.shape[0]):
+        for j in range(u.shape[1]):
+            if i == 0 and not started:
+                state[j] = u[0, j]
+            else:
+                state[j] = a * state[j] + (1.0 - a) * u[i, j]
+            out[i, j] = state[j]
+    return out
 
 
 @njit(cache=True)
@@ -297,6 +317,7 @@ class BrailleScan(ft.Source):
             Drift(c.gain_drift, c.drift_tau_s, 1.0 / c.rate_hz),
             Drift(c.speed_jitter, c.speed_jitter_tau_s, 1.0 / c.rate_hz),
         )
+        self._cover = np.zeros(ROWS * COLS)  # the cover's relaxing compression (cover_tau_s)
         self._drifting = bool(c.press_drift_mm or c.gain_drift or c.speed_jitter)
         self._cat = np.array([CATEGORIES.index("space" if ch == " " else ch) for ch in self.text], np.float64)
         self._dt = 1.0 / c.rate_hz
@@ -405,6 +426,9 @@ class BrailleScan(ft.Source):
             squeeze = self._tip.compression(
                 x, table[:, 4], self._dots, height_scale=self._scales, sigma_mm=spread, press_mm=table[:, 3]
             )
+            if c.cover_tau_s and n:
+                a = math.exp(-self._dt / c.cover_tau_s)
+                squeeze = _relax(squeeze, a, self._cover, self._i > n)
             out["taxels"] = ft.Chunk(t, self._tip.reading(squeeze) * table[:, 5:6] + noise)
         if "char" in want:
             out["char"] = ft.Chunk(t, self._char(x))
