@@ -32,7 +32,7 @@ ROBOT: dict[str, float | int] = {
     "drift_tau_s": 2.0,
     "dot_height_min": 1.0,
     "dot_height_max": 1.4,
-    "lateral_sd_mm": 0.7,
+    "lateral_sd_mm": 0.8,
     "yaw_sd_deg": 2.0,
     "speed_jitter": 0.05,
     "speed_jitter_tau_s": 0.1,
