@@ -13,7 +13,7 @@ import flowtact.api as ft
 
 from .cells import CATEGORIES, LETTERS, Geometry, dot_positions, text_cells
 from .fingertip import COLS, ROWS, Fingertip
-from .variation import CONDITION_LABELS, Drift, Trials, dot_scales
+from .variation import CONDITION_LABELS, ROBOT, Drift, Trials, dot_scales
 
 __all__ = ["TAXEL_LABELS", "BrailleScan", "BrailleScanConfig"]
 
@@ -490,7 +490,11 @@ class BrailleScan(ft.Source):
         speed[100] = 0.0  # clamped to the minimum
         lateral = 0.3 * np.sin(np.arange(n) / 60.0)
         return ft.Example(
-            params={"text": "bat", "rate_hz": 250.0},
+            params={
+                "text": "bat",
+                "rate_hz": 250.0,
+                **ROBOT,
+            },  # every variation on: the suite checks them too
             inputs={"speed": speed, "lateral": lateral},
             units={"speed": "mm/s", "lateral": "mm"},
             rate_hz=250.0,
