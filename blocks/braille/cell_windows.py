@@ -12,7 +12,7 @@ import flowtact.api as ft
 
 from .cells import PAPER_SCALE, Geometry
 
-__all__ = ["NO_CELL", "CellWindows", "CellWindowsConfig", "cell_window_values"]
+__all__ = ["NO_CELL", "BrailleCellWindows", "BrailleCellWindowsConfig", "cell_window_values"]
 
 #: Window value between cells (a gap for ``naive_bayes``: values < 0 are no window).
 NO_CELL = -1.0
@@ -34,8 +34,8 @@ def cell_window_values(x: np.ndarray, geometry: Geometry, origin_mm: float = 0.0
 
 
 @dataclass(frozen=True)
-class CellWindowsConfig(ft.Config):
-    """Parameters of :class:`CellWindows` (what the robot knows of the page: its layout, not its text)."""
+class BrailleCellWindowsConfig(ft.Config):
+    """Parameters of :class:`BrailleCellWindows` (what the robot knows of the page: its layout, not its text)."""
 
     scale: float = ft.param(
         PAPER_SCALE, doc="scaling of the DIN 32976 Braille dimensions (Bologna et al.: 1:1.7)", gt=0
@@ -45,7 +45,7 @@ class CellWindowsConfig(ft.Config):
     )
 
 
-class CellWindows(ft.Block):
+class BrailleCellWindows(ft.Block):
     """Character windows from position: cell k while the finger's centre is over its dots, −1 between.
 
     Config
@@ -64,14 +64,14 @@ class CellWindows(ft.Block):
     Example
     -------
     >>> import numpy as np
-    >>> from flowtact.blocks.braille.cell_windows import CellWindows
+    >>> from flowtact.blocks.braille.cell_windows import BrailleCellWindows
     >>> from flowtact.testing import run_offline
     >>> x = np.array([0.0, 1.8, 5.1, 8.6, 9.0, 12.0, 20.0])  # mm
-    >>> run_offline(CellWindows(), position=x, rate_hz=250.0, units={"position": "mm"})["window"].data.tolist()
+    >>> run_offline(BrailleCellWindows(), position=x, rate_hz=250.0, units={"position": "mm"})["window"].data.tolist()
     [-1.0, 0.0, 0.0, 0.0, -1.0, 1.0, -1.0]
     """
 
-    config_cls = CellWindowsConfig
+    config_cls = BrailleCellWindowsConfig
     inputs = {
         "position": ft.Port(
             dtype="float64",

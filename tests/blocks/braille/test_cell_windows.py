@@ -4,7 +4,7 @@ import numpy as np
 import yaml
 from runs import ROOT
 
-from flowtact.blocks.braille.cell_windows import NO_CELL, CellWindows, cell_window_values
+from flowtact.blocks.braille.cell_windows import NO_CELL, BrailleCellWindows, cell_window_values
 from flowtact.blocks.braille.cells import Geometry
 from flowtact.blocks.braille.reading import char_windows, graph_text, position_windows, read_line
 from flowtact.blocks.braille.scan import BrailleScan
@@ -33,7 +33,7 @@ def test_the_window_is_the_cell_s_dots_and_nothing_of_the_text():
         cell_window_values(x, g), [NO_CELL, 0, 0, 0, NO_CELL, 1, np.floor((1e6 + 5.1) / 10.2), NO_CELL]
     )
     assert cell_window_values(np.array([6.7]), g, origin_mm=1.6)[0] == 0  # the line moved 1.6 mm on
-    out = run_offline(CellWindows(), position=np.array([0.0, np.inf, 5.0]), rate_hz=250.0,
+    out = run_offline(BrailleCellWindows(), position=np.array([0.0, np.inf, 5.0]), rate_hz=250.0,
                       units={"position": "mm"})  # fmt: skip
     assert out["window"].data.tolist() == [NO_CELL, NO_CELL, 0.0]
 
