@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from flowtact.bench.braille import fastest_constant, heldout_text, rates
-from flowtact.bench.braille_metrics import chow_threshold, confusion, entropy_bits, mi_bits, mi_corrected, pt_bias_bits
+from flowtact.bench.braille_metrics import (
+    chow_threshold,
+    confusion,
+    entropy_bits,
+    mi_bits,
+    mi_corrected,
+    pt_bias_bits,
+)
 from flowtact.blocks.braille.train_braille import HELDOUT_SEED
 
 
