@@ -11,7 +11,7 @@
 * Reject option: a window whose largest posterior is below a threshold is "not classified"
   (``nb_model.decide``, the decoder block's rule). Each layer's threshold minimises Chow's risk
   (errors + ½ × abstentions) on a validation text (seed 500, graph seeds 500 up; 8 alphabets per
-  speed at 10, 20, 30, 40, 60 and 80 mm/s, 2 with ``--quick``), never on the held-out text.
+  speed at 10, 20, 30, 40, 60 and 80 mm/s; ``--quick``: 2 at 20, 40, 80), never on the held-out text.
 * Held-out text: permutations of the alphabet drawn from seed ``HELDOUT_SEED`` (each letter equally
   often), read with graph seeds from ``HELDOUT_SEED`` up, which training refuses.
 * Constant speed, 10–80 mm/s (the paper's range): recognition rate (correct / all windows) and
@@ -63,6 +63,7 @@ QUICK = {
     "speeds": (10.0, 30.0, 80.0),
     "reps": 2,
     "validation_reps": 2,
+    "validation_speeds": (20.0, 40.0, 80.0),
     "offsets": (-1.0, 0.0, 1.0),
     "offset_reps": 1,
     "loop_reps": 2,
@@ -74,6 +75,7 @@ FULL = {
     "speeds": (10.0, 15.0, 20.0, 30.0, 40.0, 50.0, 60.0, 80.0),
     "reps": 20,
     "validation_reps": 8,
+    "validation_speeds": VALIDATION_SPEEDS,
     "offsets": (-2.0, -1.0, 0.0, 1.0, 2.0),
     "offset_reps": 4,
     "loop_reps": 78,
@@ -145,7 +147,7 @@ def _validation(ctx: Context, cfg: dict[str, Any], models: Mapping[str, Any]) ->
     text = heldout_text(cfg["validation_reps"], VALIDATION_SEED)
     top: dict[str, list[np.ndarray]] = {k: [] for k in models}
     right: dict[str, list[np.ndarray]] = {k: [] for k in models}
-    for i, v in enumerate(VALIDATION_SPEEDS):
+    for i, v in enumerate(cfg["validation_speeds"]):
         ctx.step(f"validation {v:g} mm/s")
         r = read_line(seed=VALIDATION_SEED + i, speed_mm_s=v, text=text, layers=tuple(models))
         y = _labels(r.letters)
@@ -157,7 +159,7 @@ def _validation(ctx: Context, cfg: dict[str, Any], models: Mapping[str, Any]) ->
     ctx.data["thresholds"] = out
     ctx.note(
         "Reject thresholds (largest posterior below it: not classified), chosen on the validation text "
-        f"({len(text)} letters at each of {', '.join(f'{v:g}' for v in VALIDATION_SPEEDS)} mm/s, seed "
+        f"({len(text)} letters at each of {', '.join(f'{v:g}' for v in cfg['validation_speeds'])} mm/s, seed "
         f"{VALIDATION_SEED}) by Chow's risk, errors + {REJECT_COST:g} × abstentions: "
         + ", ".join(f"{k} {t:.6g}" for k, t in out.items())
         + "."

@@ -48,7 +48,7 @@ def test_fast_closed_loop_runs_are_bit_identical_in_process_and_across_processes
     assert len(letters) == 6 and len(a.streams["decoder.decision"].t) == 6
     ctl = load_compiled(GRAPH).graph.nodes["control"].params
     lo, hi = ctl["min_speed_mm_s"], ctl["max_speed_mm_s"]
-    assert (lo, hi) == (10.0, 80.0)  # inside the paper's range
+    assert 10.0 <= lo < hi <= 80.0  # inside the paper's range
     assert speed.min() >= lo and speed.max() <= hi and len(np.unique(speed)) > 10  # steered, within bounds
 
 
