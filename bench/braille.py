@@ -470,6 +470,7 @@ def _closed_loop(
         speed = n / sum(g[3] / g[2] for g in got)  # total distance over total time (equal lines)
         pts.append((setting, speed, rec, nc, n))
     setting, speed, rec, nc, n = pts[0]
+    n_line = len(text)
     best = fastest_constant(curve, rec)
     at_speed = float(np.interp(speed, [p[0] for p in curve], [p[1] for p in curve]))
     ctx.figure("closed loop reading speed", speed, "mm/s", "higher")
@@ -525,41 +526,39 @@ def _closed_loop(
     ]
 
     def draw(fig: Any) -> None:
-        ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+        axes = [fig.add_subplot(1, 3, k + 1) for k in range(3)]
         v = [p[0] for p in curve]
-        ax1.plot(v, [p[1] * 100 for p in curve], "o-", color="C0", label="constant speed (first order)")
-        ax2.plot(v, [p[2] * 100 for p in curve], "o-", color="C0", label="constant speed (first order)")
-        for k, (s, sp, acc, c, _) in enumerate(pts):
-            style = (
-                {"marker": "*", "ms": 14, "color": "C3"}
-                if k == 0
-                else {"marker": "s", "ms": 6, "color": "C1"}
-            )
-            lab = (
-                "closed loop (graph setting)"
-                if k == 0
-                else ("closed loop (other settings)" if k == 1 else None)
-            )
-            ax1.plot([sp], [acc * 100], ls="none", label=lab, **style)
-            ax2.plot([sp], [c * 100], ls="none", label=lab, **style)
-            ax1.annotate(f"{s['min_speed_mm_s']:g}–{s['max_speed_mm_s']:g}, sure {s['sure']:g}", (sp, acc * 100),
-                         textcoords="offset points", xytext=(6, -10), fontsize=7)  # fmt: skip
-        ax1.axhline(CHANCE * 100, color="0.4", ls="--", lw=1, label=f"chance ({CHANCE:.1%})")
-        ax1.set_ylim(0, 102)
-        ax1.set_ylabel("recognition rate (% of letters)")
-        ax2.set_ylim(0, max(20.0, max(p[2] for p in curve) * 110, max(p[3] for p in pts) * 110))
-        ax2.set_ylabel("non-classification rate (% of letters)")
-        for ax in (ax1, ax2):
+        err = [100 * math.sqrt(p[1] * (1 - p[1]) / max(n_line, 1)) for p in curve]
+        for ax, col in ((axes[0], 1), (axes[1], 1), (axes[2], 2)):
+            ax.errorbar(v, [p[col] * 100 for p in curve], yerr=err if col == 1 else None, fmt="o-", color="C0",
+                        capsize=2, label=f"constant speed, first order ({n_line} letters each; ±1 s.e.)")  # fmt: skip
+            for k, (s, sp, acc, c, _) in enumerate(pts):
+                style = (
+                    {"marker": "*", "ms": 14, "color": "C3"}
+                    if k == 0
+                    else {"marker": "s", "ms": 6, "color": "C1"}
+                )
+                lab = f"closed loop, graph setting ({n} letters)" if k == 0 else ("closed loop, other settings" if k == 1 else None)  # fmt: skip
+                ax.plot([sp], [(acc if col == 1 else c) * 100], ls="none", label=lab, **style)
+                if ax is axes[1]:
+                    ax.annotate(f"{s['min_speed_mm_s']:g}–{s['max_speed_mm_s']:g}", (sp, acc * 100),
+                                textcoords="offset points", xytext=(6, -12 if k % 2 else 6), fontsize=7)  # fmt: skip
             ax.set_xlabel("mean reading speed (mm/s)")
-            ax.set_xlim(0, 85)
             ax.grid(alpha=0.3)
-            ax.legend(loc="lower left" if ax is ax1 else "upper left", fontsize=7)
+        axes[0].axhline(CHANCE * 100, color="0.4", ls="--", lw=1, label=f"chance ({CHANCE:.1%})")
+        axes[0].set(ylim=(0, 102), xlim=(0, 85), ylabel="recognition rate (% of letters)", title="10–80 mm/s")
+        axes[0].legend(loc="lower left", fontsize=6)
+        axes[1].set(
+            xlim=(25, 65), ylim=(80, 95), ylabel="recognition rate (%)", title="zoom (chance 3.8 % off-axis)"
+        )
+        axes[2].set(xlim=(0, 85), ylim=(0, max(10.0, max(p[2] for p in curve) * 110)),
+                    ylabel="non-classification rate (% of letters)", title="abstentions")  # fmt: skip
 
     ctx.plot(
         "closed_loop",
         draw,
         f"Closed-loop reading (graph setting: {n} held-out letters) against the constant-speed curve "
-        f"({curve and len(heldout_text(cfg['reps']))} letters per speed), first order, 10–80 mm/s",
+        f"({n_line} letters per speed), first order, 10–80 mm/s",
     )
 
 
