@@ -26,6 +26,7 @@ import numpy as np
 from flowtact.blocks.spiking.nb_model import fit_multinomial, log_posterior
 
 __all__ = [
+    "chow_threshold",
     "confusion",
     "crossval_predict",
     "entropy_bits",
@@ -110,3 +111,27 @@ def mi_corrected(
     h_s = entropy_bits(np.bincount(y, minlength=n_classes))
     est = min(max(mi_extrapolated(y, pred, n_classes, rng), 0.0), h_s)
     return est, raw - est
+
+
+def chow_threshold(top: np.ndarray, correct: np.ndarray, cost: float = 0.5) -> float:
+    """The reject threshold minimising Chow's risk on validation windows: errors + ``cost`` ×
+    abstentions, where a window abstains when its largest posterior ``top`` is below the threshold
+    and ``correct`` says whether its most probable class was right. Candidates: 0 (never abstain)
+    and each window's ``top`` (abstain on every window below it); the smallest of equal risks.
+    With calibrated posteriors the optimum is ``1 − cost`` (Chow 1970); a naive Bayes model is
+    over-confident, hence the search."""
+    top = np.asarray(top, np.float64)
+    correct = np.asarray(correct, bool)
+    order = np.argsort(top, kind="stable")
+    t, c = top[order], correct[order]
+    # abstaining on the k lowest windows: errors among the rest + cost · k
+    errors_kept = np.concatenate([[np.sum(~c)], np.sum(~c) - np.cumsum(~c)])
+    risk = errors_kept + cost * np.arange(len(t) + 1)
+    cand = np.concatenate([[0.0], t])  # threshold = t[k] abstains on t < t[k]: the k lowest when distinct
+    # a threshold must abstain on whole groups of equal tops: only k where t[k-1] < t[k] (or k = 0, n)
+    ok = np.ones(len(t) + 1, bool)
+    ok[1:-1] = t[:-1] < t[1:]
+    k = int(np.flatnonzero(ok)[np.argmin(risk[ok])])
+    if k == len(t):
+        return float(np.nextafter(t[-1], np.inf)) if len(t) else 0.0
+    return float(cand[k] if k == 0 else t[k])

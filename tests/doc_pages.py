@@ -33,7 +33,7 @@ CHECKED_ONLY = {
     "flowtact train-braille --out model.npz": "flowtact train-braille --help",
     # the Braille benchmark: ~30 s idle, minutes loaded (flowtact bench has its own tests)
     "flowtact bench braille --quick --out bench-braille": "flowtact bench --list",
-    # a dozen closed-loop readings of 104 letters: no arguments to parse; compiled only
+    # 6 constant-speed and 18 closed-loop readings of 208 letters: about 6 min; compiled only
     "python scripts/braille_controller_validation.py": "python -m py_compile scripts/braille_controller_validation.py",
     # three fresh numba compiles of the normal generator under different CPU tunings: minutes under load
     "python scripts/normal_draws_tuning.py": "python -m py_compile scripts/normal_draws_tuning.py",

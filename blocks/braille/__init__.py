@@ -1,11 +1,12 @@
 """Closed-loop Braille reading (Bologna et al. 2013): graphs/braille_open.yaml.
 
-================ ================ ==========================================================
-block            module           what
-================ ================ ==========================================================
-braille_scan     scan             fingertip of 24 capacitive taxels scanning a line of Braille
-speed_controller speed_controller scanning speed from the decoder's confidence; lateral corrector
-================ ================ ==========================================================
+==================== ================ ======================================================
+block                module           what
+==================== ================ ======================================================
+braille_cell_windows cell_windows     the decoder's character windows from the finger's position
+braille_scan         scan             fingertip of 24 capacitive taxels scanning a line of Braille
+speed_controller     speed_controller scanning speed from the decoder's confidence; lateral corrector
+==================== ================ ======================================================
 
 ``reading`` runs a Braille graph in process and cuts its spikes into character windows;
 ``train_braille`` is ``flowtact train-braille`` (the decoder's model, ``models/braille_first.npz``,

@@ -3,8 +3,10 @@
 What ``flowtact train-braille`` and the ``braille`` benchmark share: :func:`read_line` runs the
 open-loop graph (or any graph with a ``braille_scan`` node named ``scan``) on a text or on seeded
 random letters at a given speed, fast and in process, and returns each population's spikes with
-the character windows; :func:`char_windows` is the decoder's own window rule (a maximal run of one
-``char`` value that is no gap) applied offline.
+the character windows. The windows come from the finger's position and the known cell pitch
+(:func:`position_windows`: ``braille_cell_windows`` and the decoder's own window rule, a maximal
+run of one cell index, applied offline), never from the simulator's ``char`` stream, which only
+labels them (for training and scoring). :func:`char_windows` is the same rule on ``char``.
 """
 
 from __future__ import annotations
@@ -19,9 +21,19 @@ import yaml
 
 import flowtact.api as ft
 
-from .cells import CATEGORIES
+from .cell_windows import cell_window_values
+from .cells import CATEGORIES, LETTERS, PAPER_SCALE, Geometry
 
-__all__ = ["GAPS", "LAYERS", "OPEN_GRAPH", "Reading", "char_windows", "prefix_windows", "read_line"]
+__all__ = [
+    "GAPS",
+    "LAYERS",
+    "OPEN_GRAPH",
+    "Reading",
+    "char_windows",
+    "position_windows",
+    "prefix_windows",
+    "read_line",
+]
 
 #: The shipped open-loop graph (graphs/braille_open.yaml, found from any folder).
 OPEN_GRAPH = "braille_open"
@@ -33,7 +45,8 @@ GAPS: tuple[str, ...] = ("gap", "space")
 
 @dataclass(frozen=True)
 class Reading:
-    """One scanned line: spikes per layer, the character windows [t0, t1) and their letters."""
+    """One scanned line: spikes per layer, the character windows [t0, t1) (from position) and their
+    labels (from ``char``: a letter, or ``space`` for a dot-less cell)."""
 
     spikes: Mapping[str, tuple[np.ndarray, np.ndarray]]
     n_units: Mapping[str, int]
@@ -62,6 +75,41 @@ def char_windows(
         if not gap and start is None:
             start = k
     return np.array(out, np.float64).reshape(-1, 2), tuple(labels)
+
+
+def _runs(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Windows ``(n, 2)`` [t of a run's first sample, t of the first sample after it) of the maximal
+    runs of one value >= 0 in ``v`` (integers), and each run's first sample index; a run still open
+    at the last sample is left out (as ``naive_bayes`` leaves it)."""
+    v = np.asarray(v, np.int64)
+    if not len(v):
+        return np.zeros((0, 2)), np.zeros(0, np.int64)
+    change = np.flatnonzero(np.diff(v)) + 1
+    starts = np.concatenate([[0], change])
+    ends = np.concatenate([change, [len(v)]])
+    keep = (v[starts] >= 0) & (ends < len(v))
+    starts, ends = starts[keep], ends[keep]
+    return np.column_stack([t[starts], t[ends]]).astype(np.float64).reshape(-1, 2), starts
+
+
+def position_windows(
+    t: np.ndarray,
+    position: np.ndarray,
+    char: np.ndarray | None = None,
+    *,
+    scale: float = PAPER_SCALE,
+    categories: Sequence[str] = CATEGORIES,
+) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The decoder's windows ``(n, 2)`` from the finger's ``position`` (mm) and the cell pitch
+    (``braille_cell_windows`` then the decoder's run rule), and their labels: the ``char`` category
+    at each window's first sample (``""`` without ``char``; ``gap`` where no cell lies there)."""
+    t = np.asarray(t, np.float64)
+    k = cell_window_values(np.asarray(position, np.float64), Geometry(scale=scale))
+    windows, starts = _runs(t, k.astype(np.int64))
+    if char is None:
+        return windows, tuple("" for _ in starts)
+    c = np.asarray(char, np.float64)[starts]
+    return windows, tuple(categories[int(x)] if np.isfinite(x) else "gap" for x in c)
 
 
 def graph_text(
@@ -124,7 +172,8 @@ def read_line(
     duration_s: float | None = None,
     progress: Callable[[float, float | None], None] | None = None,
 ) -> Reading:
-    """Run ``graph`` in process, fast, and return what a decoder sees. An open-loop graph keeps
+    """Run ``graph`` in process, fast, and return what a decoder sees: the windows of the cells that
+    hold a letter (from position; a space cell's window is left out). An open-loop graph keeps
     nothing of its tick (its blocks are chunking-invariant), so a long ``tick_s`` only saves
     time; a closed loop must keep its own (pass ``tick_s=0`` to keep the graph's)."""
     from flowtact.graphfile.graph import load_graph
@@ -133,7 +182,8 @@ def read_line(
     from flowtact.runtime.inproc import InprocExecutor
     from flowtact.testing import MemoryRecorder
 
-    streams = ["scan.char", *(f"{LAYERS[k]}.spikes" for k in layers), *extra]
+    streams = ["scan.char", "scan.position", *(f"{LAYERS[k]}.spikes" for k in layers), *extra]
+    streams = list(dict.fromkeys(streams))
     path, yml = graph_text(
         graph, seed=seed, speed_mm_s=speed_mm_s, text=text, letters=letters, params=params,
         tick_s=tick_s or None, record=streams,
@@ -145,8 +195,11 @@ def read_line(
         plan, fast=True, tick_s=tick_s or plan.graph.tick_s, recorder=memory, progress=progress
     ).run(duration)
     got = {s: ft.concat(memory.chunks.get(s, []), plan.specs[tuple(s.split("."))]) for s in streams}  # type: ignore[index]
-    char = got["scan.char"]
-    windows, labels = char_windows(char.t, char.data)
+    char, pos = got["scan.char"], got["scan.position"]
+    scale = float(yaml.safe_load(yml)["nodes"]["scan"].get("params", {}).get("scale", PAPER_SCALE))
+    windows, labels = position_windows(pos.t, pos.data, char.data, scale=scale)
+    letter = np.array([c in LETTERS for c in labels], bool)  # a space cell's window: not a letter
+    windows, labels = windows[letter], tuple(c for c, ok in zip(labels, letter, strict=True) if ok)
     spikes = {
         k: (got[f"{LAYERS[k]}.spikes"].t, np.asarray(got[f"{LAYERS[k]}.spikes"].data, np.int64))
         for k in layers

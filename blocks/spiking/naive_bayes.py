@@ -13,8 +13,10 @@ import numpy as np
 
 import flowtact.api as ft
 from flowtact.blocks.spiking.nb_model import (
+    NOT_CLASSIFIED,
     ModelError,
     NaiveBayesModel,
+    decide,
     load_model,
     log_posterior,
     tempered_log_posterior,
@@ -43,6 +45,18 @@ class NaiveBayesConfig(ft.Config):
         ("gap",),
         doc="window categories that are not windows (between characters); ignored without categories",
     )
+    threshold: float = ft.param(
+        0.0,
+        doc="reject option: a window whose largest posterior probability is below this is decided "
+        "'not classified' (index n_classes); 0 never abstains",
+        ge=0,
+        le=1,
+    )
+    window_labels: bool = ft.param(
+        True,
+        doc="the window values name what is read (a categorical stream, or class indices), so the "
+        "summary scores the decisions; false for windows that only delimit (braille_cell_windows)",
+    )
 
 
 class NaiveBayes(ft.Block):
@@ -50,7 +64,8 @@ class NaiveBayes(ft.Block):
 
     Config
     ------
-    ``model`` (the file; its features, classes, units and sub-bins come from it) and ``gap``.
+    ``model`` (the file; its features, classes, units and sub-bins come from it), ``gap``, the
+    reject ``threshold`` and ``window_labels``.
 
     Notes
     -----
@@ -61,6 +76,9 @@ class NaiveBayes(ft.Block):
     prior, never NaN. A window's result waits until the spike watermark passes its end, so the
     output is the same whatever the chunking. A window still open at end of stream is dropped
     (``unfinished_windows``). Window values that are no category index count as gaps.
+    With ``threshold`` > 0 the decoder may abstain (:func:`~flowtact.blocks.spiking.nb_model.decide`):
+    a window whose largest posterior probability is below it is decided ``not classified``, a
+    category of its own after the classes (``not_classified``).
 
     Example
     -------
@@ -108,7 +126,8 @@ class NaiveBayes(ft.Block):
             shape=(),
             units="1",
             doc=(
-                "the most probable class (the first of equals), categorical (the classes), one sample per"
+                "the most probable class (the first of equals), categorical (the classes, then 'not "
+                "classified' when threshold > 0: the largest probability was below it), one sample per"
                 " finished window, stamped at its end"
             ),
         ),
@@ -128,6 +147,8 @@ class NaiveBayes(ft.Block):
     }
     counter_docs = {
         "windows": "windows decoded (posterior and decision emitted): the normal work",
+        "not_classified": "windows decided 'not classified' (largest posterior below threshold): the "
+        "reject option at work",
         "empty_windows": "windows with no spike at all: decoded as the prior (the population was silent)",
         "unfinished_windows": "a window still open at end of stream: dropped, not decoded",
         "late_spikes": "spikes older than results already emitted, by more than float rounding "
@@ -167,9 +188,13 @@ class NaiveBayes(ft.Block):
         post = ft.StreamSpec(dtype="float64", shape=(c,), units="1", labels=m.classes)
         return {
             "posterior": post,
-            "decision": ft.StreamSpec(dtype="int64", shape=(), units="1", categories=m.classes),
+            "decision": ft.StreamSpec(dtype="int64", shape=(), units="1", categories=self._decisions(m)),
             "running": post.with_(rate_hz=w.rate_hz),
         }
+
+    def _decisions(self, m: NaiveBayesModel) -> tuple[str, ...]:
+        """The decision's categories: the classes, and 'not classified' when the decoder may abstain."""
+        return (*m.classes, NOT_CLASSIFIED) if self.config.threshold > 0 else m.classes
 
     # -- state -------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -272,7 +297,9 @@ class NaiveBayes(ft.Block):
                 self._last = p
                 post_t.append(need)
                 post.append(p)
-                dec.append(int(np.argmax(p)))
+                dec.append(int(decide(p[None, :], self.config.threshold)[0]))
+                if dec[-1] == c:
+                    self.count("not_classified")
                 self._tell(dec[-1], value)
             else:
                 run_t.append(need - self._dt)
@@ -287,24 +314,36 @@ class NaiveBayes(ft.Block):
 
     def _tell(self, decided: int, value: int) -> None:
         """Keep what a window was read as, and whether that is its label (the window stream's own
-        category name, or its value where the stream has no categories), for :meth:`summary`."""
-        name = self._m.classes[decided]
-        if self._labels is not None:
+        category name, or its value where the stream has no categories; unknown without
+        ``window_labels``), for :meth:`summary`."""
+        name = self._decisions(self._m)[decided]
+        right: bool | None
+        if not self.config.window_labels:
+            right = None
+        elif decided == len(self._m.classes):
+            right = False
+        elif self._labels is not None:
             right: bool | None = 0 <= value < len(self._labels) and self._labels[value] == name
         else:
             right = value == decided
         self._read.append((name, right))
 
     def summary(self) -> str | None:
-        """``read 26 windows, 26 right (against the window labels): "qwerty…"``; None if none was read."""
+        """``read 26 windows, 26 right (against the window labels): "qwerty…"`` (``, 2 not
+        classified`` with a threshold; no score without ``window_labels``, where an abstention is
+        shown as ``?``); None if none was read."""
         if not self._read:
             return None
-        names = [n for n, _ in self._read]
+        names = ["?" if n == NOT_CLASSIFIED else n for n, _ in self._read]
         right = sum(1 for _, r in self._read if r)
         text = "".join(names) if all(len(n) == 1 for n in names) else " ".join(names)
         if len(text) > SUMMARY_TEXT_CHARS:
             text = text[: SUMMARY_TEXT_CHARS - 1] + "…"
-        return f'read {len(names)} windows, {right} right (against the window labels): "{text}"'
+        abstained = sum(1 for n, _ in self._read if n == NOT_CLASSIFIED)
+        rejects = f", {abstained} not classified" if self.config.threshold > 0 else ""
+        if not self.config.window_labels:
+            return f'read {len(names)} windows{rejects}: "{text}"'
+        return f'read {len(names)} windows, {right} right{rejects} (against the window labels): "{text}"'
 
     def _decode(self, t0: float, t1: float) -> np.ndarray:
         m = self._m

@@ -39,8 +39,10 @@ from flowtact.inputs.safe_text import shown
 
 __all__ = [
     "FORMAT",
+    "NOT_CLASSIFIED",
     "ModelError",
     "NaiveBayesModel",
+    "decide",
     "fit_gaussian",
     "fit_multinomial",
     "fit_temperature",
@@ -148,6 +150,22 @@ def fit_temperature(model: NaiveBayesModel, x: np.ndarray, y: Sequence[str]) -> 
     best = grid[int(np.argmin([loss(g) for g in grid]))]
     fine = np.linspace(best - 0.2, min(best + 0.2, 0.0), 21)
     return float(np.exp(fine[int(np.argmin([loss(g) for g in fine]))]))
+
+
+#: The decision of a window whose largest posterior probability is below the threshold: its own
+#: category, after the classes (index ``n_classes``).
+NOT_CLASSIFIED = "not classified"
+
+
+def decide(posterior: np.ndarray, threshold: float = 0.0) -> np.ndarray:
+    """The decision rule with a reject option (Chow 1970), shared by ``naive_bayes`` and the bench:
+    for posterior rows ``(n, C)``, the most probable class (the first of equals), or ``C`` (
+    :data:`NOT_CLASSIFIED`) where the largest probability is below ``threshold`` (0: never)."""
+    p = np.asarray(posterior, np.float64).reshape(len(posterior), -1)
+    if not 0.0 <= threshold <= 1.0:
+        raise ValueError(f"threshold must be in [0, 1]; got {threshold}")
+    best = np.argmax(p, axis=1).astype(np.int64)
+    return np.where(p.max(axis=1, initial=-np.inf) < threshold, p.shape[1], best)
 
 
 def log_posterior(model: NaiveBayesModel, x: np.ndarray) -> np.ndarray:

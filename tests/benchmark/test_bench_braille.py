@@ -3,8 +3,15 @@
 import numpy as np
 import pytest
 
-from flowtact.bench.braille import _fastest_constant, heldout_text
-from flowtact.bench.braille_metrics import confusion, entropy_bits, mi_bits, mi_corrected, pt_bias_bits
+from flowtact.bench.braille import fastest_constant, heldout_text, rates
+from flowtact.bench.braille_metrics import (
+    chow_threshold,
+    confusion,
+    entropy_bits,
+    mi_bits,
+    mi_corrected,
+    pt_bias_bits,
+)
 from flowtact.blocks.braille.train_braille import HELDOUT_SEED
 
 
@@ -46,10 +53,10 @@ def test_information_grows_with_the_signal_and_stays_below_the_stimulus_entropy(
 
 def test_fastest_constant_speed_of_equal_accuracy_interpolates_the_curve():
     curve = [(10.0, 1.0), (100.0, 1.0), (200.0, 0.9), (300.0, 0.5)]
-    assert _fastest_constant(curve, 1.0) == pytest.approx(100.0, abs=0.2)
-    assert _fastest_constant(curve, 0.95) == pytest.approx(150.0, abs=0.2)
-    assert _fastest_constant(curve, 0.7) == pytest.approx(250.0, abs=0.2)
-    assert np.isnan(_fastest_constant([(10.0, 0.5), (20.0, 0.4)], 0.9))
+    assert fastest_constant(curve, 1.0) == pytest.approx(100.0, abs=0.2)
+    assert fastest_constant(curve, 0.95) == pytest.approx(150.0, abs=0.2)
+    assert fastest_constant(curve, 0.7) == pytest.approx(250.0, abs=0.2)
+    assert np.isnan(fastest_constant([(10.0, 0.5), (20.0, 0.4)], 0.9))
 
 
 def test_held_out_text_is_balanced_and_from_the_held_out_seed():
@@ -57,3 +64,25 @@ def test_held_out_text_is_balanced_and_from_the_held_out_seed():
     assert len(text) == 78 and all(text.count(c) == 3 for c in "abcdefghijklmnopqrstuvwxyz")
     rng = np.random.default_rng(HELDOUT_SEED)
     assert text[:26] == "".join(rng.permutation(list("abcdefghijklmnopqrstuvwxyz")))
+
+
+def test_chow_threshold_minimises_errors_plus_half_the_abstentions_by_brute_force():
+    """Against the risk of every threshold on a fine grid (an independent oracle): the chosen one
+    reaches the least risk, and no threshold abstaining on fewer windows does."""
+    rng = np.random.default_rng(2)
+    top = np.round(rng.uniform(1 / 26, 1.0, 400), 2)  # ties on purpose
+    correct = rng.uniform(0, 1, 400) < top  # confident windows are right more often
+    risk = lambda th: np.sum(~correct & (top >= th)) + 0.5 * np.sum(top < th)  # noqa: E731
+    grid = np.linspace(0, 1.01, 10_102)
+    best = min(risk(th) for th in grid)
+    th = chow_threshold(top, correct, 0.5)
+    n_out = np.sum(top < th)
+    assert risk(th) == best and all(risk(g) > best for g in grid if np.sum(top < g) < n_out)  # fewest abstain
+    assert chow_threshold(top, np.ones(400, bool)) == 0.0  # never wrong: never abstain
+    th = chow_threshold(top, np.zeros(400, bool))  # always wrong: abstain on all
+    assert (top < th).all()
+
+
+def test_rates_count_abstentions_apart_from_errors():
+    truth = np.array([0, 1, 2, 3])
+    assert rates(np.array([0, 26, 2, 5]), truth) == (0.5, 0.25)  # 26: not classified

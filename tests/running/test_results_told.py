@@ -32,26 +32,26 @@ def test_the_braille_loop_says_what_it_read_and_how_much_was_right(tmp_path):
     # the shipped graph raises no counter that signals a fault upstream (it was float rounding)
     assert "late_spikes" not in s["counters"].get("decoder", {}), s["counters"]
     said = s["block_summaries"]
-    m = re.fullmatch(
-        r'read (\d+) windows, (\d+) right \(against the window labels\): "([a-z]+)"', said["decoder"]
-    )
+    # the decoder's windows come from position (it does not know the letters): it says what it
+    # read and how often it abstained, not how much was right
+    m = re.fullmatch(r'read (\d+) windows, (\d+) not classified: "([a-z?]+)"', said["decoder"])
     assert m, said
-    n, right, text = int(m[1]), int(m[2]), m[3]
-    # the counts are the recording's: each decision against the letter under the finger in its window
+    n, abstained, text = int(m[1]), int(m[2]), m[3]
+    # the counts are the recording's; scored against the letter under the finger in each window
     r = read_recording(rec)
     dec, char = r.streams["decoder.decision"], r.streams["scan.char"]
     classes, cats = dec.spec.categories, char.spec.categories
     decided = [classes[int(d)] for d in dec.data]
     truth = [cats[int(char.data[np.searchsorted(char.t, t) - 1])] for t in dec.t]
-    assert n == len(decided) == 26 and text == "".join(decided)
-    assert right == sum(a == b for a, b in zip(decided, truth, strict=True))
-    # The varying fingertip at the loop's 100-300 mm/s reads about 2 letters in 3 (17/26 when
-    # written; constant speed: 73 % at 80 mm/s, less faster). A decoder at chance (1/26) gets 8 or
-    # more of 26 right with probability < 1e-5 (binomial tail): a broken decoder would not.
+    assert n == len(decided) == 26 and text == "".join("?" if d == "not classified" else d for d in decided)
+    assert abstained == decided.count("not classified")
+    right = sum(a == b for a, b in zip(decided, truth, strict=True))
+    # The varying fingertip reads about 9 letters in 10 at 10-80 mm/s. A decoder at chance (1/26)
+    # gets 8 or more of 26 right with probability < 1e-5 (binomial tail): a broken decoder would not.
     assert right >= 8
     scan = re.fullmatch(r'scanned "([a-z]+)" \(26 letters\) in ([\d.]+) s, (\d+) mm/s mean', said["scan"])
     assert scan and scan[1] == "".join(truth), said
-    assert 100 <= int(scan[3]) <= 300  # the controller's bounds
+    assert 10 <= int(scan[3]) <= 80  # the controller's bounds
     assert f"decoder: {said['decoder']}" in RunSummary(**_fields(s)).format()
 
 

@@ -377,3 +377,58 @@ def test_the_summary_counts_windows_read_right_against_their_labels(cats, n_righ
     assert blk.summary() is None  # nothing read yet: nothing to say
     blk(spikes=Chunk(t, u, 10.0), window=Chunk(np.arange(len(window)) / EXAMPLE_RATE_HZ, window))
     assert blk.summary() == f'read 5 windows, {n_right} right (against the window labels): "xyzxz"'
+
+
+def test_the_reject_rule_abstains_below_the_threshold_only():
+    from flowtact.blocks.spiking.nb_model import decide
+
+    p = np.array([[0.5, 0.3, 0.2], [0.2, 0.2, 0.6], [1 / 3, 1 / 3, 1 / 3], [0.45, 0.45, 0.1]])
+    assert decide(p).tolist() == [0, 2, 0, 0]  # no threshold: the most probable, the first of equals
+    assert decide(p, 0.5).tolist() == [0, 2, 3, 3]  # below 0.5: "not classified" (index 3)
+    assert decide(p, 0.6).tolist() == [3, 2, 3, 3]  # at the threshold: still classified
+    assert decide(p, 1.0).tolist() == [3, 3, 3, 3]
+    with pytest.raises(ValueError, match="threshold must be in"):
+        decide(p, 1.5)
+
+
+def test_the_block_abstains_by_the_shared_rule_and_counts_it():
+    """Decisions are decide(posterior, threshold) of the block's own posteriors; abstentions get the
+    category 'not classified', a counter and a place in the summary."""
+    from flowtact.blocks.spiking.nb_model import NOT_CLASSIFIED, decide
+
+    (t, u), window = example_data(labels=(0, 1, 2, 0, 2, 1, 1, 0), seed=5)
+    plain = run_offline(NaiveBayes(model=str(example_model_path())), spikes=(t, u), window=window,
+                        rate_hz=EXAMPLE_RATE_HZ)  # fmt: skip
+    top = plain["posterior"].data.max(axis=1)
+    thr = float(np.median(top))  # half the windows fall below it
+    blk = NaiveBayes(model=str(example_model_path()), threshold=thr)
+    out = run_offline(blk, spikes=(t, u), window=window, rate_hz=EXAMPLE_RATE_HZ)
+    dec = out["decision"].data
+    np.testing.assert_array_equal(dec, decide(out["posterior"].data, thr))
+    n_abstained = int((top < thr).sum())
+    assert 0 < n_abstained < len(top) and int((dec == 3).sum()) == n_abstained
+    spec = blk.specs(
+        {
+            "spikes": StreamSpec(dtype="int64", events=True, n_units=4),
+            "window": StreamSpec(dtype="int64", rate_hz=EXAMPLE_RATE_HZ),
+        }
+    )
+    assert spec["decision"].categories[-1] == NOT_CLASSIFIED and len(spec["decision"].categories) == 4
+
+
+def test_the_summary_counts_abstentions_and_scores_only_labelled_windows():
+    (t, u), window = example_data(labels=(0, 1, 2, 0, 2), seed=3)
+    spikes, win = Chunk(t, u, 10.0), Chunk(np.arange(len(window)) / EXAMPLE_RATE_HZ, window)
+    specs = {
+        "spikes": StreamSpec(dtype="int64", events=True, n_units=4),
+        "window": StreamSpec(dtype="int64", rate_hz=EXAMPLE_RATE_HZ),
+    }
+    blk = NaiveBayes(model=str(example_model_path()), threshold=1.0)  # abstains on every window
+    blk.bind(specs)
+    blk(spikes=spikes, window=win)
+    assert blk.summary() == 'read 5 windows, 0 right, 5 not classified (against the window labels): "?????"'
+    assert blk.counters["not_classified"] == 5
+    blk = NaiveBayes(model=str(example_model_path()), window_labels=False)  # windows that only delimit
+    blk.bind(specs)
+    blk(spikes=spikes, window=win)
+    assert blk.summary() == 'read 5 windows: "xyzxz"'
