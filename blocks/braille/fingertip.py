@@ -59,19 +59,20 @@ def _compress(
     qx: np.ndarray,
     qw: np.ndarray,
     radius: float,
-    height: float,
+    heights: np.ndarray,
     half: float,
-    sigma: float,
+    sigmas: np.ndarray,
     reach: float,
 ) -> np.ndarray:
-    """Mean compression (mm, above the uniform press) under each taxel, for each finger position."""
+    """Mean compression (mm, above the uniform press) under each taxel, for each finger position
+    (dot d of height ``heights[d]``; the cover's spread ``sigmas[i]`` at finger position i)."""
     n, m, q = len(xf), len(ox), len(qx)
     out = np.zeros((n, m))
-    k = 1.0 / (math.sqrt(2.0) * sigma)
     inv2s = 1.0 / (4.0 * half)
     bx = np.empty((q, m))
     by = np.empty((q, m))
     for i in range(n):
+        k = 1.0 / (math.sqrt(2.0) * sigmas[i])
         # dots sorted by x: scan only the window [xf − reach, xf + reach]
         lo = np.searchsorted(dots_x, xf[i] - reach)
         hi = np.searchsorted(dots_x, xf[i] + reach)
@@ -87,7 +88,7 @@ def _compress(
                     rho2 = (qx[a] * qx[a] + qx[b] * qx[b]) / (radius * radius)
                     if rho2 >= 1.0:
                         continue
-                    w = qw[a] * qw[b] * height * (1.0 - rho2)
+                    w = qw[a] * qw[b] * heights[d] * (1.0 - rho2)
                     for j in range(m):
                         out[i, j] += w * bx[a, j] * by[b, j]
     return out
@@ -110,16 +111,36 @@ class Fingertip:
     def sigma_mm(self) -> float:
         return self.spread * self.cover_mm
 
-    def compression(self, x: np.ndarray, y: np.ndarray, dots: np.ndarray) -> np.ndarray:
-        """(n, 24) mean cover compression (mm) under each taxel, finger centre at (x[i], y[i])."""
+    def compression(
+        self,
+        x: np.ndarray,
+        y: np.ndarray,
+        dots: np.ndarray,
+        *,
+        height_scale: np.ndarray | None = None,
+        sigma_mm: np.ndarray | None = None,
+        press_mm: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """(n, 24) mean cover compression (mm) under each taxel, finger centre at (x[i], y[i]).
+
+        The fingertip's variations, all optional (None: the nominal constant): ``height_scale``
+        multiplies each dot's height (one per row of ``dots``), ``sigma_mm`` is the cover's spread
+        at each finger position (its wear) and ``press_mm`` the uniform press there."""
         g = self.geometry
         order = np.argsort(dots[:, 0], kind="stable")
         dx = np.ascontiguousarray(dots[order, 0])
         dy = np.ascontiguousarray(dots[order, 1])
+        heights = np.full(len(dots), g.dot_height)
+        if height_scale is not None:
+            heights = g.dot_height * np.asarray(height_scale, np.float64)
+        sigmas = np.full(len(x), self.sigma_mm)
+        if sigma_mm is not None:
+            sigmas = np.asarray(sigma_mm, np.float64).reshape(len(x))
         ox, oy = taxel_offsets(self.pitch_mm)
         nodes, weights = np.polynomial.legendre.leggauss(_NODES)
         r = g.dot_radius
-        reach = r + 0.5 * self.taxel_mm + 6.0 * self.sigma_mm + max(np.abs(ox).max(), np.abs(oy).max())
+        widest = float(sigmas.max()) if len(sigmas) else self.sigma_mm
+        reach = r + 0.5 * self.taxel_mm + 6.0 * widest + max(np.abs(ox).max(), np.abs(oy).max())
         out = _compress(
             np.ascontiguousarray(x, np.float64),
             np.ascontiguousarray(y, np.float64),
@@ -130,12 +151,14 @@ class Fingertip:
             nodes * r,
             weights * r,
             r,
-            g.dot_height,
+            np.ascontiguousarray(heights[order]),
             0.5 * self.taxel_mm,
-            self.sigma_mm,
+            np.ascontiguousarray(sigmas),
             reach,
         )
-        return out + self.press_mm
+        if press_mm is None:
+            return out + self.press_mm
+        return out + np.asarray(press_mm, np.float64).reshape(len(x), 1)
 
     def reading(self, compression: np.ndarray) -> np.ndarray:
         """ΔC/C0 of a parallel-plate taxel whose gap closes by ``transmission · compression``."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -12,6 +13,7 @@ import flowtact.api as ft
 
 from .cells import CATEGORIES, LETTERS, Geometry, dot_positions, text_cells
 from .fingertip import COLS, ROWS, Fingertip
+from .variation import CONDITION_LABELS, ROBOT, Drift, Trials, dot_scales
 
 __all__ = ["TAXEL_LABELS", "BrailleScan", "BrailleScanConfig"]
 
@@ -45,6 +47,38 @@ class BrailleScanConfig(ft.BadDataConfig):
         0.3, doc="fraction of the cover compression closing the taxel gap", gt=0, le=1
     )
     gap_mm: float = ft.param(0.5, doc="dielectric gap of a taxel at rest", gt=0)
+    # -- the fingertip's variation (docs/braille.md, "A fingertip that varies"); 0: none --------------
+    trial_cells: int = ft.param(
+        0,
+        doc="cells per trial: each trial draws its own press, lateral offset, yaw and gain (0: one trial)",
+        ge=0,
+    )
+    press_sd_mm: float = ft.param(0.0, doc="sd of the per-trial offset of press_mm", ge=0)
+    press_drift_mm: float = ft.param(0.0, doc="sd of the slow drift of press_mm within a trial", ge=0)
+    drift_tau_s: float = ft.param(2.0, doc="correlation time of the slow press and gain drifts", gt=0)
+    dot_height_min: float = ft.param(1.0, doc="lowest dot height, as a factor of the nominal one", gt=0)
+    dot_height_max: float = ft.param(1.0, doc="highest dot height (each dot uniform in [min, max])", gt=0)
+    lateral_sd_mm: float = ft.param(0.0, doc="sd of the per-trial lateral (±Y) offset of the line", ge=0)
+    yaw_sd_deg: float = ft.param(
+        0.0,
+        doc="sd of the per-trial yaw of the line (degrees, about the trial's first cell boundary)",
+        ge=0,
+        le=10,
+    )
+    speed_jitter: float = ft.param(
+        0.0, doc="sd of the actual speed around the command, as a fraction of it", ge=0, le=0.2
+    )
+    speed_jitter_tau_s: float = ft.param(0.1, doc="correlation time of the speed jitter", gt=0)
+    gain_sd: float = ft.param(0.0, doc="sd of the per-trial log sensor gain", ge=0, le=1)
+    gain_drift: float = ft.param(0.0, doc="sd of the slow drift of the log sensor gain", ge=0, le=1)
+    cover_tau_s: float = ft.param(
+        0.0,
+        doc="the cover's relaxation time: the compression reaches the taxels low-passed by it (0: at once)",
+        ge=0,
+    )
+    wear_per_m: float = ft.param(
+        0.0, doc="cover wear: growth of its spread per metre slid, as a fraction of spread·cover_mm", ge=0
+    )
 
     def check(self) -> None:
         if self.text and self.random_letters:
@@ -56,11 +90,22 @@ class BrailleScanConfig(ft.BadDataConfig):
             raise self.error("text", f"must hold only letters a-z and spaces; got {''.join(bad)!r}")
         if self.max_speed_mm_s < self.min_speed_mm_s:
             raise self.error("max_speed_mm_s", f"must be >= min_speed_mm_s ({self.min_speed_mm_s:g})")
-        top = self.transmission * (self.press_mm + 0.5 * self.scale)
+        if self.dot_height_max < self.dot_height_min:
+            raise self.error("dot_height_max", f"must be >= dot_height_min ({self.dot_height_min:g})")
+        top = self.transmission * (self.press_top() + 0.5 * self.scale * self.dot_height_max)
         if top >= self.gap_mm:
             raise self.error(
-                "gap_mm", f"must exceed transmission·(press + dot height) = {top:g} mm (the gap would close)"
+                "gap_mm",
+                f"must exceed transmission·(highest press + highest dot) = {top:g} mm (the gap would close)",
             )
+
+    def press_top(self) -> float:
+        """The highest press (mm) a sample may have: nominal + 4 sd of trial offset and drift (clipped there)."""
+        return self.press_mm + 4.0 * (self.press_sd_mm + self.press_drift_mm)
+
+    def slowest(self) -> float:
+        """The lowest factor of the command the jittered speed reaches (clipped at 4 sd, at most −50 %)."""
+        return 1.0 - min(4.0 * self.speed_jitter, 0.5)
 
     def fingertip(self) -> Fingertip:
         """The sensor model these parameters describe."""
@@ -86,6 +131,21 @@ class BrailleScanConfig(ft.BadDataConfig):
 
 SUMMARY_TEXT_CHARS = 60
 """At most this many characters of the line in :meth:`BrailleScan.summary`."""
+
+
+@njit(cache=True)
+def _relax(u: np.ndarray, a: float, state: np.ndarray, started: bool) -> np.ndarray:
+    """First-order low-pass of each column of ``u``: ``y_i = a·y_{i−1} + (1 − a)·u_i``, continuing
+    from ``state`` (updated in place); the first sample of a run starts at rest on ``u_0``."""
+    out = np.empty_like(u)
+    for i in range(u.shape[0]):
+        for j in range(u.shape[1]):
+            if i == 0 and not started:
+                state[j] = u[0, j]
+            else:
+                state[j] = a * state[j] + (1.0 - a) * u[i, j]
+            out[i, j] = state[j]
+    return out
 
 
 @njit(cache=True)
@@ -194,7 +254,25 @@ class BrailleScan(ft.Source):
             shape=(),
             units="mm",
             rate="rate_hz",
-            doc="the finger centre across the line (0 = on the middle dot row): offset + correction",
+            doc="the finger centre across the line as the robot commands it: y_offset_mm + correction (the "
+            "line's own offset and yaw are in conditions' lateral)",
+        ),
+        "speed": ft.Port(
+            dtype="float64",
+            shape=(),
+            units="mm/s",
+            rate="rate_hz",
+            doc="the finger's actual speed from this sample: the (clamped) command times the jitter",
+        ),
+        "conditions": ft.Port(
+            dtype="float64",
+            shape=(len(CONDITION_LABELS),),
+            units="mm",
+            rate="rate_hz",
+            labels=CONDITION_LABELS,
+            doc="what the taxels met at each sample: press (mm), lateral (the finger centre from the line's "
+            "middle dot row, mm: what the taxels saw), spread (the cover's blur sd, mm), dot_scale_1 (mean "
+            "dot height factor of the cell under the finger centre, 0 without dots), yaw_deg, gain_1",
         ),
     }
     counter_docs = {
@@ -207,6 +285,7 @@ class BrailleScan(ft.Source):
     def ends_at(self, inputs: Mapping[str, ft.StreamSpec]) -> float | None:
         c = self.config
         v = c.min_speed_mm_s if "speed" in inputs else self._clamp_speed(c.speed_mm_s)
+        v = v * c.slowest() if c.speed_jitter else v
         x0, x_end = c.track()
         return _samples_at(x0, x_end, v / c.rate_hz) / c.rate_hz
 
@@ -215,7 +294,8 @@ class BrailleScan(ft.Source):
 
     def reset(self) -> None:
         c = self.config
-        text_rng, self._noise_rng = self.rng.spawn(2)
+        text_rng, self._noise_rng, var_rng = self.rng.spawn(3)
+        trial_rng, dot_rng, self._drift_rng = var_rng.spawn(3)
         if c.random_letters:
             self.text = "".join(LETTERS[k] for k in text_rng.integers(0, len(LETTERS), c.random_letters))
         else:
@@ -223,6 +303,22 @@ class BrailleScan(ft.Source):
         self._tip = c.fingertip()
         cells = text_cells(self.text)
         self._dots = dot_positions(cells, self._tip.geometry)
+        self._scales = dot_scales(dot_rng, len(self._dots), c.dot_height_min, c.dot_height_max)
+        cell = self._dots[:, 2].astype(np.int64)
+        n_dots = np.bincount(cell, minlength=len(cells))
+        self._cell_scale = np.bincount(cell, self._scales, minlength=len(cells)) / np.maximum(n_dots, 1)
+        g = self._tip.geometry
+        self._trials = Trials.draw(
+            trial_rng, len(cells), c.trial_cells, g.cell_pitch, c.press_sd_mm, c.lateral_sd_mm, c.yaw_sd_deg,
+            c.gain_sd,
+        )  # fmt: skip
+        self._drifts = (
+            Drift(c.press_drift_mm, c.drift_tau_s, 1.0 / c.rate_hz),
+            Drift(c.gain_drift, c.drift_tau_s, 1.0 / c.rate_hz),
+            Drift(c.speed_jitter, c.speed_jitter_tau_s, 1.0 / c.rate_hz),
+        )
+        self._cover = np.zeros(ROWS * COLS)  # the cover's relaxing compression (cover_tau_s)
+        self._drifting = bool(c.press_drift_mm or c.gain_drift or c.speed_jitter)
         self._cat = np.array([CATEGORIES.index("space" if ch == " " else ch) for ch in self.text], np.float64)
         self._dt = 1.0 / c.rate_hz
         self._i = 0
@@ -292,39 +388,76 @@ class BrailleScan(ft.Source):
     ) -> dict[str, ft.Chunk]:
         self._take("speed", speed)
         self._take("lateral", lateral)
-        n_due = max(self.due(now, self.config.rate_hz) - self._i, 0)
-        xs, ys = [], []
+        c = self.config
+        n_due = max(self.due(now, c.rate_hz) - self._i, 0)
+        rows: list[tuple[float, ...]] = []  # per sample: x, y, actual speed, press, lateral, gain, trial
+        trials, (press_drift, gain_drift, jitter) = self._trials, self._drifts
+        lo = c.slowest()
         for _ in range(n_due if not self._done else 0):
+            eps = self._drift_rng.standard_normal(3) if self._drifting else (0.0, 0.0, 0.0)
+            factor = min(max(1.0 + jitter.step(eps[2]), lo), 2.0 - lo) if c.speed_jitter else 1.0
             if self._i > 0:
                 t_prev = (self._i - 1) * self._dt
                 v = self._apply_until("speed", t_prev)
                 self._v = self._v if v is None else v
                 lat = self._apply_until("lateral", t_prev)
                 self._lat = self._lat if lat is None else lat
-                self._x = self._x + self._v * self._dt
+                self._x = self._x + self._v * factor * self._dt
             if self._x > self._x_end:
                 self._done = True
                 break
-            xs.append(self._x)
-            ys.append(self.config.y_offset_mm + self._lat)
+            k = trials.index(self._x)
+            y = c.y_offset_mm + self._lat
+            press = min(max(c.press_mm + trials.press[k] + press_drift.step(eps[0]), 0.0), c.press_top())
+            gain = math.exp(trials.log_gain[k] + gain_drift.step(eps[1]))
+            rows.append((self._x, y, self._v * factor, press, y - trials.line_y(k, self._x), gain, k))
             self._i += 1
-        n = len(xs)
+        n = len(rows)
+        table = np.array(rows, np.float64).reshape(n, 7)
+        x, y = table[:, 0].copy(), table[:, 1].copy()
         if n:
-            self._x_last = xs[-1]
-        t = (self._i - n + np.arange(n)) / self.config.rate_hz
-        x, y = np.array(xs, np.float64), np.array(ys, np.float64)
+            self._x_last = float(x[-1])
+        t = (self._i - n + np.arange(n)) / c.rate_hz
         out: dict[str, ft.Chunk] = {}
         want = self.demanded
+        spread = self._tip.sigma_mm * (1.0 + c.wear_per_m * 1e-3 * (x - self._x0)) if c.wear_per_m else None
         if "taxels" in want:
-            noise = self._noise_rng.standard_normal((n, ROWS * COLS)) * self.config.noise
-            out["taxels"] = ft.Chunk(t, self._tip.reading(self._tip.compression(x, y, self._dots)) + noise)
+            noise = self._noise_rng.standard_normal((n, ROWS * COLS)) * c.noise
+            squeeze = self._tip.compression(
+                x, table[:, 4], self._dots, height_scale=self._scales, sigma_mm=spread, press_mm=table[:, 3]
+            )
+            if c.cover_tau_s and n:
+                a = math.exp(-self._dt / c.cover_tau_s)
+                squeeze = _relax(squeeze, a, self._cover, self._i > n)
+            out["taxels"] = ft.Chunk(t, self._tip.reading(squeeze) * table[:, 5:6] + noise)
         if "char" in want:
             out["char"] = ft.Chunk(t, self._char(x))
         if "position" in want:
             out["position"] = ft.Chunk(t, x)
         if "y" in want:
             out["y"] = ft.Chunk(t, y)
+        if "speed" in want:
+            out["speed"] = ft.Chunk(t, table[:, 2].copy())
+        if "conditions" in want:
+            out["conditions"] = ft.Chunk(t, self._conditions(table, spread))
         return out
+
+    def _conditions(self, table: np.ndarray, spread: np.ndarray | None) -> np.ndarray:
+        """(n, 6) what each sample's taxels met, in :data:`CONDITION_LABELS` order."""
+        x, k = table[:, 0], table[:, 6].astype(np.int64)
+        cell = np.floor(x / self._tip.geometry.cell_pitch).astype(np.int64)
+        inside = (cell >= 0) & (cell < len(self._cell_scale))
+        scale = np.where(inside, self._cell_scale[np.clip(cell, 0, max(len(self._cell_scale) - 1, 0))], 0.0)
+        return np.column_stack(
+            [
+                table[:, 3],
+                table[:, 4],
+                np.full(len(x), self._tip.sigma_mm) if spread is None else spread,
+                scale,
+                np.degrees(self._trials.yaw_rad[k]),
+                table[:, 5],
+            ]
+        )
 
     def _char(self, x: np.ndarray) -> np.ndarray:
         """Category of the cell under each finger position (0 between cells and off the text)."""
@@ -357,7 +490,11 @@ class BrailleScan(ft.Source):
         speed[100] = 0.0  # clamped to the minimum
         lateral = 0.3 * np.sin(np.arange(n) / 60.0)
         return ft.Example(
-            params={"text": "bat", "rate_hz": 250.0},
+            params={
+                "text": "bat",
+                "rate_hz": 250.0,
+                **ROBOT,
+            },  # every variation on: the suite checks them too
             inputs={"speed": speed, "lateral": lateral},
             units={"speed": "mm/s", "lateral": "mm"},
             rate_hz=250.0,
