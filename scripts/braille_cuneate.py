@@ -95,6 +95,9 @@ VARIANTS = (
     Variant("gain 1.5, tau_m 4 ms", nlif={"gain": 1.5, "tau_s": 0.004}),
     Variant("gain 3, tau_m 4 ms", nlif={"gain": 3.0, "tau_s": 0.004}),
     Variant("gain 2, tau_syn 4 ms", synapse={"tau_s": 0.004}, nlif={"gain": 2.0}),
+    Variant("gain 4, tau_syn 4 ms", synapse={"tau_s": 0.004}, nlif={"gain": 4.0}),
+    Variant("gain 3, tau_syn 4 ms", synapse={"tau_s": 0.004}, nlif={"gain": 3.0}),
+    Variant("gain 4, tau_syn 4 ms, tau_m 4 ms", synapse={"tau_s": 0.004}, nlif={"gain": 4.0, "tau_s": 0.004}),
     Variant("shipped preset", synapse=dict(CUNEATE_SYNAPSE), nlif=dict(CUNEATE)),
 )
 VARIANT_NAMES = tuple(v.name for v in VARIANTS)
@@ -262,7 +265,7 @@ def draw(results: Mapping[str, Any], path: str) -> None:
 
     lay = results["layers"]
     speeds = [float(s) for s in results["speeds"]]
-    fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), gridspec_kw={"width_ratios": [1.0, 1.25, 1.0]})
+    fig, ax = plt.subplots(1, 3, figsize=(16, 6.5), gridspec_kw={"width_ratios": [1.0, 1.25, 1.0]})
     styles = {"first order": "k-o", "old preset": "r--s", "shipped preset": "b-^"}
     for name, st in styles.items():
         if name in lay:

@@ -25,6 +25,10 @@ CHECKED_ONLY = {
     "python scripts/braille_discrimination.py --letters 520 --speed 30": (
         "python scripts/braille_discrimination.py --help"
     ),
+    # 3 x 260 training and 8 x 520 validation letters, then some 25 second-order layers: minutes
+    "python scripts/braille_cuneate.py --json cuneate.json --figure braille-cuneate.png": (
+        "python scripts/braille_cuneate.py --help"
+    ),
     # 3 x 260 letters of training runs (README runs a small train-braille in full)
     "flowtact train-braille --out model.npz": "flowtact train-braille --help",
     # the Braille benchmark: ~30 s idle, minutes loaded (flowtact bench has its own tests)
