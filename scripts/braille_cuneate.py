@@ -265,7 +265,7 @@ def draw(results: Mapping[str, Any], path: str) -> None:
 
     lay = results["layers"]
     speeds = [float(s) for s in results["speeds"]]
-    fig, ax = plt.subplots(1, 3, figsize=(16, 6.5), gridspec_kw={"width_ratios": [1.0, 1.25, 1.0]})
+    fig, ax = plt.subplots(1, 3, figsize=(16, 7), gridspec_kw={"width_ratios": [1.0, 1.25, 1.0]})
     styles = {"first order": "k-o", "old preset": "r--s", "shipped preset": "b-^"}
     for name, st in styles.items():
         if name in lay:
@@ -290,17 +290,18 @@ def draw(results: Mapping[str, Any], path: str) -> None:
     ax[1].set_yticks(y, names, fontsize=8)
     ax[1].invert_yaxis()
     ax[1].set_xlabel(f"information about the letter at {TRANSFER_SPEED:g} mm/s (bits; dashed: first order)")
-    ax[1].set_xlim(2.0, 4.8)
-    ax[1].legend(fontsize=8, loc="lower right")
+    ax[1].set_xlim(0.0, 4.8)
+    ax[1].legend(fontsize=8, loc="upper right")
     ax[1].set_title("one factor at a time (H(letter) = 4.70 bits)")
     for name, st in (("old preset", "r--s"), ("shipped preset", "b-^")):
         tr = results.get("transfer", {}).get(name)
         if tr:
             ax[2].plot(tr["n"], tr["mean"], st, label=f"{name}: mean cuneate count")
             ax[2].plot(tr["n"], tr["silent"], st[0] + ":", label=f"{name}: fraction silent")
-    ax[2].plot([0, 6], [0, 6], color="gray", lw=0.8, label="identity")
-    ax[2].set_xlim(0, None)
-    ax[2].set_ylim(0, 6)
+    top = max((max(t["n"]) for t in results.get("transfer", {}).values() if t["n"]), default=6)
+    ax[2].plot([0, top], [0, top], color="gray", lw=0.8, label="identity")
+    ax[2].set_xlim(0, top)
+    ax[2].set_ylim(0, top)
     ax[2].set_xlabel(f"spikes of the afferent in a window ({TRANSFER_SPEED:g} mm/s)")
     ax[2].set_ylabel("cuneate spikes (count), or fraction")
     ax[2].set_title("cuneate neurons sampling one afferent")
