@@ -102,8 +102,10 @@ def main(argv: list[str] | None = None) -> int:
         fig, ax = plt.subplots(figsize=(6, 4))
         v = [r["speed_mm_s"] for r in rows]
         for k, name in (("first", "first order (24 afferents)"), ("second", "second order (49 cuneate)")):
-            ax.plot(v, [100 * r[k] for r in rows], "o-", label=name)
-        ax.plot([30], [89], "k*", ms=12, label="Bologna et al. 2012 abstract: 89 % at 30 mm/s")
+            acc = np.array([r[k] for r in rows])
+            se = 100 * np.sqrt(acc * (1 - acc) / np.array([r["letters"] for r in rows]))  # binomial
+            ax.errorbar(v, 100 * acc, yerr=se, fmt="o-", capsize=3, label=f"{name} (± 1 s.e.)")
+        ax.plot([30], [89], "r*", ms=14, zorder=5, label="Bologna et al. 2012 abstract: 89 % at 30 mm/s")
         ax.axhline(100 / 26, color="0.5", ls=":", lw=1, label="chance (1/26)")
         ax.set_xlabel("constant scanning speed (mm/s)")
         ax.set_ylabel("held-out letters recognised (%)")

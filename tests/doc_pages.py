@@ -29,6 +29,10 @@ CHECKED_ONLY = {
     "python scripts/braille_cuneate.py --json cuneate.json --figure braille-cuneate.png": (
         "python scripts/braille_cuneate.py --help"
     ),
+    # 3 x 260 training letters and 6 x 260 held-out ones on the varying fingertip: about a minute idle
+    "python scripts/braille_fingertip_curve.py --reps 10 --plot braille-fingertip-curve.png": (
+        "python scripts/braille_fingertip_curve.py --help"
+    ),
     # 3 x 260 letters of training runs (README runs a small train-braille in full)
     "flowtact train-braille --out model.npz": "flowtact train-braille --help",
     # the Braille benchmark: ~30 s idle, minutes loaded (flowtact bench has its own tests)

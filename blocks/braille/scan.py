@@ -186,6 +186,13 @@ class BrailleScan(ft.Source):
     that time exactly at constant speed; with ``speed`` connected, the time at
     ``min_speed_mm_s`` (a bound; flowtact runs until the latest source end before a graph's
     ``duration_s``, so shorten a closed loop with ``--duration``).
+    *Variation* (``variation``; none by default, docs/braille.md "A fingertip that varies"): per
+    trial of ``trial_cells`` cells a press offset, the line's lateral offset and yaw, and a sensor
+    gain; slow OU drifts of press and gain; an OU jitter of the actual speed around the command
+    (``position`` is the true position, ``speed`` the actual speed); per-dot heights uniform in
+    [``dot_height_min``, ``dot_height_max``] × nominal; the cover's spread growing with the distance
+    slid (``wear_per_m``) and its compression relaxing with ``cover_tau_s``. All drawn from the
+    node's seed on streams of their own, recorded per sample in ``conditions``.
     *Safety*: speeds outside the range (0, negative, huge) are clamped and counted
     (``speed_clamped``); NaN/inf speed or lateral samples follow ``on_bad_data`` (drop and hold
     both keep the previous command).

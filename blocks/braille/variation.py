@@ -74,11 +74,12 @@ class Trials:
         gain_sd: float,
     ) -> Trials:
         """Independent normal draws per trial, in a fixed order (press, lateral, yaw, gain), each
-        skipped (zeros) when its sd is 0 so one variation never shifts another's draws."""
+        drawn even when its sd is 0 (giving zeros), so turning one variation off leaves the others'
+        draws as they were."""
         n = max(math.ceil(n_cells / cells), 1) if cells else 1
 
         def normal(sd: float) -> np.ndarray:
-            return rng.standard_normal(n) * sd if sd > 0 else np.zeros(n)
+            return rng.standard_normal(n) * sd
 
         press, lateral = normal(press_sd), normal(lateral_sd)
         yaw = normal(math.radians(yaw_sd_deg))

@@ -212,3 +212,13 @@ def test_bad_variation_parameters_are_refused_in_one_line(params, field, words):
 def test_both_braille_graphs_turn_the_calibrated_variation_on(graph):
     params = yaml.safe_load((GRAPHS / graph).read_text())["nodes"]["scan"]["params"]
     assert {k: params.get(k) for k in ROBOT} == ROBOT
+
+
+def test_turning_one_variation_off_leaves_the_others_draws_as_they_were():
+    """Each variation draws from a fixed place in its stream: with the lateral offset off, press,
+    gain and yaw are the same values (so an ablation compares like with like)."""
+    a = scan(3.0, seed=5, text="abc", **ROBOT)["conditions"].data
+    b = scan(3.0, seed=5, text="abc", **(ROBOT | {"lateral_sd_mm": 0.0}))["conditions"].data
+    for ch in ("press", "gain_1", "yaw_deg", "spread", "dot_scale_1"):
+        np.testing.assert_array_equal(a[:, C[ch]], b[:, C[ch]])
+    assert not np.array_equal(a[:, C["lateral"]], b[:, C["lateral"]])
