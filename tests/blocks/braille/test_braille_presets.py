@@ -37,7 +37,7 @@ def _cuneate_spikes(afferent_times: np.ndarray, source: int, **nlif: float) -> n
 
 def test_a_cuneate_neuron_relays_each_spike_of_its_single_afferent_at_once_and_only_once():
     # The session-39 repair (docs/braille.md, "The second-order layer"): with the old preset (gain 1,
-    # tau_syn 10 ms) an isolated afferent spike fired nothing and about four in 30 ms were needed, so
+    # tau_syn 10 ms) an isolated afferent spike fired nothing (4 at 80 spikes/s fired one), so
     # the layer dropped the 1-2 spike responses that tell weak and off-centre dots apart.
     w = Synapse(preset="braille.cuneate").config.matrix()
     rng = np.random.default_rng(3)
