@@ -22,6 +22,7 @@ run on the same features.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -122,6 +123,13 @@ def features(spikes: tuple[np.ndarray, np.ndarray], r: Reading, n_units: int, n_
     return window_features(*spikes, r.windows, n_units=n_units, n_bins=n_bins)
 
 
+def letters_only(r: Reading) -> Reading:
+    """The run with only the windows labelled a letter (a reader whose windows come from the finger's
+    position may also cut windows over gaps or spaces)."""
+    keep = [i for i, c in enumerate(r.letters) if c in LETTERS]
+    return dataclasses.replace(r, windows=r.windows[keep], letters=tuple(r.letters[i] for i in keep))
+
+
 def labels(r: Reading) -> np.ndarray:
     return np.array([LETTERS.index(c) for c in r.letters], np.int64)
 
@@ -162,16 +170,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     variants = [v for v in VARIANTS if not a.variants or v.name in a.variants.split(";")]
     t_start = time.time()
     train = [
-        read_line(seed=TRAIN_SEED + k, speed_mm_s=s, letters=a.train_letters, layers=("first",))
+        letters_only(read_line(seed=TRAIN_SEED + k, speed_mm_s=s, letters=a.train_letters, layers=("first",)))
         for k, s in enumerate(TRAIN_SPEEDS)
     ]
     valid = {
-        s: read_line(
-            seed=VALID_SEED + k,
-            speed_mm_s=s,
-            letters=a.letters,
-            layers=("first",),
-            params={"scan": {"max_speed_mm_s": FAST_LIMIT_MM_S}} if s > 100 else None,
+        s: letters_only(
+            read_line(
+                seed=VALID_SEED + k,
+                speed_mm_s=s,
+                letters=a.letters,
+                layers=("first",),
+                params={"scan": {"max_speed_mm_s": FAST_LIMIT_MM_S}} if s > 100 else None,
+            )
         )
         for k, s in enumerate(SPEEDS)
     }
