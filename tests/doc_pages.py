@@ -25,6 +25,10 @@ CHECKED_ONLY = {
     "python scripts/braille_discrimination.py --letters 520 --speed 30": (
         "python scripts/braille_discrimination.py --help"
     ),
+    # 3 x 260 training and 8 x 520 validation letters, then some 25 second-order layers: minutes
+    "python scripts/braille_cuneate.py --json cuneate.json --figure braille-cuneate.png": (
+        "python scripts/braille_cuneate.py --help"
+    ),
     # 3 x 260 training letters and 6 x 260 held-out ones on the varying fingertip: about a minute idle
     "python scripts/braille_fingertip_curve.py --reps 10 --plot braille-fingertip-curve.png": (
         "python scripts/braille_fingertip_curve.py --help"
