@@ -53,7 +53,7 @@ LOGREG_SPEEDS = (30.0, 80.0, 200.0)
 DECODER_LAYERS = ("first order", "old preset", "shipped preset")
 #: Speeds above the scan's default limit (100 mm/s) run with it raised to this.
 FAST_LIMIT_MM_S = 400.0
-#: Shipped values before session 39 (the variants below change one of them at a time).
+#: The shipped values before the secure-relay preset (the variants below change one of them at a time).
 OLD_SYNAPSE: dict[str, Any] = {
     "rate_hz": 250.0, "tau_s": 0.01, "grid": (6, 4), "n_targets": 49, "fan_in": (1, 3), "weight": 1.0,
     "connect_seed": 13,

@@ -16,7 +16,7 @@ them):
   one afferent spike (a current of 1) lifts v by 4·(1 − e^(−0.4)) = 1.32 in one 4 ms step, over
   the threshold of 1 by 6 noise sd (σ 1 /√s) — the smallest whole gain that does (3 gives 0.99);
   refractory 8 ms, like the afferents, so a train of one afferent passes spike for spike. The
-  session-39 measurement (docs/braille.md, "The second-order layer") found the old setting (gain
+  measurement (docs/braille.md, "The second-order layer") found the old setting (gain
   1, τ_syn 10 ms: 2 afferent spikes 8 ms apart fired nothing, 4 at 80 spikes/s one) silenced most 1–2-spike responses.
 * ``synapse`` ``cuneate``: each of 49 targets samples 1–3 adjacent taxels on the 6 × 4 grid
   (the paper's rule), ``connect_seed`` 13 (fixed, so the connectivity does not change with the
