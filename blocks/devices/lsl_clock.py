@@ -9,11 +9,19 @@ graph clock:
    predicted with the *drift* (slope, reported in ppm) between the two clocks, not just the last
    reading. One machine: offset and drift are ~0 (the same clock), as the tests check.
 2. *Local LSL clock → graph time*: ``t = local − anchor``. The anchor is graph time 0 on the LSL
-   clock, measured once per run and process as ``local_clock() − now`` at the first step of any
-   LSL block (:class:`Anchor`): a step runs at or after its graph time, so the anchor is late by
-   that first step's lateness (typically well under a tick; reported). Every LSL block of the
-   process uses the same anchor, so a sample read by an inlet and republished by an outlet of the
-   same process leaves with exactly its incoming LSL time.
+   clock, shared by the LSL blocks of one process during a run (:class:`Anchor`). A step runs at
+   or after its graph time, so every step gives an upper bound ``local_clock() − now``; the
+   anchor is the least of them seen so far (as ``serial_io``'s clock): a first step that came
+   seconds late (a loaded worker catching up with merged ticks) no longer shifts the whole run,
+   the anchor comes down at the first step that runs on time. What remains is the least
+   lateness, bounded by the time from the last ``open`` to that step (the summary reports both).
+
+   Samples mapped before the anchor came down keep the older anchor: an inlet's samples already
+   emitted stay stamped early by the move (an inlet re-maps the ones it still holds), later ones
+   carry the settled anchor, so emitted times stay increasing (the move only raises them). A
+   sample read by an inlet and republished by an outlet of the same process leaves with exactly
+   its incoming LSL time once the anchor has settled; one mapped before a move and published
+   after it leaves early by that move (at most the first step's excess lateness, reported).
 """
 
 from __future__ import annotations
@@ -76,9 +84,10 @@ class OffsetFit:
 class Anchor:
     """Graph time 0 on the LSL clock, shared by the LSL blocks of this process during one run.
 
-    Blocks ``acquire`` it in ``open`` and ``release`` it in ``close``; the first ``at(now)`` after
-    the first acquire measures it, and it is forgotten when the last holder releases it (the next
-    run in the same process measures its own).
+    Blocks ``acquire`` it in ``open`` and ``release`` it in ``close``; every ``at(now)`` lowers it
+    to the least ``local_clock() − now`` seen (a step is never early, so that is the best
+    estimate), and it is forgotten when the last holder releases it (the next run in the same
+    process measures its own).
     """
 
     def __init__(self, clock: Callable[[], float]) -> None:
@@ -86,27 +95,50 @@ class Anchor:
         self._lock = threading.Lock()
         self._holders = 0
         self._value: float | None = None
-        self.lateness = math.inf  # least (local − now − anchor) seen: how late steps run at best
+        self._first = math.nan
+        self._opened = -math.inf
 
     def acquire(self) -> None:
+        """A block opened: graph time 0 comes after this (it bounds the anchor's error)."""
+        local = self._clock()
         with self._lock:
             self._holders += 1
+            self._opened = max(self._opened, local)
 
     def release(self) -> None:
         with self._lock:
             self._holders = max(0, self._holders - 1)
             if self._holders == 0:
                 self._value = None
-                self.lateness = math.inf
+                self._first = math.nan
+                self._opened = -math.inf
 
     def at(self, now: float) -> float:
-        """The anchor (measured at the first call of the run); also tracks the steps' lateness."""
+        """The anchor after this step: the least ``local_clock() − now`` of the run so far."""
         local = self._clock()
         with self._lock:
             if self._value is None:
-                self._value = local - now
-            self.lateness = min(self.lateness, local - now - self._value)
+                self._value = self._first = local - now
+            else:
+                self._value = min(self._value, local - now)
             return self._value
+
+    @property
+    def moved(self) -> float:
+        """How far the anchor came down after the first step (s): how much later than the best
+        step the first one ran (0 before any step)."""
+        with self._lock:
+            return 0.0 if self._value is None else self._first - self._value
+
+    @property
+    def late_at_most(self) -> float:
+        """A bound on the anchor's remaining error, the best step's lateness (s): graph time 0
+        comes after every ``open``, so that is at most the anchor minus the LSL clock at the last
+        ``open`` (inf before any step)."""
+        with self._lock:
+            if self._value is None or not math.isfinite(self._opened):
+                return math.inf
+            return max(0.0, self._value - self._opened)
 
 
 def _local_clock() -> float:

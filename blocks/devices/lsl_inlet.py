@@ -141,8 +141,10 @@ class LslInlet(ft.Source):
     Time. A sample's LSL stamp (the sender's clock) plus the offset to the sender's clock, fitted
     as a line over LSL's ``time_correction`` readings (offset *and* drift), gives our LSL clock;
     minus the run's anchor (graph time 0 on that clock, shared by this process's LSL blocks) gives
-    graph time (:mod:`flowtact.blocks.devices.lsl_clock`). The summary reports offset, drift and
-    how late the anchor was measured. Samples are emitted in increasing time: one stamped at or
+    graph time (:mod:`flowtact.blocks.devices.lsl_clock`). The anchor is the least lateness seen
+    over the steps: a late first step does not shift the run; samples still held when it comes
+    down move with it, those emitted keep their times. The summary reports offset, drift, how far
+    the anchor moved after the first step and a bound on its remaining error. Samples are emitted in increasing time: one stamped at or
     before the previous is moved 1 µs past it (``stamp_nudged``); one stamped at or after ``now``
     is held for a later step. A sample sent before the run started keeps its (negative) graph
     time (``before_start``). A real stream needs a real-time run: graph time more than 1 s ahead of
@@ -307,13 +309,22 @@ class LslInlet(ft.Source):
                     f"{self.node} (lsl_inlet): the LSL stream is not open — open() runs before step() in "
                     "a graph; offline, use sim: true"
                 )
-            self._anchor = anchor.at(now)
+            self._settle(anchor.at(now))
             self._check_realtime(now)
             if self._lost is not None and not self._ready_t:
                 raise RuntimeError(self._lost)  # after a step that emitted everything received
             if self._lost is None:
                 self._pull()
         return self._emit(now)
+
+    def _settle(self, a: float) -> None:
+        """Take the anchor after this step; samples still held move with it (those emitted keep
+        their times: the move only raises the later ones, so times stay increasing)."""
+        if self._anchor is not None and a < self._anchor and self._ready_t:
+            d = self._anchor - a
+            self._ready_t = [t + d for t in self._ready_t]
+            self._queued_t += d
+        self._anchor = a
 
     def _check_realtime(self, now: float) -> None:
         """Refuse a run whose graph time outruns the wall clock (``--fast``). Graph time 0 comes
@@ -433,11 +444,13 @@ class LslInlet(ft.Source):
     def summary(self) -> str | None:
         if self.config.sim or self._meta is None:
             return None
-        late = -anchor.lateness if math.isfinite(anchor.lateness) and anchor.lateness < 0 else 0.0
+        bound = anchor.late_at_most
+        late = f"at most {bound * 1e3:.2f} ms late" if math.isfinite(bound) else "late by an unknown amount"
         return (
             f"LSL '{self._meta.name}': {self.counters.get('samples', 0)} samples; clock offset "
             f"{self._fit.offset(self._last_local()) * 1e6:+.0f} µs, drift {self._fit.drift_ppm:+.1f} ppm "
-            f"({self._fit.readings} probes); anchor measured {late * 1e3:.2f} ms late"
+            f"({self._fit.readings} probes); anchor moved {anchor.moved * 1e3:.2f} ms after "
+            f"the first step, {late}"
         )
 
     def _last_local(self) -> float:

@@ -59,9 +59,10 @@ class LslOutlet(ft.Block):
 
     Time. Each sample leaves stamped with its graph time plus the run's anchor (graph time 0 on the
     LSL clock, shared by this process's LSL blocks; :mod:`flowtact.blocks.devices.lsl_clock`): a
-    sample an ``lsl_inlet`` of the same process read keeps its LSL stamp exactly. An outlet in a
-    process without an inlet measures the anchor at its first sample (it is not told ``now``), so
-    its stamps are late by that sample's way through the graph (reported in the summary).
+    sample an ``lsl_inlet`` of the same process read keeps its LSL stamp exactly once the anchor has
+    settled (it comes down to the least lateness seen over the steps). An outlet in a process
+    without an inlet measures the anchor at each chunk's first sample (it is not told ``now``), so
+    its stamps are late by the least such sample's way through the graph.
 
     I/O. ``open`` creates the outlet (and optionally waits for a consumer), ``step`` pushes without
     blocking, ``close`` withdraws the stream. NaN/inf samples follow ``on_bad_data`` (float streams).

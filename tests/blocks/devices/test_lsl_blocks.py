@@ -343,3 +343,136 @@ def test_lsl_list_shows_the_stream_and_its_packets_go_to_loopback_only(sender, l
     dests = re.findall(r'sin6?_addr=inet_(?:addr|pton)\((?:AF_INET6, )?"([^"]+)"\)', trace.read_text())
     assert dests, "strace saw no destination: the check looked at nothing"
     assert set(dests) == {"127.0.0.1"}, sorted(set(dests))
+
+
+# -- the anchor: the least lateness seen, not the first step's (a late first step) ----------------
+
+LATE_S = 2.3  # a loaded worker's first step (seen in CI)
+TICK_S = 0.005  # the graphs' tick: the error allowed to a mapping once the anchor has settled
+
+
+def test_the_anchor_comes_down_to_the_least_lateness_after_a_late_first_step():
+    """A fake LSL clock: graph time 0 at 100 s; the first step runs 2.3 s late, the next ones on
+    time (1 µs late). The anchor is the truth within that 1 µs once an on-time step ran (the first
+    step's measurement would be 2.3 s off), it reports the move, and a new run measures anew."""
+    from flowtact.blocks.devices.lsl_clock import Anchor
+
+    t0, wall = 100.0, [99.5]
+    a = Anchor(lambda: wall[0])
+    a.acquire()  # open: 0.5 s before graph time 0
+    wall[0] = t0 + 0.01 + LATE_S
+    assert a.at(0.01) == pytest.approx(t0 + LATE_S, abs=1e-9)
+    for now in (2.32, 2.33, 2.5):
+        wall[0] = t0 + now + 1e-6
+        a.at(now)
+    assert abs(a.at(2.5) - t0) <= 1e-6 + 1e-9
+    assert a.moved == pytest.approx(LATE_S - 1e-6, abs=1e-9)
+    assert a.late_at_most == pytest.approx(0.5 + 1e-6, abs=1e-9)  # the open bounds the rest
+    a.release()
+    wall[0] = t0 + 7.0
+    assert a.at(0.0) == pytest.approx(t0 + 7.0) and a.moved == 0.0  # the next run's own
+
+
+def test_an_inlets_samples_after_a_late_first_step_map_to_their_true_time(sender, monkeypatch):
+    """A live sender (2000 samples at 1 kHz, stamped i/1000 after its first); graph time 0 is the
+    LSL clock just after open. The inlet's first step runs 2.3 s late as the anchor sees it (its
+    clock is moved on for that step only), after at least one sample arrived; later steps run on
+    time. Oracle: sample i's true graph time is its stamp minus graph time 0 (one machine: offset
+    ~0). The samples the late step mapped come out 2.3 s early (emitted before the anchor moved:
+    kept), every later one within a tick of the truth (the first step's anchor: 2.3 s off), and
+    the times increase throughout."""
+    import pylsl
+
+    from flowtact.blocks.devices import lsl_clock
+
+    name, n = _name(), 2000
+    peer = sender(name, n)
+    block = LslInlet(name=name, node="force")
+    block.bind({})
+    block.open()
+    t0 = pylsl.local_clock()  # graph time 0: after open
+    extra = [LATE_S]
+    clock = lsl_clock.anchor._clock  # noqa: SLF001 - the anchor's view of the LSL clock
+    monkeypatch.setattr(lsl_clock.anchor, "_clock", lambda: clock() + extra[0])
+    chunks: list[ft.Chunk] = []
+    try:
+        _go(peer)
+        assert _until(lambda: block._inlet.samples_available() >= 1)  # noqa: SLF001
+        chunks.append(block(pylsl.local_clock() - t0)["x"])  # the late first step
+        early = len(chunks[0])
+        extra[0] = 0.0
+        while sum(len(c) for c in chunks) < n:
+            now = pylsl.local_clock() - t0
+            assert now < BOUND_S, f"{sum(len(c) for c in chunks)} of {n} samples"
+            chunks.append(block(now)["x"])
+        first = float(_line(peer).split()[2])
+        summary = block.summary()
+    finally:
+        block.close()
+    got = ft.concat(chunks)
+    i = np.round(got.data[:, 1] * 1e6).astype(int)
+    truth = first + i / 1000.0 - t0
+    err = got.t - truth
+    assert 1 <= early < n, early  # samples on both sides of the move
+    assert np.all(np.diff(got.t) > 0)
+    np.testing.assert_allclose(err[:early], -LATE_S, atol=TICK_S)
+    assert np.abs(err[early:]).max() < TICK_S, np.abs(err[early:]).max()
+    moved = float(summary.split("anchor moved ")[1].split(" ms")[0])  # the first step's excess
+    assert abs(moved - LATE_S * 1e3) < TICK_S * 1e3, summary
+
+
+def test_an_outlet_after_the_anchor_moved_stamps_the_true_lsl_time(lsl_env):  # noqa: ARG001
+    """The anchor's clock is faked: graph time 0 at 50 s; the first chunk is pushed 2.3 s late, the
+    next on time. A plain pylsl inlet in this process receives the second sample stamped exactly
+    50 s + its graph time (the first step's anchor: 2.3 s later) — what a sample read by an inlet
+    of this process and republished leaves with once the anchor has settled."""
+    import pylsl
+
+    from flowtact.blocks.devices import lsl_clock
+
+    t0, wall = 50.0, [0.0]
+    name = _name()
+    spec = ft.StreamSpec("float64", (), "N", 10.0)
+    block = LslOutlet(name=name, node="out")
+    block.bind({"x": spec})
+    block.open()
+    orig = lsl_clock.anchor._clock  # noqa: SLF001
+    lsl_clock.anchor._clock = lambda: wall[0]  # noqa: SLF001
+    try:
+        hits = pylsl.resolve_byprop("name", name, 1, BOUND_S)
+        inlet = pylsl.StreamInlet(hits[0])
+        inlet.open_stream(BOUND_S)
+        wall[0] = t0 + 0.1 + LATE_S
+        block.step(x=ft.Chunk(np.array([0.1]), np.array([1.0])))  # late by 2.3 s
+        wall[0] = t0 + 1.0 + 1e-3
+        block.step(x=ft.Chunk(np.array([1.0]), np.array([2.0])))  # on time (1 ms on its way)
+        got = []
+        while len(got) < 2:
+            x, ts = inlet.pull_sample(timeout=BOUND_S)
+            assert x is not None, got
+            got.append((x[0], ts))
+        inlet.close_stream()
+    finally:
+        lsl_clock.anchor._clock = orig  # noqa: SLF001
+        block.close()
+    assert got[0] == (1.0, pytest.approx(t0 + LATE_S + 0.1))  # sent before the move: as it was
+    assert got[1][0] == 2.0 and abs(got[1][1] - (t0 + 1.0)) <= 1e-3 + 1e-9
+
+
+def test_samples_an_inlet_still_holds_move_with_the_anchor_and_times_stay_increasing():
+    """A declared stream, no LSL needed: two samples mapped with an anchor at 10 s (LSL 12.0 and
+    12.5 → 2.0, 2.5); ``now`` 2.2 emits the first and holds the second. The anchor comes down by
+    1 s: the held one moves with it (3.5: its mapping with the settled anchor), the one emitted
+    keeps 2.0, and a sample mapped after (12.6 → 3.6) follows in order."""
+    block = LslInlet(name="held", channels=1, format="float64", rate_hz=10.0, node="force")
+    block.bind({})
+    x = np.zeros((1, 1))
+    block._settle(10.0)  # noqa: SLF001 - the anchor a step takes
+    block._take(np.array([12.0, 12.5]), np.zeros((2, 1)))  # noqa: SLF001 - what a step pulls
+    first = block._emit(2.2)["x"]  # noqa: SLF001
+    block._settle(9.0)  # noqa: SLF001
+    block._take(np.array([12.6]), x)  # noqa: SLF001
+    second = block._emit(4.0)["x"]  # noqa: SLF001
+    np.testing.assert_allclose(first.t, [2.0])
+    np.testing.assert_allclose(second.t, [3.5, 3.6])
+    assert "stamp_nudged" not in block.counters
