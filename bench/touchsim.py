@@ -140,15 +140,17 @@ def chain_rate(
     models: list[str], s: np.ndarray, d: np.ndarray, repeats: int, fused: bool = False
 ) -> list[float]:
     """Afferents per core in real time: n × 1 s over the CPU seconds of each repeat's run (after a
-    warm-up); ``fused``: through touchsim_chain, else iir → rectified_gain → nlif."""
+    warm-up); ``fused``: through touchsim_chain, else iir → rectified_gain → nlif. Timed: the
+    blocks' steps up to their spike stream, what a graph runs (sorting the spikes out by afferent
+    for the comparisons is not, as TouchSim's own timing leaves out its spikes' conversion)."""
     from flowtact.bench.touchsim_chain import TouchSimChain
 
-    TouchSimChain(models, seed=99, fused=fused).run(s, d, chunk=CHUNK)
+    TouchSimChain(models, seed=99, fused=fused).spike_chunks(s, d, chunk=CHUNK)
     out = []
     for r in range(repeats):
         chain = TouchSimChain(models, seed=r, fused=fused)
         t0 = time.process_time()
-        chain.run(s, d, chunk=CHUNK)
+        chain.spike_chunks(s, d, chunk=CHUNK)
         out.append(len(models) * STIM_S / (time.process_time() - t0))
     return out
 

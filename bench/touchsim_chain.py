@@ -74,6 +74,13 @@ class TouchSimChain:
     ) -> list[np.ndarray]:
         """Spikes of each afferent (sample indices: nlif stamps sample n at n/fs) for s, d from rest;
         with ``keep_current`` the current (samples × afferents) is left in ``self.current_out``."""
+        return self._by_unit(self.spike_chunks(s, d, chunk, keep_current))
+
+    def spike_chunks(
+        self, s: np.ndarray, d: np.ndarray, chunk: int = 50, keep_current: bool = False
+    ) -> list[Chunk]:
+        """:meth:`run` up to the spike stream the blocks emit (what a graph runs), before it is
+        sorted out by afferent."""
         t_all = np.arange(len(s)) / TOUCHSIM_RATE_HZ
         if self.fused is not None:
             return self._run_fused(s, d, t_all, chunk, keep_current)
@@ -96,11 +103,11 @@ class TouchSimChain:
         tail = self.afferents.flush().get("spikes")
         if tail is not None:
             parts.append(tail)
-        return self._by_unit(parts)
+        return parts
 
     def _run_fused(
         self, s: np.ndarray, d: np.ndarray, t_all: np.ndarray, chunk: int, keep_current: bool
-    ) -> list[np.ndarray]:
+    ) -> list[Chunk]:
         """:meth:`run` through the fused block (``touchsim_chain``)."""
         block = self.fused
         assert block is not None
@@ -120,7 +127,7 @@ class TouchSimChain:
             currents.append(out.get("current"))
         if keep_current:
             self.current_out = np.concatenate([c.data for c in currents])
-        return self._by_unit(parts)
+        return parts
 
     def _bind_fused(self, demanded: frozenset[str]) -> None:
         """Bind the fused block from rest (filter design included: seconds for 17 000 afferents)."""
