@@ -50,6 +50,9 @@ CHECKED_ONLY = {
     # the start-up table: 4 graphs x 2 caches x idle and loaded (CPU-bound loops) x 3 rounds, a quarter
     # of an hour; the README's cheap row (one graph, idle, one round) runs in full
     "python scripts/startup_table.py": "python scripts/startup_table.py --help",
+    # 10 s of 16 900 afferents in real time: with the start-up, tens of seconds on a loaded machine;
+    # a short --fast run of the same graph (bench/touchsim_hand.py runs it in real time)
+    "flowtact run graphs/hand.yaml --duration 10": "flowtact run graphs/hand.yaml --fast --duration 0.05",
 }
 
 
