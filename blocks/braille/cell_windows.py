@@ -21,7 +21,7 @@ NO_CELL = -1.0
 def cell_window_values(x: np.ndarray, geometry: Geometry, origin_mm: float = 0.0) -> np.ndarray:
     """For finger positions ``x`` (mm): the index k ≥ 0 of the cell whose dot columns (± a dot
     radius) lie under the finger's centre, else :data:`NO_CELL`. Cell k spans
-    ``origin + [k, k + 1)·pitch``; the same arithmetic as ``braille_scan``'s cell spans, so on a
+    ``origin + [k, k + 1)·pitch``. ``braille_scan`` marks its ``char`` stream by this rule too, so on a
     line whose every cell holds a letter the windows are the ``char`` stream's, to the sample."""
     x = np.asarray(x, np.float64) - origin_mm
     with np.errstate(invalid="ignore"):

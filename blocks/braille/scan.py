@@ -11,6 +11,7 @@ from numba import njit
 
 import flowtact.api as ft
 
+from .cell_windows import cell_window_values
 from .cells import CATEGORIES, LETTERS, Geometry, dot_positions, text_cells
 from .fingertip import COLS, ROWS, Fingertip
 from .variation import CONDITION_LABELS, ROBOT, Drift, Trials, dot_scales
@@ -467,13 +468,11 @@ class BrailleScan(ft.Source):
         )
 
     def _char(self, x: np.ndarray) -> np.ndarray:
-        """Category of the cell under each finger position (0 between cells and off the text)."""
-        g = self._tip.geometry
-        k = np.floor(x / g.cell_pitch).astype(np.int64)
-        inside = (k >= 0) & (k < len(self._cat))
-        kk = np.clip(k, 0, max(len(self._cat) - 1, 0))
-        lo, hi = g.cell_span(kk)
-        on = inside & (x >= lo) & (x <= hi)
+        """Category of the cell under each finger position (0 between cells and off the text): the
+        window rule of ``braille_cell_windows``, with the text's letter in each window."""
+        k = cell_window_values(x, self._tip.geometry)
+        on = (k >= 0) & (k < len(self._cat))
+        kk = np.where(on, k, 0.0).astype(np.int64)
         return np.where(on, self._cat[kk] if len(self._cat) else 0.0, 0.0)
 
     def summary(self) -> str | None:

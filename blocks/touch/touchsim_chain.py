@@ -182,7 +182,9 @@ def _one_pass(ws, lag, n_block, cap, filt_s, noisy):  # type: ignore[no-untyped-
     noise _XI) through the prefilters, the held row's current and its membranes (history in _H),
     then the new row held — per lane the same operations, in the same order, as :func:`_sections`,
     :func:`_current` and :func:`_membranes`, with the intermediates in registers. Returns (spikes,
-    non-finite currents), the spikes as a mask, bit k for lane k (a tile is 64 lanes)."""
+    non-finite currents), the spikes as a mask, bit k for lane k (a tile is 64 lanes). The terms are
+    written out here, not taken from per-lane helpers shared with those two: inlined helpers left
+    LLVM unable to vectorise this loop (2.5x slower, `scripts/touchsim_chain_ab.py`)."""
     mask = np.uint64(0)
     bad = 0
     for k in range(TILE):
