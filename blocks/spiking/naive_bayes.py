@@ -323,7 +323,7 @@ class NaiveBayes(ft.Block):
         elif decided == len(self._m.classes):
             right = False
         elif self._labels is not None:
-            right: bool | None = 0 <= value < len(self._labels) and self._labels[value] == name
+            right = 0 <= value < len(self._labels) and self._labels[value] == name
         else:
             right = value == decided
         self._read.append((name, right))
